@@ -1,0 +1,43 @@
+# kitegully: the two commands are `make run` and `make test`.
+# Both create .venv from the pinned lock file when it is missing or stale.
+PYTHON ?= python3.11
+VENV := .venv
+STAMP := $(VENV)/.installed
+BIN := $(VENV)/bin
+CORES ?= 2
+SITE ?=
+SNAKE_ARGS ?=
+
+ifeq ($(SITE),)
+CONFIG_ARG :=
+else
+CONFIG_ARG := --configfile config/sites/$(SITE).yaml
+endif
+
+.PHONY: run test report venv clean-venv dryrun benchmark
+
+$(STAMP): pyproject.toml requirements.lock
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
+	rm -rf $(VENV)
+	$(PYTHON) -m venv $(VENV)
+	@echo "installing pinned dependencies into $(VENV) (log: $(VENV)/install.log)"
+	$(BIN)/python -m pip install -r requirements.lock > $(VENV)/install.log 2>&1 || { tail -30 $(VENV)/install.log; exit 1; }
+	$(BIN)/python -m pip install --no-deps --no-build-isolation -e . >> $(VENV)/install.log 2>&1 || { tail -30 $(VENV)/install.log; exit 1; }
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) $(SNAKE_ARGS)
+
+dryrun: $(STAMP)
+	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) --dry-run
+
+report: $(STAMP)
+	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) --report report.html
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -n $(CORES) --dist loadgroup $(PYTEST_ARGS)
+
+clean-venv:
+	rm -rf $(VENV)

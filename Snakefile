@@ -1,0 +1,47 @@
+# kitegully: kite/drone photogrammetry for soil-erosion mapping.
+#
+#   snakemake --cores 2                                         # default site (kamech_twin)
+#   snakemake --cores 2 --configfile config/sites/<site>.yaml   # another site
+#   snakemake --report report.html                              # HTML report
+#
+# config/config.yaml names the default site file; a site file given with --configfile
+# replaces it. Every loaded file is validated against config/schema before any job runs.
+
+from pathlib import Path
+
+from kitegully import InputError
+from kitegully.config import validate_config
+
+
+configfile: "config/config.yaml"
+
+
+if not workflow.overwrite_configfiles:
+
+    configfile: config["default_site"]
+
+
+try:
+    config = validate_config(config, sources=workflow.configfiles)
+except InputError as _err:
+    raise WorkflowError(f"Invalid configuration: {_err}") from None
+
+SITE = config["site"]["name"]
+IS_TWIN = config["site"]["kind"] == "twin"
+
+
+include: "workflow/rules/common.smk"
+
+
+# One rule file per stage, in data-flow order. Each file registers its final outputs with
+# add_targets() and decides itself whether it applies to the site (e.g. twin-only stages).
+for _stage in STAGES:
+    if Path(f"workflow/rules/{_stage}.smk").exists():
+
+        include: f"workflow/rules/{_stage}.smk"
+
+
+rule all:
+    input:
+        all_targets(),
+    default_target: True

@@ -1,0 +1,127 @@
+"""Loading and validating site configurations against the JSON schemas.
+
+A site configuration is one YAML file (``config/sites/<site>.yaml``); the global
+``config/config.yaml`` names the default site. The schema lives in
+``config/schema/site.schema.yaml`` with one file per stage under
+``config/schema/stages/<stage>.schema.yaml``, so each stage owns its keys.
+
+Errors are one line that names the file and the offending key path, e.g.::
+
+    config/sites/x.yaml: tether.kite.area_m2: 'big' is not of type 'number'
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import jsonschema
+import yaml
+
+from kitegully import InputError
+
+SCHEMA_DIR = Path(__file__).resolve().parents[2] / "config" / "schema"
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    """Read a YAML mapping, raising :class:`InputError` naming the file on failure."""
+    path = Path(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh)
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise InputError(f"{path}: not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: top level must be a mapping of keys, got {type(data).__name__}")
+    return data
+
+
+def load_schema(schema_dir: str | Path = SCHEMA_DIR) -> dict[str, Any]:
+    """Assemble the full schema: the site schema plus every stage schema.
+
+    Each ``stages/<name>.schema.yaml`` becomes ``properties.<name>`` of the top level.
+    """
+    schema_dir = Path(schema_dir)
+    schema = load_yaml(schema_dir / "site.schema.yaml")
+    props = schema.setdefault("properties", {})
+    for stage_file in sorted((schema_dir / "stages").glob("*.schema.yaml")):
+        name = stage_file.name.removesuffix(".schema.yaml")
+        props[name] = load_yaml(stage_file)
+    return schema
+
+
+def _strip_required(schema: Any) -> Any:
+    """Copy of ``schema`` without any ``required`` lists (for partial files)."""
+    if isinstance(schema, dict):
+        return {k: _strip_required(v) for k, v in schema.items() if k != "required"}
+    if isinstance(schema, list):
+        return [_strip_required(v) for v in schema]
+    return schema
+
+
+def _format_error(error: jsonschema.ValidationError, source: str) -> str:
+    path = ".".join(str(p) for p in error.absolute_path)
+    if error.validator == "additionalProperties":
+        extra = [k for k in error.instance if k not in error.schema.get("properties", {})]
+        key = ".".join(filter(None, [path, extra[0] if extra else ""]))
+        allowed = ", ".join(sorted(error.schema.get("properties", {})))
+        return f"{source}: unknown key '{key}' (allowed here: {allowed})"
+    where = path or "(top level)"
+    return f"{source}: {where}: {error.message}"
+
+
+def _first_error(schema: Mapping, data: Mapping) -> jsonschema.ValidationError | None:
+    validator = jsonschema.Draft202012Validator(schema)
+    errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.absolute_path)))
+    return errors[0] if errors else None
+
+
+def validate_config(
+    config: Mapping[str, Any],
+    sources: Iterable[str | Path] = (),
+    schema_dir: str | Path = SCHEMA_DIR,
+) -> dict[str, Any]:
+    """Validate a merged configuration and the files it came from.
+
+    Each source file is first checked on its own (types and unknown keys, without
+    ``required``) so the error can name the file that is wrong; then the merged
+    configuration is checked completely. Defaults declared in the schema are not
+    injected: every value a method uses is written in the site file.
+
+    Parameters
+    ----------
+    config
+        The merged configuration (what Snakemake's ``config`` holds).
+    sources
+        The YAML files that were merged into ``config``, in load order.
+    schema_dir
+        Folder holding ``site.schema.yaml`` and ``stages/``.
+
+    Returns
+    -------
+    dict
+        A deep copy of ``config``.
+
+    Raises
+    ------
+    InputError
+        One line naming the file and the offending key.
+    """
+    schema = load_schema(schema_dir)
+    partial = _strip_required(schema)
+    for source in sources:
+        error = _first_error(partial, load_yaml(source))
+        if error is not None:
+            raise InputError(_format_error(error, str(source)))
+    error = _first_error(schema, config)
+    if error is not None:
+        names = ", ".join(str(s) for s in sources) or "configuration"
+        raise InputError(_format_error(error, names))
+    return copy.deepcopy(dict(config))

@@ -1,0 +1,41 @@
+"""Figure helpers: a consistent publication style and print-resolution PNG output."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+PRINT_DPI = 300
+
+STYLE = {
+    "figure.dpi": 100,
+    "savefig.dpi": PRINT_DPI,
+    "font.size": 9,
+    "axes.titlesize": 10,
+    "axes.labelsize": 9,
+    "legend.fontsize": 8,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "savefig.bbox": "tight",
+}
+
+
+def new_figure(*args, **kwargs):
+    """``plt.subplots`` under the project style."""
+    with plt.rc_context(STYLE):
+        return plt.subplots(*args, **kwargs)
+
+
+def save_figure(fig, path: str | Path, attribution: str | None = None) -> None:
+    """Save ``fig`` as PNG at print resolution and close it; add an attribution line if given."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if attribution:
+        fig.text(0.99, 0.005, attribution, ha="right", va="bottom", fontsize=6, color="0.35")
+    with plt.rc_context(STYLE):
+        fig.savefig(path, dpi=PRINT_DPI)
+    plt.close(fig)

@@ -1,0 +1,165 @@
+"""GeoTIFF reading and writing with the project's conventions.
+
+Elevation rasters are float32 with NaN as nodata; every raster is tiled (256×256)
+and DEFLATE-compressed, in the site's projected CRS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import rasterio
+from affine import Affine
+from rasterio.crs import CRS
+from rasterio.windows import Window
+
+from kitegully import InputError
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """A north-up grid: origin at the top-left corner of the top-left cell.
+
+    Attributes
+    ----------
+    x0, y0 : float
+        Map coordinates of the top-left corner (m).
+    cell : float
+        Cell size (m); rows go south, columns go east.
+    width, height : int
+        Number of columns and rows.
+    crs : str
+        CRS understood by rasterio (e.g. ``"EPSG:32632"``).
+    """
+
+    x0: float
+    y0: float
+    cell: float
+    width: int
+    height: int
+    crs: str
+
+    @property
+    def transform(self) -> Affine:
+        return Affine(self.cell, 0.0, self.x0, 0.0, -self.cell, self.y0)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) in map units."""
+        return (self.x0, self.y0 - self.height * self.cell, self.x0 + self.width * self.cell, self.y0)
+
+    def cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """1-D arrays of column-centre x and row-centre y coordinates."""
+        xs = self.x0 + (np.arange(self.width) + 0.5) * self.cell
+        ys = self.y0 - (np.arange(self.height) + 0.5) * self.cell
+        return xs, ys
+
+    def rowcol(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fractional (row, col) of map points, cell centres at integers."""
+        col = (np.asarray(x) - self.x0) / self.cell - 0.5
+        row = (self.y0 - np.asarray(y)) / self.cell - 0.5
+        return row, col
+
+    def resampled(self, cell: float) -> "GridSpec":
+        """Same extent on a different cell size (extent rounded down to whole cells)."""
+        w = int(np.floor(self.width * self.cell / cell))
+        h = int(np.floor(self.height * self.cell / cell))
+        return GridSpec(self.x0, self.y0, cell, w, h, self.crs)
+
+
+def _profile(grid: GridSpec, count: int, dtype: str, nodata) -> dict:
+    tiled = grid.width >= 256 and grid.height >= 256
+    profile = dict(
+        driver="GTiff",
+        width=grid.width,
+        height=grid.height,
+        count=count,
+        dtype=dtype,
+        crs=CRS.from_user_input(grid.crs),
+        transform=grid.transform,
+        compress="deflate",
+        nodata=nodata,
+        BIGTIFF="IF_SAFER",
+    )
+    if tiled:
+        profile.update(tiled=True, blockxsize=256, blockysize=256)
+    if np.dtype(dtype).kind == "f":
+        profile["predictor"] = 3
+    elif np.dtype(dtype).itemsize > 1:
+        profile["predictor"] = 2
+    return profile
+
+
+def write_raster(
+    path: str | Path,
+    data: np.ndarray,
+    grid: GridSpec,
+    nodata: float | int | None = None,
+    band_names: list[str] | None = None,
+    tags: dict[str, str] | None = None,
+) -> None:
+    """Write a 2-D (one band) or 3-D (bands first) array as a tiled, compressed GeoTIFF.
+
+    Float arrays get NaN as nodata unless ``nodata`` is given.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arr = np.asarray(data)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.shape[1:] != (grid.height, grid.width):
+        raise ValueError(f"{path}: array shape {arr.shape[1:]} does not match grid {(grid.height, grid.width)}")
+    if nodata is None and arr.dtype.kind == "f":
+        nodata = float("nan")
+    with rasterio.open(path, "w", **_profile(grid, arr.shape[0], arr.dtype.name, nodata)) as dst:
+        dst.write(arr)
+        if band_names:
+            dst.descriptions = tuple(band_names)
+        if tags:
+            dst.update_tags(**tags)
+
+
+def read_raster(path: str | Path, band: int | None = 1) -> tuple[np.ndarray, GridSpec]:
+    """Read one band (or all bands with ``band=None``) and its grid.
+
+    Nodata values of float rasters become NaN. Raises :class:`InputError` naming the
+    file when it cannot be opened, is not north-up, or has no CRS.
+    """
+    path = Path(path)
+    try:
+        src = rasterio.open(path)
+    except rasterio.errors.RasterioIOError as exc:
+        raise InputError(f"{path}: cannot open raster ({exc})") from None
+    with src:
+        t = src.transform
+        if t.b != 0 or t.d != 0 or t.e >= 0:
+            raise InputError(f"{path}: raster is rotated or not north-up; reproject it first")
+        if src.crs is None:
+            raise InputError(f"{path}: raster has no CRS")
+        if abs(abs(t.a) - abs(t.e)) > 1e-9 * abs(t.a):
+            raise InputError(f"{path}: cells are not square ({t.a} x {-t.e})")
+        grid = GridSpec(t.c, t.f, t.a, src.width, src.height, src.crs.to_string())
+        data = src.read(band) if band is not None else src.read()
+        if data.dtype.kind == "f" and src.nodata is not None and not np.isnan(src.nodata):
+            data = np.where(data == src.nodata, np.nan, data)
+    return data, grid
+
+
+def iter_tiles(grid: GridSpec, tile: int, overlap: int) -> Iterator[tuple[Window, Window]]:
+    """Yield (read window with overlap, core window) pairs covering the grid.
+
+    The core windows tile the grid without gaps or overlap; each read window extends
+    its core by ``overlap`` cells on every side, clipped to the grid.
+    """
+    for r0 in range(0, grid.height, tile):
+        for c0 in range(0, grid.width, tile):
+            h = min(tile, grid.height - r0)
+            w = min(tile, grid.width - c0)
+            rr0 = max(0, r0 - overlap)
+            cc0 = max(0, c0 - overlap)
+            rr1 = min(grid.height, r0 + h + overlap)
+            cc1 = min(grid.width, c0 + w + overlap)
+            yield Window(cc0, rr0, cc1 - cc0, rr1 - rr0), Window(c0, r0, w, h)

@@ -1,0 +1,47 @@
+# Shared helpers for all rule files: paths, logs and the list of final targets.
+
+STAGES = [
+    "tether",
+    "twin",
+    "flight",
+    "sfm",
+    "georef",
+    "dense",
+    "validate",
+    "gully",
+    "polygons",
+    "obia",
+    "change",
+]
+
+RESULTS = Path(config["results_dir"]) / SITE
+TARGETS = []
+
+
+def result(stage, name):
+    """Path of an output of a stage: <results_dir>/<site>/<stage>/<name>."""
+    return str(RESULTS / stage / name)
+
+
+def logfile(stage, name):
+    """Log file of a rule: <results_dir>/<site>/logs/<stage>/<name>.log."""
+    return str(RESULTS / "logs" / stage / f"{name}.log")
+
+
+def benchfile(stage, name):
+    """Benchmark file of a heavy rule: <results_dir>/<site>/benchmarks/<stage>/<name>.tsv."""
+    return str(RESULTS / "benchmarks" / stage / f"{name}.tsv")
+
+
+def add_targets(*paths):
+    """Register final outputs of a stage for rule `all`."""
+    TARGETS.extend(str(p) for p in paths)
+
+
+def all_targets():
+    return TARGETS
+
+
+def caption(name):
+    """Report caption file, relative to workflow/rules/ (where report() is called)."""
+    return f"../report/{name}.rst"
