@@ -1,0 +1,6 @@
+"""Kite line (tether) model, flight-angle analysis and flight planning (Feurer et al. 2018).
+
+Modules: ``line`` (quasi-static line shape and kite position), ``planning`` (camera,
+GSD, footprints, overlap, stereo precision), ``gps`` (flight angles from paired GPS logs,
+synthetic logs), ``config`` (building the model objects from a site config), ``plots``.
+"""
