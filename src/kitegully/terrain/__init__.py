@@ -1,0 +1,31 @@
+"""Terrain analysis on gridded DEMs.
+
+Modules, one job each:
+
+``smoothing``
+    Gaussian smoothing by FFT convolution with zero padding and normalised
+    convolution for nodata (Feurer et al. 2018, Fig. 3 b-c).
+``holes``
+    Interpolation of interior nodata holes (Laplace equation).
+``fill``
+    Priority-flood depression filling with an epsilon gradient (Barnes et al. 2014),
+    compiled with numba, O(n log n).
+``flow``
+    D8 flow directions and steepest-descent tracing on a depression-free DEM.
+"""
+
+from kitegully.terrain.fill import priority_flood_fill
+from kitegully.terrain.flow import D8_OFFSETS, d8_directions, trace_paths
+from kitegully.terrain.holes import interior_holes, interpolate_holes
+from kitegully.terrain.smoothing import gaussian_kernel_1d, gaussian_smooth_fft
+
+__all__ = [
+    "D8_OFFSETS",
+    "d8_directions",
+    "gaussian_kernel_1d",
+    "gaussian_smooth_fft",
+    "interior_holes",
+    "interpolate_holes",
+    "priority_flood_fill",
+    "trace_paths",
+]

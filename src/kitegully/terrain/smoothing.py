@@ -1,0 +1,204 @@
+"""Gaussian smoothing of a DEM by FFT convolution, with nodata handled by normalised convolution.
+
+The 2-D Gaussian is separable, so the 2-D FFT convolution ``IFFT(FFT(Z)·FFT(G))`` is
+computed as two passes of 1-D FFT convolutions (rows, then columns). The result is the
+same as one 2-D FFT of the zero-padded grid, but each pass works on blocks of rows or
+columns, so memory stays at a few copies of the DEM whatever its size.
+
+Nodata (NaN) and the area outside the grid get weight 0: with ``w`` the valid mask,
+``Zs = G*(Z·w) / G*w`` (normalised convolution). Each axis is zero-padded by the kernel
+radius (``truncate`` σ, [I] 4σ by default), so there is no wrap-around and the borders
+and holes do not pull the smoothed surface down as plain zero padding would.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import scipy.fft as sfft
+
+log = logging.getLogger(__name__)
+
+_BLOCK_BYTES = 64 * 2**20  # complex spectrum of one block of rows/columns
+
+
+def gaussian_kernel_1d(sigma_cells: float, truncate: float = 4.0) -> np.ndarray:
+    """Sampled 1-D Gaussian kernel of radius ``ceil(truncate·σ)``, normalised to sum 1.
+
+    Parameters
+    ----------
+    sigma_cells : float
+        Standard deviation in cells (> 0).
+    truncate : float
+        Kernel radius in standard deviations.
+    """
+    if not sigma_cells > 0:
+        raise ValueError(f"sigma must be positive, got {sigma_cells}")
+    radius = int(np.ceil(truncate * sigma_cells))
+    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    k = np.exp(-0.5 * (x / sigma_cells) ** 2)
+    return k / k.sum()
+
+
+def _transfer(kernel: np.ndarray, nfft: int) -> np.ndarray:
+    """rFFT of the kernel centred on index 0 (negative offsets wrapped to the end)."""
+    radius = kernel.size // 2
+    buf = np.zeros(nfft, dtype=np.float64)
+    buf[: radius + 1] = kernel[radius:]
+    buf[nfft - radius :] = kernel[:radius]
+    return sfft.rfft(buf)
+
+
+def _convolve_axis(a: np.ndarray, kernel: np.ndarray, axis: int, out: np.ndarray, workers: int) -> None:
+    """Linear (zero-padded) convolution of ``a`` with ``kernel`` along ``axis`` into ``out``."""
+    n = a.shape[axis]
+    radius = kernel.size // 2
+    nfft = sfft.next_fast_len(n + 2 * radius, real=True)
+    h = _transfer(kernel, nfft)
+    other = a.shape[1 - axis]
+    step = max(1, int(_BLOCK_BYTES // (16 * (nfft // 2 + 1))))
+    for s in range(0, other, step):
+        e = min(other, s + step)
+        if axis == 1:
+            block = np.asarray(a[s:e, :], dtype=np.float64)
+            spec = sfft.rfft(block, n=nfft, axis=1, workers=workers)
+            spec *= h[None, :]
+            out[s:e, :] = sfft.irfft(spec, n=nfft, axis=1, workers=workers)[:, :n]
+        else:
+            block = np.ascontiguousarray(a[:, s:e], dtype=np.float64)
+            spec = sfft.rfft(block, n=nfft, axis=0, workers=workers)
+            spec *= h[:, None]
+            out[:, s:e] = sfft.irfft(spec, n=nfft, axis=0, workers=workers)[:n, :]
+
+
+def _one_sided_gradient(z: np.ndarray, axis: int, out: np.ndarray) -> np.ndarray:
+    """Per-cell gradient along ``axis``: central difference, one-sided next to NaN, 0 if isolated."""
+    zz = np.asarray(z, dtype=np.float64)
+    d = np.diff(zz, axis=axis)  # d[i] = z[i+1] - z[i]
+    pad = [(0, 0), (0, 0)]
+    pad[axis] = (1, 0)
+    bwd = np.pad(d, pad, constant_values=np.nan)
+    pad[axis] = (0, 1)
+    fwd = np.pad(d, pad, constant_values=np.nan)
+    del d
+    cnt = np.isfinite(bwd).astype(np.float64) + np.isfinite(fwd)
+    np.nan_to_num(bwd, copy=False, nan=0.0)
+    np.nan_to_num(fwd, copy=False, nan=0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        np.divide(bwd + fwd, cnt, out=out)
+    out[cnt == 0] = 0.0
+    out[~np.isfinite(zz)] = 0.0
+    return out
+
+
+def _conv2(a: np.ndarray, kernel: np.ndarray, work: np.ndarray, workers: int) -> np.ndarray:
+    """Separable 2-D convolution of float64 ``a`` in place (``work``: scratch of the same shape)."""
+    _convolve_axis(a, kernel, 1, work, workers)
+    _convolve_axis(work, kernel, 0, a, workers)
+    return a
+
+
+def gaussian_smooth_fft(
+    z: np.ndarray,
+    sigma_cells: float,
+    truncate: float = 4.0,
+    workers: int = 1,
+    min_weight: float = 1e-3,
+    linear_edges: bool = True,
+) -> np.ndarray:
+    """Smooth a DEM with a Gaussian by FFT convolution; NaN cells are ignored.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Elevations; NaN marks nodata.
+    sigma_cells : float
+        Standard deviation of the Gaussian in cells (σ_m / cell size).
+    truncate : float
+        Kernel radius (and zero padding) in σ. [I] 4 σ.
+    workers : int
+        Threads for ``scipy.fft``.
+    min_weight : float
+        Cells whose normalised-convolution weight ``G*w`` is below this get NaN
+        (too far from any valid cell).
+    linear_edges : bool
+        [I] First-order correction near edges and nodata. There the window is
+        one-sided, so normalised convolution returns the elevation at the weighted
+        centroid instead of at the cell: on a slope g the bias is ``g·(x̄ − x)`` (0.16 m
+        at the edge of a 2 % slope with σ = 10 m, enough for a false gully). The
+        correction subtracts ``ĝ·(x̄ − x)`` with ``ĝ`` the smoothed gradient of the DEM;
+        it is exact on planes and zero where the window is full.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        The smoothed surface, defined also in small nodata holes.
+
+    Notes
+    -----
+    Complexity O(n log n) for n = H·W cells. Memory: three float64 work arrays of the
+    grid size plus one block spectrum (64 MB). With no nodata the weight image and the
+    centroids are separable and come from 1-D convolutions; the edge correction costs
+    two more 2-D convolutions (gradient), or four with nodata.
+    """
+    z = np.asarray(z)
+    if z.ndim != 2:
+        raise ValueError("z must be a 2-D array")
+    h, w = z.shape
+    valid = np.isfinite(z)
+    nvalid = int(valid.sum())
+    if nvalid == 0:
+        raise ValueError("the DEM has no valid cell")
+    full = nvalid == z.size
+    kernel = gaussian_kernel_1d(sigma_cells, truncate)
+    # Work relative to the mean elevation: better precision of the FFT sums.
+    offset = float(np.mean(z[valid], dtype=np.float64))
+    work = np.empty((h, w), dtype=np.float64)
+    a = np.where(valid, z - offset, 0.0).astype(np.float64)
+    _conv2(a, kernel, work, workers)
+    if full:
+        wr = np.empty((1, w))
+        wc = np.empty((h, 1))
+        _convolve_axis(np.ones((1, w)), kernel, 1, wr, workers)
+        _convolve_axis(np.ones((h, 1)), kernel, 0, wc, workers)
+        den = wc * wr  # separable weight image
+    else:
+        den = _conv2(valid.astype(np.float64), kernel, work, workers)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        zs = (a / den).astype(np.float32)
+    if linear_edges:
+        # Smoothed gradient of the DEM (per cell), zero where a neighbour is missing.
+        for axis in (0, 1):
+            step = 512  # blocks across the other axis keep the temporaries small
+            for s0 in range(0, z.shape[1 - axis], step):
+                sl = (slice(None), slice(s0, s0 + step)) if axis == 0 else (slice(s0, s0 + step), slice(None))
+                a[sl] = _one_sided_gradient(z[sl], axis, out=np.empty(a[sl].shape))
+            _conv2(a, kernel, work, workers)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                a /= den
+            # Centroid offset (x̄ − x) along this axis, in cells.
+            if full:
+                n = h if axis == 0 else w
+                idx = np.arange(n, dtype=np.float64)
+                num1 = np.empty(n)
+                wt1 = np.empty(n)
+                _convolve_axis(idx[None, :], kernel, 1, num1[None, :], workers)
+                _convolve_axis(np.ones((1, n)), kernel, 1, wt1[None, :], workers)
+                off = num1 / wt1 - idx
+                a *= off[:, None] if axis == 0 else off[None, :]
+            else:
+                idx = np.arange(h if axis == 0 else w, dtype=np.float64)
+                coord = np.broadcast_to(idx[:, None] if axis == 0 else idx[None, :], (h, w))
+                c = np.where(valid, coord, 0.0)
+                _conv2(c, kernel, work, workers)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    c /= den
+                c -= coord
+                a *= c
+                del c
+            with np.errstate(invalid="ignore"):
+                zs -= a.astype(np.float32)
+    zs[~(den >= min_weight)] = np.nan
+    zs += np.float32(offset)
+    return zs
