@@ -35,5 +35,5 @@ def run_snakemake(
     ]
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
     if check and proc.returncode != 0:
-        raise AssertionError(f"snakemake failed ({proc.returncode}):\n{proc.stderr[-6000:]}")
+        raise AssertionError(f"snakemake failed ({proc.returncode}):\n{(proc.stdout + proc.stderr)[-6000:]}")
     return proc
