@@ -30,6 +30,9 @@ SITE = config["site"]["name"]
 IS_TWIN = config["site"]["kind"] == "twin"
 
 
+report: "workflow/report/workflow.rst"
+
+
 include: "workflow/rules/common.smk"
 
 

@@ -41,3 +41,8 @@ def test_tether_stage_outputs(tmp_path):
     for png in tether.glob("*.png"):
         assert png.stat().st_size > 20_000
     assert (out / "tiny_twin" / "logs" / "tether" / "simulation.log").read_text().count("Table 2 under") == 2
+    report = tmp_path / "report.html"
+    run_snakemake(site, out, targets=targets, extra=["--report", str(report)])
+    html = report.read_text(errors="ignore")
+    for name in ("line_shapes.png", "flight_angle_vs_length.png", "observed_flight_angles.png", "flight_plan.csv"):
+        assert name in html
