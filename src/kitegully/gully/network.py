@@ -223,7 +223,11 @@ def network_lines(net: GullyNetwork, grid: GridSpec, keep: np.ndarray | None = N
             geoms.append(_coords(grid, run))
             orders.append(int(net.seg_order[s]))
             seg_ids.append(s + 1)
-    lines = linestrings(geoms) if geoms else []
+    if geoms:
+        ind = np.repeat(np.arange(len(geoms)), [g.shape[0] for g in geoms])
+        lines = linestrings(np.concatenate(geoms), indices=ind)
+    else:
+        lines = []
     gdf = gpd.GeoDataFrame(
         {"segment_id": np.array(seg_ids, dtype=np.int64), "stream_order": np.array(orders, dtype=np.int64)},
         geometry=gpd.GeoSeries(lines, crs=grid.crs),

@@ -1,0 +1,40 @@
+"""Input checks of the gully stage: one clear sentence naming the file on bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from kitegully import InputError
+from kitegully.io.vectors import read_vector
+
+
+def read_heads(path: str | Path, crs: str) -> tuple[np.ndarray, np.ndarray]:
+    """Gully head coordinates (x, y) from a point layer in the site CRS.
+
+    MultiPoints are split into their points. Raises :class:`InputError` if the file has
+    no point, or holds other geometry types.
+    """
+    gdf = read_vector(path, crs=crs)
+    geoms = [g for g in gdf.geometry if g is not None and not g.is_empty]
+    types = {g.geom_type for g in geoms}
+    if not geoms:
+        raise InputError(f"{path}: no gully head points in the layer")
+    if not types <= {"Point", "MultiPoint"}:
+        raise InputError(f"{path}: gully heads must be points, found {', '.join(sorted(types))}")
+    pts = shapely.get_coordinates(geoms)
+    return pts[:, 0].astype(np.float64), pts[:, 1].astype(np.float64)
+
+
+def check_dem(dem: np.ndarray, path: str | Path) -> None:
+    """Raise :class:`InputError` if the DEM has no valid cell."""
+    if not np.isfinite(dem).any():
+        raise InputError(f"{path}: the DEM is all nodata")
+
+
+def check_heads_on_dem(inside: np.ndarray, path: str | Path) -> None:
+    """Raise :class:`InputError` if no gully head falls on valid DEM cells."""
+    if not np.any(inside):
+        raise InputError(f"{path}: none of the {inside.size} gully heads lies on valid DEM cells")
