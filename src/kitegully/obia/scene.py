@@ -1,0 +1,157 @@
+"""The whole OBIA chain for one orthophoto + DEM (Mayr et al. 2016, sect. 2.3-2.4).
+
+features (R, G, B, Wood slope; z-normalised) -> seeds (variance minima) -> seeded region
+growing -> ExG, Gaussian blur -> histogram valley threshold (Otsu alongside) -> segment
+mean ExG -> grass / eroded -> optional minimum-area filter.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from kitegully import InputError
+from kitegully.obia.classify import ERODED, GRASS, NODATA, classify_segments, remove_small_eroded, segment_means
+from kitegully.obia.features import normalise_features
+from kitegully.obia.indices import EXG_RANGE, excess_green, gaussian_blur
+from kitegully.obia.seeds import generate_seeds
+from kitegully.obia.slope import wood_slope
+from kitegully.obia.srg import seeded_region_growing
+from kitegully.obia.threshold import ThresholdResult, find_thresholds, histogram
+
+log = logging.getLogger("kitegully.obia")
+
+
+@dataclass(frozen=True)
+class ObiaParams:
+    """Method parameters (config section ``obia``, see the stage schema)."""
+
+    slope_window_cells: int = 5
+    seed_bandwidth_cells: int = 15
+    position_weight: float = 0.0
+    blur_sigma_cells: float = 1.0
+    blur_radius_cells: int = 2
+    hist_bins: int = 256
+    min_class_fraction: float = 0.01
+    max_valley_ratio: float = 0.7
+    unimodal_class: str = "grass"
+    segment_feature: str = "blurred"
+    min_area_m2: float = 0.0
+
+    @classmethod
+    def from_config(cls, obia: dict) -> "ObiaParams":
+        return cls(
+            slope_window_cells=int(obia["features"]["slope_window_cells"]),
+            seed_bandwidth_cells=int(obia["seeds"]["bandwidth_cells"]),
+            position_weight=float(obia["growing"]["position_weight"]),
+            blur_sigma_cells=float(obia["exg_blur"]["sigma_cells"]),
+            blur_radius_cells=int(obia["exg_blur"]["radius_cells"]),
+            hist_bins=int(obia["threshold"]["bins"]),
+            min_class_fraction=float(obia["threshold"]["min_class_fraction"]),
+            max_valley_ratio=float(obia["threshold"]["max_valley_ratio"]),
+            unimodal_class=str(obia["threshold"]["unimodal_class"]),
+            segment_feature=str(obia["classification"]["segment_feature"]),
+            min_area_m2=float(obia["classification"]["min_area_m2"]),
+        )
+
+
+@dataclass
+class SceneResult:
+    """Everything the chain produced for one scene (rasters share the input grid)."""
+
+    exg: np.ndarray
+    exg_blur: np.ndarray
+    slope_deg: np.ndarray
+    seeds: np.ndarray
+    segments: np.ndarray
+    n_segments: int
+    segment_exg: np.ndarray
+    threshold: ThresholdResult
+    classes: np.ndarray
+    classes_otsu: np.ndarray
+    timings_s: dict
+
+
+def marker_mask(shape: tuple[int, int], grid, markers, factor: float) -> np.ndarray:
+    """Cells within ``factor`` x radius of any surveyed marker centre (``x, y, radius_m``)."""
+    mask = np.zeros(shape, dtype=bool)
+    if markers is None or len(markers) == 0:
+        return mask
+    xs, ys = grid.cell_centres()
+    for _, m in markers.iterrows():
+        r = float(m["radius_m"]) * factor
+        cols = np.flatnonzero(np.abs(xs - m["x"]) <= r)
+        rows = np.flatnonzero(np.abs(ys - m["y"]) <= r)
+        if len(cols) == 0 or len(rows) == 0:
+            continue
+        sub = (xs[cols][None, :] - m["x"]) ** 2 + (ys[rows][:, None] - m["y"]) ** 2 <= r * r
+        mask[np.ix_(rows, cols)] |= sub
+    return mask
+
+
+def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaParams, valid: np.ndarray | None = None, source: str = "scene") -> SceneResult:
+    """Run the OBIA chain on one scene.
+
+    Parameters
+    ----------
+    rgb
+        (3, rows, cols) array, any scale (uint8 DN).
+    dem
+        float DEM on the same grid (m), NaN = no data.
+    cell
+        Cell size (m).
+    params
+        Method parameters.
+    valid
+        Optional mask of cells to use (e.g. without GCP markers); also excludes cells
+        where the DEM is NaN or the colour is missing.
+    source
+        Name used in error messages (file or scene name).
+
+    Complexity: O(N log N) for N cells (region growing); memory a few N-sized arrays.
+    """
+    if rgb.ndim != 3 or rgb.shape[0] < 3:
+        raise InputError(f"{source}: orthophoto needs 3 bands (R, G, B), got shape {rgb.shape}")
+    if rgb.shape[1:] != dem.shape:
+        raise InputError(f"{source}: orthophoto {rgb.shape[1:]} and DEM {dem.shape} are not on the same grid")
+    t = {}
+    t0 = time.perf_counter()
+    red, green, blue = (rgb[i].astype(np.float32) for i in range(3))
+    ok = np.isfinite(dem) & np.isfinite(red) & np.isfinite(green) & np.isfinite(blue)
+    if valid is not None:
+        ok &= valid
+    if not ok.any():
+        raise InputError(f"{source}: no valid cells (DEM all nodata or everything masked)")
+    slope = wood_slope(dem, cell, params.slope_window_cells)
+    feats = normalise_features([red, green, blue, slope], ok)
+    t["features"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    seeds = generate_seeds(feats, ok, params.seed_bandwidth_cells)
+    t["seeds"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    segments, nseg = seeded_region_growing(feats, seeds, ok, params.position_weight)
+    t["growing"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    exg = excess_green(red, green, blue)
+    exg[~ok] = np.nan
+    exg_blur = gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells)
+    counts, centres = histogram(exg_blur, params.hist_bins)
+    thr = find_thresholds(counts, centres, params.min_class_fraction, params.max_valley_ratio)
+    feature = exg_blur if params.segment_feature == "blurred" else exg
+    means = segment_means(feature, segments, nseg)
+    unimodal = GRASS if params.unimodal_class == "grass" else ERODED
+    classes = remove_small_eroded(classify_segments(means, segments, thr.valley, unimodal), cell, params.min_area_m2)
+    classes_otsu = remove_small_eroded(classify_segments(means, segments, thr.otsu, unimodal), cell, params.min_area_m2)
+    classes[~ok] = NODATA
+    classes_otsu[~ok] = NODATA
+    t["classify"] = time.perf_counter() - t0
+    log.info("%s: %d seeds, %d segments, valley %s, Otsu %s (%s)", source, int(seeds.max()), nseg,
+             "none" if thr.valley is None else f"{thr.valley:.4f}",
+             "none" if thr.otsu is None else f"{thr.otsu:.4f}", thr.reason)
+    return SceneResult(exg, exg_blur, slope, seeds, segments, nseg, means, thr, classes, classes_otsu, t)
+
+
+__all__ = ["ObiaParams", "SceneResult", "classify_scene", "marker_mask", "EXG_RANGE"]

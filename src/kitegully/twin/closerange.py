@@ -1,0 +1,308 @@
+"""Synthetic close-range scenes of eroded patches on a steep grass slope (after Mayr et al. 2016).
+
+Each scene is what 001's terrestrial SfM delivered: a 2 cm RGB orthophoto and DEM of a
+30-40 degree grass slope with one main eroded (bare-soil) patch of a few to ~60 m², plus
+the truth a careful manual mapper would draw.  What makes the scenes hard is modelled
+explicitly, not tuned to any classifier:
+
+* the patch has sharp scarps on its upslope and lateral edges and a gradual transition
+  at its downslope edge (a band where grass cover thins out with tufts);
+* grass clods lie inside the patch (raised, grass-covered);
+* low sun casts shadows from the scarps onto the patch floor, shaded light is bluish;
+* grass colour goes from green (July) to straw brown (September) by a greenness value,
+  with dry blotches and dark gaps between blades; soil has moisture patches and stones;
+* white spherical GCP markers (radius 10 cm) stand on the grass;
+* the camera adds gamma encoding, blur and sensor noise, quantised to 8 bit.
+
+The truth mask is ``eroded`` where the smooth vegetation-cover field is below 50 %
+(clods count as grass); the markers are written as a separate truth mask and as an
+observed marker list (surveyed centres with RTK noise).
+
+Cost: O(N * K) for N cells, K shadow-ray steps (about depth / tan(sun elevation) / cell).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import ndimage
+
+from kitegully.io.raster import GridSpec
+
+
+@dataclass
+class CloseRangeScene:
+    """One generated scene.
+
+    Attributes
+    ----------
+    name : str
+    grid : GridSpec
+    rgb : numpy.ndarray
+        (3, rows, cols) uint8 orthophoto.
+    dem : numpy.ndarray
+        float32 DEM (m).
+    truth_eroded : numpy.ndarray
+        uint8, 1 = eroded (bare), 0 = grass.
+    truth_markers : numpy.ndarray
+        uint8, 1 = GCP sphere.
+    markers : pandas.DataFrame
+        Observed marker centres ``gcp_id, x, y, z, radius_m`` (with survey noise).
+    meta : dict
+        Scene parameters and the reference eroded area (m²).
+    """
+
+    name: str
+    grid: GridSpec
+    rgb: np.ndarray
+    dem: np.ndarray
+    truth_eroded: np.ndarray
+    truth_markers: np.ndarray
+    markers: pd.DataFrame
+    meta: dict
+
+
+def scene_rng(seed: int, name: str) -> np.random.Generator:
+    """Independent random stream per scene, from the master seed."""
+    return np.random.default_rng([int(seed), zlib.crc32(b"obia-closerange"), zlib.crc32(name.encode())])
+
+
+def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], sigma_cells: float) -> np.ndarray:
+    """Gaussian random field with unit SD and correlation length ~ sigma_cells."""
+    white = rng.standard_normal(shape)
+    if sigma_cells > 0:
+        white = ndimage.gaussian_filter(white, sigma_cells, mode="wrap")
+    sd = white.std()
+    return (white / sd if sd > 0 else white).astype(np.float32)
+
+
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _patch_radius(rng: np.random.Generator, area_m2: float, elongation: float, roughness: float):
+    """Radial outline r(theta) of a blob with the requested area (m²)."""
+    n_harm = 5
+    amps = roughness * rng.uniform(0.3, 1.0, n_harm) / np.arange(2, 2 + n_harm)
+    phases = rng.uniform(0, 2 * np.pi, n_harm)
+
+    def shape_fn(theta):
+        wobble = 1.0 + sum(a * np.cos(k * theta + p) for k, a, p in zip(range(2, 2 + n_harm), amps, phases))
+        # elongated along the slope (x, downslope): ellipse radius factor
+        ell = 1.0 / np.sqrt((np.cos(theta) / elongation) ** 2 + np.sin(theta) ** 2)
+        return wobble * ell
+
+    th = np.linspace(0, 2 * np.pi, 4096, endpoint=False)
+    unit_area = 0.5 * np.mean(shape_fn(th) ** 2) * 2 * np.pi
+    r0 = np.sqrt(area_m2 / unit_area)
+    return lambda theta: r0 * shape_fn(theta), r0
+
+
+def _cast_shadow(dem: np.ndarray, cell: float, sun_az_deg: float, sun_el_deg: float, max_dist_m: float) -> np.ndarray:
+    """Boolean mask of cells in cast shadow (ray marching towards the sun on the DEM)."""
+    az = np.radians(sun_az_deg)
+    dx, dy = np.sin(az), np.cos(az)  # east, north components towards the sun
+    tan_el = np.tan(np.radians(sun_el_deg))
+    steps = int(np.ceil(max_dist_m / cell))
+    shadow = np.zeros(dem.shape, dtype=bool)
+    for k in range(1, steps + 1):
+        dist = k * cell
+        # rows go south: moving north means a negative row shift
+        shifted = ndimage.shift(dem, (dy * k, -dx * k), order=1, mode="nearest", prefilter=False)
+        shadow |= shifted > dem + dist * tan_el
+    return shadow
+
+
+def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, origin: tuple[float, float]) -> CloseRangeScene:
+    """Generate one close-range scene.
+
+    Parameters
+    ----------
+    name
+        Scene name (also seeds its random stream).
+    params
+        Generator parameters shared by the scenes (config ``obia.scenes`` without
+        ``list``): ``cell_m, size_m, slope_deg, patch_depth_m, scarp_width_m,
+        gradual_edge_width_m, patch_elongation, patch_roughness, clods, clod_area_m2,
+        marker_count, marker_radius_m, marker_survey_sd_m, colours, grass_gap_fraction,
+        texture, camera``.
+    scene
+        Per-scene values: ``area_m2`` (0 = no eroded patch), ``greenness`` (1 = green
+        July grass, 0 = brown September grass), ``sun_elevation_deg``,
+        ``sun_azimuth_deg``, ``diffuse_fraction`` (1 = overcast).
+    seed
+        Master seed of the configuration.
+    crs, origin
+        Site CRS and the top-left corner (x, y) of the scene.
+    """
+    rng = scene_rng(seed, name)
+    cell = float(params["cell_m"])
+    n = int(round(float(params["size_m"]) / cell))
+    grid = GridSpec(float(origin[0]), float(origin[1]), cell, n, n, crs)
+    xs = (np.arange(n) + 0.5) * cell
+    ys = (np.arange(n) + 0.5) * cell  # distance south of the top edge
+    X, Ys = np.meshgrid(xs, ys)
+    Y = -Ys  # northing relative to the top edge
+    size = n * cell
+
+    # --- terrain: plane dipping east (downslope = +x), undulations, micro-roughness
+    slope = rng.uniform(*params["slope_deg"])
+    tex = params["texture"]
+    dem = -np.tan(np.radians(slope)) * X
+    dem += tex["undulation_m"] * _smooth_noise(rng, (n, n), tex["undulation_scale_m"] / cell)
+    dem += tex["grass_roughness_m"] * _smooth_noise(rng, (n, n), 1.0)
+
+    # --- eroded patch: vegetation cover v (1 grass, 0 bare), smooth for the truth
+    area = float(scene["area_m2"])
+    v_smooth = np.ones((n, n), dtype=np.float64)
+    clod_mask = np.zeros((n, n), dtype=bool)
+    centre = (size / 2, -size / 2)
+    if area > 0:
+        radius_fn, r0 = _patch_radius(rng, area, params["patch_elongation"], params["patch_roughness"])
+        reach = float(np.max(radius_fn(np.linspace(0, 2 * np.pi, 720))))
+        margin = min(reach + 0.3, size / 2)
+        centre = (rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2,
+                  -(rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2))
+        dxp, dyp = X - centre[0], Y - centre[1]
+        rho = np.hypot(dxp, dyp)
+        theta = np.arctan2(dyp, dxp)
+        s = rho - radius_fn(theta)  # signed radial distance, > 0 outside
+        # edge width: scarp everywhere except the downslope (east) side, which is gradual
+        downslope = np.clip(np.cos(theta), 0.0, 1.0) ** 2
+        w = params["scarp_width_m"] + (params["gradual_edge_width_m"] - params["scarp_width_m"]) * downslope
+        v_smooth = _smoothstep((s + w / 2) / w)
+        # clods of grass inside the patch
+        n_clods = int(rng.integers(params["clods"][0], params["clods"][1] + 1))
+        inner = np.argwhere(s < -0.3)
+        for _ in range(n_clods if len(inner) else 0):
+            cr, cc = inner[rng.integers(len(inner))]
+            a_m2 = rng.uniform(*params["clod_area_m2"])
+            ax = np.sqrt(a_m2 / np.pi) * rng.uniform(0.7, 1.4)
+            ay = a_m2 / (np.pi * ax)
+            ang = rng.uniform(0, np.pi)
+            u = (X - xs[cc]) * np.cos(ang) + (Y + ys[cr]) * np.sin(ang)
+            t = -(X - xs[cc]) * np.sin(ang) + (Y + ys[cr]) * np.cos(ang)
+            clod_mask |= (u / ax) ** 2 + (t / ay) ** 2 <= 1.0
+        depth = rng.uniform(*params["patch_depth_m"])
+        floor_tilt = 0.05 * (X - centre[0])  # floor slightly steeper than the slope [I]
+        v_geom = np.where(clod_mask, 1.0, v_smooth)
+        clod_relief = ndimage.gaussian_filter(clod_mask.astype(np.float64), 1.5)
+        dem += -(depth + floor_tilt.clip(-depth * 0.5, depth * 0.5)) * (1.0 - v_smooth) + depth * 0.7 * clod_relief * (1 - v_smooth)
+        v_smooth = v_geom
+    truth_eroded = (v_smooth < 0.5).astype(np.uint8)
+
+    # visible cover: thin, tufted vegetation in the transition zone
+    tuft = _smooth_noise(rng, (n, n), 2.0)
+    band = 4.0 * v_smooth * (1.0 - v_smooth)
+    v_vis = np.clip(v_smooth + 0.35 * band * tuft, 0.0, 1.0)
+
+    # --- GCP markers: white spheres on the grass, away from the patch
+    marker_r = float(params["marker_radius_m"])
+    truth_markers = np.zeros((n, n), dtype=np.uint8)
+    rows = []
+    placed = 0
+    tries = 0
+    while placed < int(params["marker_count"]) and tries < 1000:
+        tries += 1
+        mx, my = rng.uniform(0.4, size - 0.4), -rng.uniform(0.4, size - 0.4)
+        ci, cj = int(-my / cell), int(mx / cell)
+        if v_smooth[max(ci - 25, 0):ci + 25, max(cj - 25, 0):cj + 25].min() < 0.99:
+            continue
+        if any(np.hypot(mx - r["_x"], my - r["_y"]) < 1.0 for r in rows):
+            continue
+        d2 = (X - mx) ** 2 + (Y - my) ** 2
+        inside = d2 <= marker_r ** 2
+        ground = float(dem[ci, cj])
+        cap = np.sqrt(np.clip(marker_r ** 2 - d2, 0.0, None))
+        dem = np.where(inside, np.maximum(dem, ground + marker_r + cap), dem)
+        truth_markers[inside] = 1
+        rows.append({"_x": mx, "_y": my, "z": ground + marker_r})
+        placed += 1
+    sd = float(params["marker_survey_sd_m"])
+    markers = pd.DataFrame(
+        {
+            "gcp_id": [f"S{i + 1}" for i in range(len(rows))],
+            "x": [grid.x0 + r["_x"] + rng.normal(0, sd) for r in rows],
+            "y": [grid.y0 + r["_y"] + rng.normal(0, sd) for r in rows],
+            "z": [r["z"] + rng.normal(0, sd) for r in rows],
+            "radius_m": marker_r,
+        }
+    )
+
+    # --- reflectance (linear, 0..1)
+    col = params["colours"]
+    green = np.asarray(col["grass_green"], dtype=np.float64)
+    brown = np.asarray(col["grass_brown"], dtype=np.float64)
+    g_local = np.clip(float(scene["greenness"]) + tex["greenness_variation"] * _smooth_noise(rng, (n, n), 25.0), 0.0, 1.0)
+    grass = brown[None, None, :] + g_local[..., None] * (green - brown)[None, None, :]
+    blade = np.exp(tex["grass_blade_sd"] * _smooth_noise(rng, (n, n), 0.6))
+    gap = np.clip(float(params["grass_gap_fraction"]) * (1.0 + _smooth_noise(rng, (n, n), 0.8)), 0.0, 0.9)
+    litter = np.asarray(col["litter"], dtype=np.float64)
+    grass = (grass * blade[..., None]) * (1 - gap[..., None]) + litter * gap[..., None]
+    soil = np.asarray(col["soil"], dtype=np.float64)[None, None, :] * np.exp(tex["soil_moisture_sd"] * _smooth_noise(rng, (n, n), 12.0))[..., None]
+    soil *= np.exp(tex["soil_grain_sd"] * _smooth_noise(rng, (n, n), 0.5))[..., None]
+    stones = _smooth_noise(rng, (n, n), 1.5) > tex["stone_quantile_z"]
+    soil[stones] = np.asarray(col["stone"], dtype=np.float64) * rng.uniform(0.8, 1.2)
+    refl = v_vis[..., None] * grass + (1 - v_vis[..., None]) * soil
+    refl[truth_markers == 1] = np.asarray(col["marker"], dtype=np.float64)
+
+    # --- illumination: diffuse (bluish sky) + direct sun with cast shadows
+    el, az = float(scene["sun_elevation_deg"]), float(scene["sun_azimuth_deg"])
+    diffuse = float(scene["diffuse_fraction"])
+    gy, gx = np.gradient(dem, cell)  # gy along rows (south)
+    nx, ny, nz = -gx, gy, np.ones_like(dem)  # upward normal (east, north, up)
+    norm = np.sqrt(nx ** 2 + ny ** 2 + nz ** 2)
+    sun = np.array([np.sin(np.radians(az)) * np.cos(np.radians(el)), np.cos(np.radians(az)) * np.cos(np.radians(el)), np.sin(np.radians(el))])
+    cos_i = np.clip((nx * sun[0] + ny * sun[1] + nz * sun[2]) / norm, 0.0, None)
+    plane_n = np.array([np.sin(np.radians(slope)), 0.0, np.cos(np.radians(slope))])
+    cos_plane = max(float(plane_n @ sun), 0.05)
+    lit = np.ones_like(dem, dtype=bool)
+    if diffuse < 1.0:
+        relief = float(np.nanmax(dem - ndimage.minimum_filter(dem, size=int(1.0 / cell))))
+        max_dist = min(size, (relief + 0.5) / np.tan(np.radians(el)))
+        lit = ~_cast_shadow(dem, cell, az, el, max_dist)
+    sky = np.asarray(col["sky_tint"], dtype=np.float64)
+    sun_tint = np.asarray(col["sun_tint"], dtype=np.float64)
+    direct = (1.0 - diffuse) * (cos_i / cos_plane * lit)[..., None] * sun_tint
+    irradiance = diffuse * sky + direct
+    radiance = refl * irradiance
+
+    # --- camera: blur (mosaicking), exposure, gamma, noise, 8 bit
+    cam = params["camera"]
+    radiance = ndimage.gaussian_filter(radiance, (cam["blur_sigma_px"], cam["blur_sigma_px"], 0))
+    exposure = cam["target_median"] / float(np.median(radiance.mean(axis=-1)))
+    encoded = np.clip(radiance * exposure * rng.uniform(0.9, 1.1), 0.0, 1.0) ** (1.0 / cam["gamma"])
+    dn = encoded * 255.0 + rng.normal(0.0, cam["noise_dn"], encoded.shape)
+    rgb = np.clip(np.round(dn), 0, 255).astype(np.uint8).transpose(2, 0, 1)
+
+    dem_abs = (dem + float(params["base_elevation_m"])).astype(np.float32)
+    markers["z"] += float(params["base_elevation_m"])
+    meta = {
+        "scene": name,
+        "slope_deg": float(slope),
+        "area_requested_m2": area,
+        "area_ref_m2": float(truth_eroded.sum() * cell * cell),
+        "greenness": float(scene["greenness"]),
+        "sun_elevation_deg": el,
+        "sun_azimuth_deg": az,
+        "diffuse_fraction": diffuse,
+        "shadow_fraction": float(1.0 - lit.mean()) if diffuse < 1.0 else 0.0,
+        "clod_area_m2": float((clod_mask & (truth_eroded == 0)).sum() * cell * cell),
+        "markers": int(placed),
+    }
+    return CloseRangeScene(name, grid, rgb, dem_abs, truth_eroded, truth_markers, markers, meta)
+
+
+def scene_names(count: int) -> list[str]:
+    """Names ``scene_01 .. scene_NN``."""
+    return [f"scene_{i + 1:02d}" for i in range(count)]
+
+
+def scene_origin(index: int, params: dict) -> tuple[float, float]:
+    """Top-left corner of scene ``index`` (0-based): scenes sit side by side along y."""
+    x0, y0 = params["origin_xy"]
+    return float(x0), float(y0) - index * (float(params["size_m"]) + float(params["spacing_m"]))
