@@ -1,0 +1,282 @@
+"""Bundle adjustment with ground control: our own sparse least squares.
+
+COLMAP's bundle adjustment has no GCP term, so the georeferencing step adjusts the block
+again with three kinds of residuals, each divided by its standard deviation:
+
+* tie-point reprojection errors, ``(x̂ − x) / σ_tie`` (px);
+* GCP reprojection errors of the GCP image measurements, ``(x̂ − x) / σ_gcp_px``;
+* GCP position priors, ``(X_gcp − X_survey) / σ_xyz`` (m), σ per axis from config.
+
+Unknowns: every camera pose (rotation vector, translation), the shared intrinsics that
+are refined (focal length, principal point, k1, k2), tie points and GCP points. The
+problem is solved by Levenberg–Marquardt on the normal equations with the points
+eliminated by the Schur complement (the classic sparse bundle adjustment): the reduced
+camera system (intrinsics + poses) is dense but small, point blocks are 3×3. The
+Jacobian is analytic except for the rotation columns (central differences). A Huber
+weight (iteratively reweighted, threshold ``loss_scale`` σ) damps tie-point outliers;
+GCP points are points with an additional position prior. Because the survey
+fixes position, orientation and scale and the tie points tie the block together, a bent
+block (wrong distortion start, dome) is straightened, which a similarity cannot do.
+
+Cost per iteration: O(observations × 11²) to build the normal equations plus
+O(P³) for the reduced camera system of P = 5·cameras + 6·images unknowns.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import coo_matrix, csr_matrix
+
+from kitegully.georef.geometry import project, rotate
+
+log = logging.getLogger(__name__)
+
+INTRINSIC_NAMES = ("f", "cx", "cy", "k1", "k2")
+
+
+@dataclass
+class Block:
+    """A photogrammetric block in a metric local frame.
+
+    Attributes
+    ----------
+    intr : (n_cameras, 5) intrinsics ``f, cx, cy, k1, k2`` (px, px, px, -, -).
+    cam_of_image : (n_images,) camera index of each image.
+    rv, t : (n_images, 3) camera-from-world rotation vectors and translations.
+    points : (n_points, 3) tie points.
+    obs_image, obs_point : (n_obs,) indices of each tie observation.
+    obs_xy : (n_obs, 2) measured pixels.
+    gcp_xyz : (n_gcp, 3) GCP positions (start values).
+    gcp_obs_image, gcp_obs_gcp : (n_gobs,) indices of each GCP observation.
+    gcp_obs_xy : (n_gobs, 2) measured GCP pixels.
+    """
+
+    intr: np.ndarray
+    cam_of_image: np.ndarray
+    rv: np.ndarray
+    t: np.ndarray
+    points: np.ndarray
+    obs_image: np.ndarray
+    obs_point: np.ndarray
+    obs_xy: np.ndarray
+    gcp_xyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    gcp_obs_image: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    gcp_obs_gcp: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    gcp_obs_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    def copy(self) -> "Block":
+        return Block(**{k: np.array(v, copy=True) for k, v in self.__dict__.items()})
+
+    def reprojection_rms(self) -> float:
+        """RMS tie-point reprojection error (px)."""
+        cam = self.cam_of_image[self.obs_image]
+        p = project(self.intr[cam], self.rv[self.obs_image], self.t[self.obs_image], self.points[self.obs_point])
+        return float(np.sqrt(np.mean(np.sum((p - self.obs_xy) ** 2, axis=1))))
+
+
+@dataclass
+class BundleSettings:
+    """Weights and options of the GCP bundle adjustment (all from config).
+
+    Attributes
+    ----------
+    sigma_tie_px, sigma_gcp_px : image measurement σ (px).
+    sigma_gcp_xy_m, sigma_gcp_z_m : GCP survey σ (m).
+    refine : names of intrinsics to refine (subset of f, cx, cy, k1, k2).
+    loss : ``huber`` (robust) or ``linear`` (plain least squares) on image residuals.
+    loss_scale : Huber threshold in σ units.
+    max_iterations : Levenberg–Marquardt iterations at most.
+    """
+
+    sigma_tie_px: float = 1.0
+    sigma_gcp_px: float = 2.0
+    sigma_gcp_xy_m: float = 0.02
+    sigma_gcp_z_m: float = 0.03
+    refine: tuple[str, ...] = ("f", "cx", "cy", "k1", "k2")
+    loss: str = "huber"
+    loss_scale: float = 3.0
+    max_iterations: int = 50
+
+
+def projection_jacobian(intr, rv, t, X):
+    """Pixels and their derivatives for each observation row.
+
+    Returns ``p`` (n, 2), ``J_intr`` (n, 2, 5), ``J_pose`` (n, 2, 6) (rotation vector then
+    translation) and ``J_X`` (n, 2, 3). Analytic except the rotation columns.
+    """
+    xc = rotate(rv, X) + t
+    z = xc[:, 2]
+    u, v = xc[:, 0] / z, xc[:, 1] / z
+    r2 = u * u + v * v
+    f, k1, k2 = intr[:, 0], intr[:, 3], intr[:, 4]
+    d = 1 + k1 * r2 + k2 * r2 * r2
+    dd = k1 + 2 * k2 * r2  # d(d)/d(r2)
+    p = np.column_stack([f * u * d + intr[:, 1], f * v * d + intr[:, 2]])
+    n = len(X)
+    Ji = np.zeros((n, 2, 5))
+    Ji[:, 0, 0], Ji[:, 1, 0] = u * d, v * d
+    Ji[:, 0, 1], Ji[:, 1, 2] = 1.0, 1.0
+    Ji[:, 0, 3], Ji[:, 1, 3] = f * u * r2, f * v * r2
+    Ji[:, 0, 4], Ji[:, 1, 4] = f * u * r2 * r2, f * v * r2 * r2
+    # d pixel / d (u, v)
+    A = np.empty((n, 2, 2))
+    A[:, 0, 0] = f * (d + 2 * u * u * dd)
+    A[:, 0, 1] = f * 2 * u * v * dd
+    A[:, 1, 0] = f * 2 * u * v * dd
+    A[:, 1, 1] = f * (d + 2 * v * v * dd)
+    # d (u, v) / d xc
+    B = np.zeros((n, 2, 3))
+    B[:, 0, 0] = 1 / z
+    B[:, 0, 2] = -u / z
+    B[:, 1, 1] = 1 / z
+    B[:, 1, 2] = -v / z
+    Jxc = A @ B  # (n, 2, 3)
+    Jp = np.empty((n, 2, 6))
+    Jp[:, :, 3:] = Jxc
+    h = 1e-6
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        dx = (rotate(rv + e, X) - rotate(rv - e, X)) / (2 * h)
+        Jp[:, :, k] = np.einsum("nij,nj->ni", Jxc, dx)
+    # d xc / d X = R: apply the rotation to the unit vectors
+    JX = np.empty((n, 2, 3))
+    for k in range(3):
+        e = np.zeros((n, 3))
+        e[:, k] = 1.0
+        JX[:, :, k] = np.einsum("nij,nj->ni", Jxc, rotate(rv, e))
+    return p, Ji, Jp, JX
+
+
+def _bincount2(index, values, size):
+    return np.bincount(index.ravel(), weights=values.ravel(), minlength=size)
+
+
+def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Block, dict]:
+    """Run the GCP bundle adjustment; returns the adjusted block and a report.
+
+    ``gcp_prior`` (n_gcp, 3) are the surveyed GCP positions in the block's frame.
+    Tie points and GCP points are one point set; GCP points carry the prior.
+    """
+    nc, ni, npt, ng = len(block.intr), len(block.rv), len(block.points), len(block.gcp_xyz)
+    ref = np.array([INTRINSIC_NAMES.index(n) for n in s.refine], dtype=int)
+    nri = len(ref)
+    P = nc * nri + 6 * ni  # reduced camera system size
+    N = npt + ng
+    # observations: tie then GCP, with point index into the joint point set
+    o_img = np.concatenate([block.obs_image, block.gcp_obs_image]).astype(int)
+    o_pt = np.concatenate([block.obs_point, npt + block.gcp_obs_gcp]).astype(int)
+    o_xy = np.concatenate([block.obs_xy, block.gcp_obs_xy])
+    o_sig = np.concatenate([np.full(len(block.obs_image), s.sigma_tie_px), np.full(len(block.gcp_obs_image), s.sigma_gcp_px)])
+    n_tie, n_g = len(block.obs_image), len(block.gcp_obs_image)
+    cam = block.cam_of_image[o_img]
+    # global camera-parameter index of each observation's 5+6 columns (-1: not refined)
+    cidx = np.full((len(o_img), 11), -1)
+    for j, r in enumerate(ref):
+        cidx[:, r] = cam * nri + j
+    cidx[:, 5:] = nc * nri + 6 * o_img[:, None] + np.arange(6)
+    keep_c = cidx >= 0
+    sig_prior = np.array([s.sigma_gcp_xy_m, s.sigma_gcp_xy_m, s.sigma_gcp_z_m])
+    prior_w = 1.0 / sig_prior**2
+
+    intr, rv, t = block.intr.copy(), block.rv.copy(), block.t.copy()
+    pts = np.vstack([block.points, block.gcp_xyz]) if ng else block.points.copy()
+
+    def residual_state(intr, rv, t, pts):
+        p = project(intr[cam], rv[o_img], t[o_img], pts[o_pt])
+        r = (p - o_xy) / o_sig[:, None]
+        rn = np.linalg.norm(r, axis=1)
+        if s.loss == "huber":
+            w = np.where(rn <= s.loss_scale, 1.0, s.loss_scale / np.maximum(rn, 1e-12))
+            rho = np.where(rn <= s.loss_scale, rn**2, 2 * s.loss_scale * rn - s.loss_scale**2)
+        else:
+            w, rho = np.ones_like(rn), rn**2
+        cost = 0.5 * rho.sum()
+        if ng:
+            cost += 0.5 * float(np.sum((pts[npt:] - gcp_prior) ** 2 * prior_w))
+        return cost, r, w
+
+    cost, r, w = residual_state(intr, rv, t, pts)
+    cost0 = cost
+    lam = 1e-3
+    it = 0
+    for it in range(1, s.max_iterations + 1):
+        p, Ji, Jp, JX = projection_jacobian(intr[cam], rv[o_img], t[o_img], pts[o_pt])
+        sw = (np.sqrt(w) / o_sig)[:, None, None]
+        Jc = np.concatenate([Ji, Jp], axis=2) * sw  # (n, 2, 11)
+        Jx = JX * sw
+        rr = r * np.sqrt(w)[:, None]
+        Jc = np.where(keep_c[:, None, :], Jc, 0.0)
+        ci = np.where(keep_c, cidx, 0)
+        # U (P×P), W (P×3N), V (N,3,3), gradients
+        U_vals = np.einsum("nki,nkj->nij", Jc, Jc)
+        U = _bincount2(ci[:, :, None] * P + ci[:, None, :], U_vals, P * P).reshape(P, P)
+        W_vals = np.einsum("nki,nkj->nij", Jc, Jx)  # (n, 11, 3)
+        W_cols = 3 * o_pt[:, None, None] + np.arange(3)[None, None, :]
+        W = coo_matrix((W_vals.ravel(), (np.broadcast_to(ci[:, :, None], W_vals.shape).ravel(), np.broadcast_to(W_cols, W_vals.shape).ravel())), shape=(P, 3 * N)).tocsr()
+        V = _bincount2(o_pt[:, None, None] * 9 + (np.arange(3)[:, None] * 3 + np.arange(3))[None], np.einsum("nki,nkj->nij", Jx, Jx), 9 * N).reshape(N, 3, 3)
+        gc = _bincount2(ci, np.einsum("nki,nk->ni", Jc, rr), P)
+        gp = _bincount2(3 * o_pt[:, None] + np.arange(3), np.einsum("nki,nk->ni", Jx, rr), 3 * N).reshape(N, 3)
+        if ng:
+            V[npt:] += np.diag(prior_w)[None]
+            gp[npt:] += (pts[npt:] - gcp_prior) * prior_w
+        improved = False
+        for _ in range(10):
+            Ud = U + lam * np.diag(np.diag(U) + 1e-9)
+            Vd = V + lam * (V * np.eye(3)[None]) + 1e-12 * np.eye(3)[None]
+            Vinv = np.linalg.inv(Vd)
+            Vinv_sp = _blockdiag(Vinv)
+            WV = W @ Vinv_sp
+            S = Ud - (WV @ W.T).toarray()
+            rhs = -gc + WV @ gp.ravel()
+            try:
+                dc = np.linalg.solve(S, rhs)
+            except np.linalg.LinAlgError:
+                lam *= 10
+                continue
+            dp = -(Vinv @ (gp + (W.T @ dc).reshape(N, 3))[:, :, None])[:, :, 0]
+            intr_n, rv_n, t_n = intr.copy(), rv.copy(), t.copy()
+            if nri:
+                intr_n[:, ref] += dc[: nc * nri].reshape(nc, nri)
+            pose = dc[nc * nri:].reshape(ni, 6)
+            rv_n += pose[:, :3]
+            t_n += pose[:, 3:]
+            pts_n = pts + dp
+            cost_n, r_n, w_n = residual_state(intr_n, rv_n, t_n, pts_n)
+            if np.isfinite(cost_n) and cost_n < cost:
+                rel = (cost - cost_n) / max(cost, 1e-300)
+                intr, rv, t, pts, cost, r, w = intr_n, rv_n, t_n, pts_n, cost_n, r_n, w_n
+                lam = max(lam / 3, 1e-9)
+                improved = True
+                break
+            lam *= 10
+        if not improved or rel < 1e-9:
+            break
+    out = block.copy()
+    out.intr, out.rv, out.t = intr, rv, t
+    out.points, out.gcp_xyz = pts[:npt], pts[npt:]
+    tie_res = r[:n_tie] * s.sigma_tie_px
+    report = {
+        "n_parameters": int(P + 3 * N),
+        "n_residuals": int(2 * (n_tie + n_g) + 3 * ng),
+        "n_tie_observations": int(n_tie),
+        "n_gcp_observations": int(n_g),
+        "initial_cost": float(cost0),
+        "final_cost": float(cost),
+        "n_iterations": int(it),
+        "tie_rms_px": float(np.sqrt(np.mean(np.sum(tie_res**2, axis=1)))) if n_tie else float("nan"),
+    }
+    log.info("GCP bundle adjustment: %d parameters, cost %.4g -> %.4g in %d iterations, tie RMS %.3f px",
+             report["n_parameters"], cost0, cost, it, report["tie_rms_px"])
+    return out, report
+
+
+def _blockdiag(blocks: np.ndarray) -> csr_matrix:
+    """Sparse block-diagonal matrix of (N, 3, 3) blocks."""
+    N = len(blocks)
+    rows = (3 * np.arange(N)[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
+    cols = (3 * np.arange(N)[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
+    return coo_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * N, 3 * N)).tocsr()

@@ -1,0 +1,128 @@
+"""Camera geometry in NumPy: rotations, the COLMAP radial camera, multi-view triangulation.
+
+Camera convention (COLMAP): ``x_cam = R @ X + t``; normalised ``u = x/z, v = y/z``;
+radial distortion ``d = k1 r² + k2 r⁴`` with ``r² = u² + v²``; pixel
+``(f u (1 + d) + cx, f v (1 + d) + cy)``. Intrinsics are ``(f, cx, cy, k1, k2)``
+(SIMPLE_RADIAL has ``k2 = 0``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rotvec_to_matrix(rv: np.ndarray) -> np.ndarray:
+    """Rodrigues: (n, 3) rotation vectors to (n, 3, 3) matrices. O(n)."""
+    rv = np.atleast_2d(rv)
+    theta = np.linalg.norm(rv, axis=1)
+    small = theta < 1e-12
+    k = rv / np.where(small, 1.0, theta)[:, None]
+    K = np.zeros((len(rv), 3, 3))
+    K[:, 0, 1], K[:, 0, 2] = -k[:, 2], k[:, 1]
+    K[:, 1, 0], K[:, 1, 2] = k[:, 2], -k[:, 0]
+    K[:, 2, 0], K[:, 2, 1] = -k[:, 1], k[:, 0]
+    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
+    R = np.eye(3)[None] + s * K + (1 - c) * (K @ K)
+    R[small] = np.eye(3)
+    return R
+
+
+def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices to (n, 3) rotation vectors (via quaternions). O(n)."""
+    R = np.asarray(R).reshape(-1, 3, 3)
+    q = np.empty((len(R), 4))
+    for i, m in enumerate(R):  # n = number of images: small
+        w = np.sqrt(max(0.0, 1 + m[0, 0] + m[1, 1] + m[2, 2])) / 2
+        x = np.copysign(np.sqrt(max(0.0, 1 + m[0, 0] - m[1, 1] - m[2, 2])) / 2, m[2, 1] - m[1, 2])
+        y = np.copysign(np.sqrt(max(0.0, 1 - m[0, 0] + m[1, 1] - m[2, 2])) / 2, m[0, 2] - m[2, 0])
+        z = np.copysign(np.sqrt(max(0.0, 1 - m[0, 0] - m[1, 1] + m[2, 2])) / 2, m[1, 0] - m[0, 1])
+        q[i] = (w, x, y, z)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    angle = 2 * np.arctan2(np.linalg.norm(q[:, 1:], axis=1), q[:, 0])
+    sin_half = np.linalg.norm(q[:, 1:], axis=1)
+    axis = q[:, 1:] / np.where(sin_half < 1e-15, 1.0, sin_half)[:, None]
+    return axis * angle[:, None]
+
+
+def rotate(rv: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Rotate points ``X`` (n, 3) by per-row rotation vectors ``rv`` (n, 3) (Rodrigues). O(n)."""
+    theta = np.linalg.norm(rv, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(theta > 1e-12, rv / theta, 0.0)
+    cos, sin = np.cos(theta), np.sin(theta)
+    kx = np.cross(k, X)
+    kd = np.sum(k * X, axis=1, keepdims=True)
+    return X * cos + kx * sin + k * kd * (1 - cos)
+
+
+def project(intr: np.ndarray, rv: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Pixel positions of world points, one camera row per point.
+
+    Parameters
+    ----------
+    intr : (n, 5) intrinsics ``f, cx, cy, k1, k2`` per observation.
+    rv, t : (n, 3) rotation vector and translation (camera from world) per observation.
+    X : (n, 3) world points.
+    """
+    xc = rotate(rv, X) + t
+    z = xc[:, 2]
+    u, v = xc[:, 0] / z, xc[:, 1] / z
+    r2 = u * u + v * v
+    d = 1 + intr[:, 3] * r2 + intr[:, 4] * r2 * r2
+    return np.column_stack([intr[:, 0] * u * d + intr[:, 1], intr[:, 0] * v * d + intr[:, 2]])
+
+
+def undistort_normalised(intr: np.ndarray, xy: np.ndarray, iterations: int = 20) -> np.ndarray:
+    """Normalised image coordinates (u, v) of pixels (fixed-point inversion of the radial model)."""
+    intr = np.atleast_2d(intr)
+    ud = (xy[:, 0] - intr[:, 1]) / intr[:, 0]
+    vd = (xy[:, 1] - intr[:, 2]) / intr[:, 0]
+    u, v = ud.copy(), vd.copy()
+    for _ in range(iterations):
+        r2 = u * u + v * v
+        d = 1 + intr[:, 3] * r2 + intr[:, 4] * r2 * r2
+        u, v = ud / d, vd / d
+    return np.column_stack([u, v])
+
+
+def camera_centres(rv: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Projection centres ``C = -Rᵀ t`` for (n, 3) rotation vectors and translations."""
+    return -rotate(-rv, t)
+
+
+def triangulate(
+    intr: np.ndarray, rv: np.ndarray, t: np.ndarray, xy: np.ndarray, point_index: np.ndarray, n_points: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ray intersection of many points at once (midpoint method).
+
+    Each observation ``k`` of point ``point_index[k]`` contributes a ray from its camera
+    centre; the point minimising the squared perpendicular distances to its rays solves
+    a 3×3 system. Vectorised: O(observations + points).
+
+    Returns
+    -------
+    X : (n_points, 3) points (NaN where fewer than two rays or the rays are parallel).
+    miss : (n_points,) RMS perpendicular ray distance (m) at the solution.
+    """
+    uv = undistort_normalised(intr, xy)
+    d_cam = np.column_stack([uv, np.ones(len(uv))])
+    d = rotate(-rv, d_cam)  # Rᵀ d
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    C = camera_centres(rv, t)
+    P = np.eye(3)[None] - d[:, :, None] * d[:, None, :]
+    A = np.zeros((n_points, 3, 3))
+    b = np.zeros((n_points, 3))
+    np.add.at(A, point_index, P)
+    np.add.at(b, point_index, np.einsum("nij,nj->ni", P, C))
+    count = np.bincount(point_index, minlength=n_points)
+    X = np.full((n_points, 3), np.nan)
+    ok = (count >= 2) & (np.linalg.cond(A) < 1e12)
+    if ok.any():
+        X[ok] = np.linalg.solve(A[ok], b[ok][:, :, None])[:, :, 0]
+    r = X[point_index] - C
+    perp = r - np.sum(r * d, axis=1, keepdims=True) * d
+    ss = np.bincount(point_index, weights=np.sum(perp**2, axis=1), minlength=n_points)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        miss = np.sqrt(ss / count)
+    miss[~ok] = np.nan
+    return X, miss

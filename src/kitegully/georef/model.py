@@ -1,0 +1,139 @@
+"""Moving a block between pycolmap reconstructions and the arrays of :mod:`bundle`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pycolmap
+
+from kitegully import InputError
+from kitegully.georef.bundle import Block
+from kitegully.georef.geometry import matrix_to_rotvec, rotvec_to_matrix, triangulate
+from kitegully.georef.similarity import Similarity
+
+
+@dataclass
+class ModelIndex:
+    """Ids that tie the block's array rows to the reconstruction."""
+
+    image_ids: np.ndarray
+    image_names: list[str]
+    camera_ids: np.ndarray
+    point_ids: np.ndarray
+    all_point_ids: np.ndarray
+    all_obs_image: np.ndarray
+    all_obs_point: np.ndarray
+    all_obs_xy: np.ndarray
+
+
+def intrinsics_of(cam: pycolmap.Camera) -> np.ndarray:
+    """``(f, cx, cy, k1, k2)`` of a SIMPLE_RADIAL or RADIAL camera."""
+    p = np.asarray(cam.params, float)
+    name = cam.model.name
+    if name == "SIMPLE_RADIAL":
+        return np.array([p[0], p[1], p[2], p[3], 0.0])
+    if name == "RADIAL":
+        return p[:5].copy()
+    if name in ("SIMPLE_PINHOLE",):
+        return np.array([p[0], p[1], p[2], 0.0, 0.0])
+    raise InputError(f"camera model {name} is not supported by the GCP bundle adjustment (use SIMPLE_RADIAL or RADIAL)")
+
+
+def block_from_reconstruction(rec: pycolmap.Reconstruction, max_tie_points: int, seed: int) -> tuple[Block, ModelIndex]:
+    """Arrays of a model; at most ``max_tie_points`` tie points (longest tracks first, ties by seeded shuffle). O(observations)."""
+    image_ids = np.array(sorted(rec.reg_image_ids()), dtype=int)
+    img_row = {int(i): k for k, i in enumerate(image_ids)}
+    camera_ids = np.array(sorted(rec.cameras.keys()), dtype=int)
+    cam_row = {int(c): k for k, c in enumerate(camera_ids)}
+    intr = np.array([intrinsics_of(rec.cameras[int(c)]) for c in camera_ids])
+    Rs, ts, cam_of = [], [], []
+    for i in image_ids:
+        img = rec.images[int(i)]
+        pose = img.cam_from_world()
+        Rs.append(pose.rotation.matrix())
+        ts.append(np.asarray(pose.translation))
+        cam_of.append(cam_row[int(img.camera_id)])
+    pids, xyz, o_img, o_pt, o_xy = [], [], [], [], []
+    for k, (pid, p) in enumerate(rec.points3D.items()):
+        pids.append(pid)
+        xyz.append(p.xyz)
+        for el in p.track.elements:
+            o_img.append(img_row[int(el.image_id)])
+            o_pt.append(k)
+            o_xy.append(rec.images[int(el.image_id)].points2D[int(el.point2D_idx)].xy)
+    pids = np.array(pids, dtype=np.int64)
+    xyz = np.array(xyz, float).reshape(-1, 3)
+    o_img, o_pt = np.array(o_img, int), np.array(o_pt, int)
+    o_xy = np.array(o_xy, float).reshape(-1, 2)
+    track_len = np.bincount(o_pt, minlength=len(pids))
+    rng = np.random.default_rng(seed)
+    order = np.lexsort((rng.random(len(pids)), -track_len))
+    keep = np.sort(order[: max_tie_points]) if max_tie_points > 0 else np.arange(len(pids))
+    new_idx = np.full(len(pids), -1)
+    new_idx[keep] = np.arange(len(keep))
+    sel = new_idx[o_pt] >= 0
+    block = Block(
+        intr=intr,
+        cam_of_image=np.array(cam_of, int),
+        rv=matrix_to_rotvec(np.array(Rs)),
+        t=np.array(ts, float),
+        points=xyz[keep],
+        obs_image=o_img[sel],
+        obs_point=new_idx[o_pt[sel]],
+        obs_xy=o_xy[sel],
+    )
+    names = [rec.images[int(i)].name for i in image_ids]
+    return block, ModelIndex(image_ids, names, camera_ids, pids[keep], pids, o_img, o_pt, o_xy)
+
+
+def transform_block(block: Block, sim: Similarity) -> Block:
+    """The block in the frame ``X' = s R X + t`` (poses re-expressed, points moved)."""
+    out = block.copy()
+    Rc = rotvec_to_matrix(block.rv)
+    Rn = Rc @ sim.R.T
+    out.rv = matrix_to_rotvec(Rn)
+    out.t = sim.scale * block.t - np.einsum("nij,j->ni", Rn, sim.t)
+    out.points = sim.apply(block.points)
+    if len(block.gcp_xyz):
+        out.gcp_xyz = sim.apply(block.gcp_xyz)
+    return out
+
+
+def retriangulate_all(block: Block, index: ModelIndex) -> tuple[np.ndarray, np.ndarray]:
+    """Every tie point of the full model re-intersected with the block's cameras. O(observations)."""
+    ci = block.cam_of_image[index.all_obs_image]
+    X, miss = triangulate(
+        block.intr[ci], block.rv[index.all_obs_image], block.t[index.all_obs_image],
+        index.all_obs_xy, index.all_obs_point, len(index.all_point_ids),
+    )
+    return X, miss
+
+
+def write_block_to_reconstruction(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, offset: np.ndarray) -> pycolmap.Reconstruction:
+    """Copy adjusted poses, intrinsics and re-triangulated points into ``rec`` (in place).
+
+    The model's coordinates are the block's local frame, i.e. site CRS minus ``offset``.
+    Points whose rays no longer meet (NaN) are deleted.
+    """
+    for k, c in enumerate(index.camera_ids):
+        cam = rec.cameras[int(c)]
+        p = np.asarray(cam.params, float).copy()
+        p[:3] = block.intr[k, :3]
+        p[3] = block.intr[k, 3]
+        if cam.model.name == "RADIAL":
+            p[4] = block.intr[k, 4]
+        cam.params = p
+    Rs = rotvec_to_matrix(block.rv)
+    for k, i in enumerate(index.image_ids):
+        img = rec.images[int(i)]
+        pose = pycolmap.Rigid3d(pycolmap.Rotation3d(Rs[k]), block.t[k])
+        frame = rec.frames[int(img.frame_id)]
+        frame.rig_from_world = pose
+    X, _ = retriangulate_all(block, index)
+    for k, pid in enumerate(index.all_point_ids):
+        if np.all(np.isfinite(X[k])):
+            rec.points3D[int(pid)].xyz = X[k]
+        else:
+            rec.delete_point3D(int(pid))
+    return rec

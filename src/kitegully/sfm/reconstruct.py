@@ -1,0 +1,176 @@
+"""pycolmap wrapper: SIFT features, matching suited to kite sequences, incremental mapping.
+
+The kite camera has one fixed lens, so all images of one shape share one camera whose
+focal length, principal point and radial distortion are refined (self-calibration) by
+COLMAP's bundle adjustment.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from kitegully import InputError
+from kitegully.sfm.images import ImageInfo
+
+log = logging.getLogger(__name__)
+
+CAMERA_MODELS = ("SIMPLE_RADIAL", "RADIAL")
+
+
+def camera_params(model: str, focal_px: float, width: int, height: int) -> str:
+    """Starting parameters of a COLMAP camera as its comma-separated string."""
+    cx, cy = width / 2.0, height / 2.0
+    if model == "SIMPLE_RADIAL":
+        return f"{focal_px},{cx},{cy},0"
+    if model == "RADIAL":
+        return f"{focal_px},{cx},{cy},0,0"
+    raise InputError(f"sfm.camera_model: '{model}' is not one of {', '.join(CAMERA_MODELS)}")
+
+
+def extract_features(
+    database: Path,
+    image_dir: Path,
+    infos: list[ImageInfo],
+    camera_model: str,
+    default_focal_factor: float,
+    max_num_features: int,
+    num_threads: int,
+) -> None:
+    """SIFT features for every prepared image; one shared camera per image shape.
+
+    The focal-length prior is the median EXIF focal length of the group (in SfM pixels),
+    or ``default_focal_factor`` × the larger image side when EXIF lacks it.
+    """
+    groups: dict[tuple[int, int], list[ImageInfo]] = defaultdict(list)
+    for info in infos:
+        groups[(info.sfm_width, info.sfm_height)].append(info)
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.num_threads = num_threads
+    ext.max_image_size = -1  # images are already downscaled by prepare_images
+    ext.sift.max_num_features = max_num_features
+    for (w, h), members in sorted(groups.items()):
+        focals = np.array([m.focal_px for m in members], dtype=float)
+        focals = focals[np.isfinite(focals)]
+        f0 = float(np.median(focals)) if focals.size else default_focal_factor * max(w, h)
+        reader = pycolmap.ImageReaderOptions()
+        reader.camera_model = camera_model
+        reader.camera_params = camera_params(camera_model, f0, w, h)
+        log.info("extracting features of %d images of %dx%d px (focal prior %.1f px)", len(members), w, h, f0)
+        pycolmap.extract_features(
+            database,
+            image_dir,
+            image_names=[m.sfm_name for m in members],
+            camera_mode=pycolmap.CameraMode.SINGLE,
+            reader_options=reader,
+            extraction_options=ext,
+            device=pycolmap.Device.cpu,
+        )
+
+
+def match_features(database: Path, n_images: int, method: str, overlap: int, exhaustive_max_images: int, num_threads: int) -> str:
+    """Match features: sequential by capture order, or exhaustive.
+
+    ``method="auto"`` matches exhaustively up to ``exhaustive_max_images`` images (cheap
+    and robust for small kite sets, where the flight path crosses itself) and
+    sequentially with ``overlap`` neighbours (quadratic overlap) above. Returns the
+    method used.
+    """
+    if method == "auto":
+        method = "exhaustive" if n_images <= exhaustive_max_images else "sequential"
+    mopt = pycolmap.FeatureMatchingOptions()
+    mopt.num_threads = num_threads
+    if method == "exhaustive":
+        pycolmap.match_exhaustive(database, matching_options=mopt, device=pycolmap.Device.cpu)
+    elif method == "sequential":
+        popt = pycolmap.SequentialPairingOptions()
+        popt.overlap = overlap
+        popt.quadratic_overlap = True
+        popt.num_threads = num_threads
+        pycolmap.match_sequential(database, matching_options=mopt, pairing_options=popt, device=pycolmap.Device.cpu)
+    else:
+        raise InputError(f"sfm.matching.method: '{method}' is not one of auto, sequential, exhaustive")
+    return method
+
+
+def incremental_map(
+    database: Path,
+    image_dir: Path,
+    out_dir: Path,
+    refine_principal_point: bool,
+    min_num_matches: int,
+    seed: int,
+    num_threads: int,
+) -> pycolmap.Reconstruction:
+    """Incremental mapping; returns the model with the most registered images.
+
+    Raises
+    ------
+    InputError
+        When no model could be built (too few matches between the images).
+    """
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.min_num_matches = min_num_matches
+    opts.ba_refine_focal_length = True
+    opts.ba_refine_principal_point = refine_principal_point
+    opts.ba_refine_extra_params = True
+    opts.num_threads = num_threads
+    opts.random_seed = seed
+    opts.mapper.random_seed = seed
+    opts.triangulation.random_seed = seed
+    tmp = out_dir.parent / (out_dir.name + "_all")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    models = pycolmap.incremental_mapping(database, image_dir, tmp, opts)
+    if not models:
+        raise InputError(f"{image_dir}: structure from motion built no model (too few matches between images)")
+    best = max(models.values(), key=lambda r: r.num_reg_images())
+    for idx, rec in models.items():
+        log.info("model %d: %d images, %d points", idx, rec.num_reg_images(), rec.num_points3D())
+    if out_dir.exists():
+        shutil.rmtree(out_dir)
+    out_dir.mkdir(parents=True)
+    best.write(out_dir)
+    shutil.rmtree(tmp)
+    return best
+
+
+def run_sfm(
+    infos: list[ImageInfo],
+    image_dir: str | Path,
+    work_dir: str | Path,
+    model_dir: str | Path,
+    params: dict,
+    seed: int,
+    num_threads: int,
+) -> tuple[pycolmap.Reconstruction, dict]:
+    """Features, matching and mapping; returns the largest model and timings (s)."""
+    image_dir, work_dir, model_dir = Path(image_dir), Path(work_dir), Path(model_dir)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    database = work_dir / "database.db"
+    if database.exists():
+        database.unlink()
+    pycolmap.set_random_seed(seed)
+    t0 = time.perf_counter()
+    extract_features(
+        database, image_dir, infos, params["camera_model"], params["default_focal_factor"],
+        params["max_num_features"], num_threads,
+    )
+    t1 = time.perf_counter()
+    m = params["matching"]
+    used = match_features(database, len(infos), m["method"], m["overlap"], m["exhaustive_max_images"], num_threads)
+    t2 = time.perf_counter()
+    rec = incremental_map(
+        database, image_dir, model_dir, params["refine_principal_point"], params["min_num_matches"], seed, num_threads
+    )
+    t3 = time.perf_counter()
+    timings = {"features_s": t1 - t0, "matching_s": t2 - t1, "mapping_s": t3 - t2, "matching_method": used}
+    log.info("features %.1f s, matching (%s) %.1f s, mapping %.1f s", t1 - t0, used, t2 - t1, t3 - t2)
+    return rec, timings
