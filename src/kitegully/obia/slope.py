@@ -33,8 +33,8 @@ def quadratic_kernels(window: int, cell: float) -> tuple[np.ndarray, np.ndarray]
 def wood_slope(dem: np.ndarray, cell: float, window: int = 5) -> np.ndarray:
     """Slope in degrees of ``dem`` (float, NaN = nodata) with a Wood quadratic fit.
 
-    NaN cells are filled with their nearest valid value before fitting (so edges of
-    the valid area get a one-sided estimate) and are NaN again in the output.
+    NaN cells are filled with their nearest valid value before fitting and are NaN
+    again in the output; the grid border is extended by odd reflection.
     """
     z = np.asarray(dem, dtype=np.float64)
     valid = np.isfinite(z)
@@ -44,8 +44,13 @@ def wood_slope(dem: np.ndarray, cell: float, window: int = 5) -> np.ndarray:
         idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
         z = z[tuple(idx)]
     kd, ke = quadratic_kernels(window, cell)
-    d = ndimage.correlate(z, kd, mode="nearest")
-    e = ndimage.correlate(z, ke, mode="nearest")
+    # odd reflection continues linear trends across the border, so edge cells keep
+    # an unbiased gradient instead of the flattening a constant extension causes
+    h = window // 2
+    zp = np.pad(z, h, mode="reflect", reflect_type="odd") if min(z.shape) > h else np.pad(z, h, mode="edge")
+    inner = (slice(h, h + z.shape[0]), slice(h, h + z.shape[1]))
+    d = ndimage.correlate(zp, kd, mode="nearest")[inner]
+    e = ndimage.correlate(zp, ke, mode="nearest")[inner]
     out = np.degrees(np.arctan(np.hypot(d, e))).astype(np.float32)
     out[~valid] = np.nan
     return out
