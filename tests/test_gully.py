@@ -180,6 +180,8 @@ def test_buffer_and_whole_patch_variant():
 def test_input_errors(tmp_path):
     with pytest.raises(InputError, match="dem.tif: the DEM is all nodata"):
         check_dem(np.full((3, 3), np.nan), "dem.tif")
+    with pytest.raises(InputError, match="dem.tif: CRS EPSG:4326 does not match"):
+        check_dem(np.ones((3, 3)), "dem.tif", "EPSG:4326", CRS)
     with pytest.raises(InputError, match="heads.gpkg: none of the 2"):
         check_heads_on_dem(np.array([False, False]), "heads.gpkg")
     lines = gpd.GeoDataFrame(geometry=[shapely.LineString([(0, 0), (1, 1)])], crs=CRS)

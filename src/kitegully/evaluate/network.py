@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 import rasterio.features
 import shapely
+import shapely.geometry
 from shapely.geometry.base import BaseGeometry
 
 from kitegully.io.raster import GridSpec
@@ -115,6 +116,13 @@ def rasterize_polygons(polygons: gpd.GeoDataFrame | Iterable[BaseGeometry], grid
         [(g, 1) for g in geoms], out_shape=(grid.height, grid.width), transform=grid.transform, fill=0, dtype="uint8"
     )
     return out.astype(bool)
+
+
+def footprint(valid: np.ndarray, grid: GridSpec) -> BaseGeometry:
+    """Polygon of the valid cells of a raster (the DEM footprint). O(n)."""
+    valid = np.asarray(valid, dtype=np.uint8)
+    polys = [shapely.geometry.shape(g) for g, v in rasterio.features.shapes(valid, mask=valid > 0, transform=grid.transform) if v]
+    return shapely.union_all(polys) if polys else shapely.Polygon()
 
 
 def area_scores(predicted: np.ndarray, truth: np.ndarray, cell_m: float) -> dict[str, float]:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from pyproj import CRS
 
 from kitegully import InputError
 from kitegully.io.vectors import read_vector
@@ -28,10 +29,12 @@ def read_heads(path: str | Path, crs: str) -> tuple[np.ndarray, np.ndarray]:
     return pts[:, 0].astype(np.float64), pts[:, 1].astype(np.float64)
 
 
-def check_dem(dem: np.ndarray, path: str | Path) -> None:
-    """Raise :class:`InputError` if the DEM has no valid cell."""
+def check_dem(dem: np.ndarray, path: str | Path, crs: str | None = None, site_crs: str | None = None) -> None:
+    """Raise :class:`InputError` if the DEM has no valid cell or its CRS is not the site CRS."""
     if not np.isfinite(dem).any():
         raise InputError(f"{path}: the DEM is all nodata")
+    if crs is not None and site_crs is not None and not CRS.from_user_input(crs).equals(CRS.from_user_input(site_crs)):
+        raise InputError(f"{path}: CRS {crs} does not match the site CRS {site_crs}")
 
 
 def check_heads_on_dem(inside: np.ndarray, path: str | Path) -> None:

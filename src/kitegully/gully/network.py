@@ -175,6 +175,23 @@ class GullyNetwork:
     def n_paths_to_outlet(self) -> int:
         return int(np.sum(self.ends == END_OUTLET))
 
+    def save(self, path) -> None:
+        """Write the network to a ``.npz`` file (arrays only, no pickle)."""
+        np.savez_compressed(
+            path, cells=self.cells, pos_down=self.pos_down, order=self.order, seg_vertices=self.seg_vertices,
+            seg_start=self.seg_start, seg_order=self.seg_order, head_cells=self.head_cells, ends=self.ends,
+            shape=np.asarray(self.shape, dtype=np.int64),
+        )
+
+    @classmethod
+    def load(cls, path) -> "GullyNetwork":
+        """Read a network written by :meth:`save`."""
+        with np.load(path, allow_pickle=False) as f:
+            return cls(
+                f["cells"], f["pos_down"], f["order"], f["seg_vertices"], f["seg_start"], f["seg_order"],
+                f["head_cells"], f["ends"], tuple(int(v) for v in f["shape"]),
+            )
+
 
 def trace_network(filled: np.ndarray, head_cells: np.ndarray) -> GullyNetwork:
     """Trace the network from the (snapped) heads on a depression-free DEM.

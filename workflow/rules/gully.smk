@@ -1,0 +1,168 @@
+# Gully network mapping and its validation (Feurer et al. 2018 sect. 2.5-2.6.2, Figs 3, 4, 9b;
+# METHODS.md 1.5-1.6). Library: kitegully.terrain, kitegully.gully, kitegully.evaluate.network.
+
+if "gully" in config:
+
+    GULLY = config["gully"]
+    GULLY_CAT = "Gully network"
+    GULLY_ATTRIBUTION = config["site"].get("attribution")
+    if GULLY["dem"] == "truth_plus_noise" and not IS_TWIN:
+        raise WorkflowError("Invalid configuration: gully.dem: truth_plus_noise needs a twin site; use dense")
+    if GULLY["heads_file"] is None and not IS_TWIN:
+        raise WorkflowError("Invalid configuration: gully.heads_file: a real site must name its gully head file")
+
+    def mapping_dem(wildcards=None):
+        """The DEM the gullies are mapped on, chosen by gully.dem."""
+        if GULLY["dem"] == "dense":
+            return result("dense", "dsm.tif")
+        # Evaluation stand-in until the dense DSM exists (issue 6): NOT photogrammetric.
+        return result("gully", "standin_dem_truth_plus_noise.tif")
+
+    GULLY_HEADS = GULLY["heads_file"] or result("twin", "observed/gully_heads.gpkg")
+    GULLY_REFERENCE = GULLY["reference_network_file"] or (
+        result("twin", "observed/field_network.gpkg") if IS_TWIN else None
+    )
+    GULLY_TRUTH = {"truth": result("twin", "truth/gully_polygons.gpkg")} if IS_TWIN else {}
+
+    if GULLY["dem"] == "truth_plus_noise":
+
+        rule gully_standin_dem:
+            input:
+                dtm=result("twin", "truth/dtm.tif"),
+            output:
+                dem=result("gully", "standin_dem_truth_plus_noise.tif"),
+            params:
+                noise=GULLY["standin"],
+                seed=config["seed"],
+            log:
+                logfile("gully", "standin_dem"),
+            benchmark:
+                benchfile("gully", "standin_dem")
+            script:
+                "../scripts/gully_standin_dem.py"
+
+    rule gully_map:
+        input:
+            dem=mapping_dem(),
+            heads=GULLY_HEADS,
+        output:
+            depth=result("gully", "depth.tif"),
+            smoothed=result("gully", "smoothed_dem.tif"),
+            gully_map=result("gully", "gully_map.tif"),
+            gully_map_whole=result("gully", "gully_map_whole_patches.tif"),
+            network=result("gully", "gully_network.gpkg"),
+            mapped_network=result("gully", "gully_network_mapped.gpkg"),
+            network_cells=result("gully", "gully_network_cells.npz"),
+            polygons=result("gully", "gully_polygons.gpkg"),
+            patches=result("gully", "depth_patches.csv"),
+            summary=report(result("gully", "gully_summary.csv"), caption=caption("gully_summary"), category=GULLY_CAT),
+        params:
+            cfg=GULLY,
+            dem_source=GULLY["dem"],
+            crs=config["site"]["crs"],
+        threads: GULLY["threads"]
+        log:
+            logfile("gully", "map"),
+        benchmark:
+            benchfile("gully", "map")
+        script:
+            "../scripts/gully_map.py"
+
+    rule gully_section:
+        input:
+            dem=mapping_dem(),
+            smoothed=rules.gully_map.output.smoothed,
+            depth=rules.gully_map.output.depth,
+            gully_map=rules.gully_map.output.gully_map,
+            network_cells=rules.gully_map.output.network_cells,
+        output:
+            figure=report(result("gully", "gully_section.png"), caption=caption("gully_section"), category=GULLY_CAT),
+        params:
+            cfg=GULLY,
+            attribution=GULLY_ATTRIBUTION,
+        log:
+            logfile("gully", "section"),
+        script:
+            "../scripts/gully_section.py"
+
+    GULLY_TARGETS = [rules.gully_map.output.summary, rules.gully_section.output.figure]
+
+    if GULLY_REFERENCE:
+
+        rule gully_validate:
+            input:
+                dem=mapping_dem(),
+                gully_map=rules.gully_map.output.gully_map,
+                mapped_network=rules.gully_map.output.mapped_network,
+                reference=GULLY_REFERENCE,
+            output:
+                table=report(
+                    result("gully", "network_validation.csv"), caption=caption("gully_network_validation"), category=GULLY_CAT
+                ),
+                tolerances=report(
+                    result("gully", "network_validation_tolerances.csv"),
+                    caption=caption("gully_network_validation_tolerances"),
+                    category=GULLY_CAT,
+                ),
+                figure=report(
+                    result("gully", "gully_validation_map.png"), caption=caption("gully_validation_map"), category=GULLY_CAT
+                ),
+            params:
+                cfg=GULLY,
+                crs=config["site"]["crs"],
+                attribution=GULLY_ATTRIBUTION,
+            log:
+                logfile("gully", "validate"),
+            script:
+                "../scripts/gully_validate.py"
+
+        GULLY_TARGETS += [rules.gully_validate.output.table, rules.gully_validate.output.figure]
+
+    if IS_TWIN:
+
+        # Evaluation rule: the only gully rule besides the sensitivity table that reads truth/.
+        rule gully_area_scores:
+            input:
+                gully_map=rules.gully_map.output.gully_map,
+                gully_map_whole=rules.gully_map.output.gully_map_whole,
+                truth=result("twin", "truth/gully_polygons.gpkg"),
+            output:
+                table=report(result("gully", "gully_area_scores.csv"), caption=caption("gully_area_scores"), category=GULLY_CAT),
+            params:
+                crs=config["site"]["crs"],
+            log:
+                logfile("gully", "area_scores"),
+            script:
+                "../scripts/gully_area_scores.py"
+
+        GULLY_TARGETS.append(rules.gully_area_scores.output.table)
+
+    rule gully_sensitivity:
+        input:
+            unpack(lambda wc: {**({"reference": GULLY_REFERENCE} if GULLY_REFERENCE else {}), **GULLY_TRUTH}),
+            dem=mapping_dem(),
+            network_cells=rules.gully_map.output.network_cells,
+        output:
+            table=report(result("gully", "gully_sensitivity.csv"), caption=caption("gully_sensitivity"), category=GULLY_CAT),
+        params:
+            cfg=GULLY,
+            crs=config["site"]["crs"],
+        threads: GULLY["threads"]
+        log:
+            logfile("gully", "sensitivity"),
+        benchmark:
+            benchfile("gully", "sensitivity")
+        script:
+            "../scripts/gully_sensitivity.py"
+
+    GULLY_TARGETS.append(rules.gully_sensitivity.output.table)
+    # The gully stage needs the twin (truth DTM, heads, field network) or the dense DSM.
+    # Until the stage that makes them has a rule file, leave the gully outputs out of `all`
+    # (they can still be requested explicitly when the inputs exist).
+    _gully_needs = ["twin"] if IS_TWIN and GULLY["heads_file"] is None else []
+    _gully_needs += ["dense"] if GULLY["dem"] == "dense" else ["twin"]
+    _gully_missing = sorted({s for s in _gully_needs if not Path(f"workflow/rules/{s}.smk").exists()})
+    if _gully_missing:
+        logger.warning(f"gully stage left out of `all`: no rule file for stage(s) {', '.join(_gully_missing)} yet")
+    else:
+        add_targets(*GULLY_TARGETS)
