@@ -33,9 +33,9 @@ rule obia_scene:
         seed=config["seed"],
         crs=config["site"]["crs"],
     log:
-        logfile("obia", "scene_{scene}"),
+        logfile("obia", "generate_{scene}"),
     benchmark:
-        benchfile("obia", "scene_{scene}")
+        benchfile("obia", "generate_{scene}")
     threads: 1
     script:
         "../scripts/obia_scene.py"
