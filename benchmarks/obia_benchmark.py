@@ -84,12 +84,12 @@ def run_saga(exe: str, feats: np.ndarray, grid, bandwidth: int, workdir: Path) -
         [exe, "imagery_segmentation", "2", "-FEATURES", ";".join(paths), "-VARIANCE", str(workdir / "variance.sdat"),
          "-SEED_GRID", str(seeds), "-SEED_TYPE", "0", "-METHOD", "0", "-BAND_WIDTH", str(bandwidth), "-NORMALIZE", "0"],
         [exe, "imagery_segmentation", "3", "-SEEDS", str(seeds), "-FEATURES", ";".join(paths), "-SEGMENTS", str(segments),
-         "-NORMALIZE", "0", "-NEIGHBOUR", "0", "-METHOD", "0", "-SIG_1", "1", "-SIG_2", "1", "-THRESHOLD", "0"],
+         "-SIMILARITY", str(workdir / "similarity.sdat"), "-TABLE", str(workdir / "seeds_table.txt"), "-NORMALIZE", "0", "-NEIGHBOUR", "0", "-METHOD", "0", "-SIG_1", "1", "-SIG_2", "1", "-THRESHOLD", "0"],
     ]
     for cmd in steps:
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
-            print(f"SAGA failed ({' '.join(cmd[:3])}): {proc.stdout[-400:]} {proc.stderr[-400:]}")
+            print(f"SAGA failed ({' '.join(cmd[:3])}): {proc.stdout[-1500:]} {proc.stderr[-1500:]}")
             return None
     seconds = time.perf_counter() - t0
     labels, _ = read_raster(segments)
