@@ -42,7 +42,7 @@ def _axes(ax, extent):
     ax.set_aspect("equal")
 
 
-def hillshade_gullies(dtm: Path, centrelines: Path, out: Path, max_px: int = 1500) -> None:
+def hillshade_gullies(dtm: Path, centrelines: Path, out: Path, max_px: int = 1500, attribution: str | None = None) -> None:
     """Shaded DTM (sun from the east, as Fig. 8) with the truth gully network coloured by depth."""
     z, extent, cell = _read_decimated(dtm, max_px)
     zp = np.pad(np.nan_to_num(z, nan=np.nanmean(z)), 1, mode="edge")
@@ -58,10 +58,10 @@ def hillshade_gullies(dtm: Path, centrelines: Path, out: Path, max_px: int = 150
                 legend=True, legend_kwds={"label": "Gully depth (m)", "shrink": 0.7})
     _axes(ax, extent)
     ax.set_title("Twin DTM (hillshade, sun from east) and true gully network")
-    save_figure(fig, out)
+    save_figure(fig, out, attribution)
 
 
-def landcover_map(landcover: Path, out: Path, max_px: int = 1500) -> None:
+def landcover_map(landcover: Path, out: Path, max_px: int = 1500, attribution: str | None = None) -> None:
     """Land-cover classes with a legend."""
     a, extent, _ = _read_decimated(landcover, max_px)
     codes = list(CLASSES)
@@ -74,10 +74,11 @@ def landcover_map(landcover: Path, out: Path, max_px: int = 1500) -> None:
               loc="upper left", bbox_to_anchor=(1.01, 1.0), title="Land cover")
     _axes(ax, extent)
     ax.set_title("Twin land cover")
-    save_figure(fig, out)
+    save_figure(fig, out, attribution)
 
 
-def site_overview(texture: Path, targets: Path, checkpoints: Path, heads: Path, out: Path, max_px: int = 1500) -> None:
+def site_overview(texture: Path, targets: Path, checkpoints: Path, heads: Path, out: Path, max_px: int = 1500,
+                  attribution: str | None = None) -> None:
     """True-colour texture with GCP targets, checkpoints and digitised gully heads."""
     with rasterio.open(texture) as src:
         f = max(1, int(np.ceil(max(src.width, src.height) / max_px)))
@@ -100,4 +101,4 @@ def site_overview(texture: Path, targets: Path, checkpoints: Path, heads: Path, 
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
     _axes(ax, extent)
     ax.set_title("Twin site overview (true-colour texture)")
-    save_figure(fig, out)
+    save_figure(fig, out, attribution)
