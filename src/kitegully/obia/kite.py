@@ -48,6 +48,30 @@ def _read_tile(ortho, dsm, window, grid: GridSpec):
     return rgb, dem, valid
 
 
+def _check_grids(ortho, dsm, ortho_path, dsm_path) -> None:
+    """Raise InputError unless the DSM can be resampled onto the orthophoto grid.
+
+    Both need the same CRS and north-up square cells, and the DSM must cover the
+    orthophoto (up to one DSM cell at the edges [I]); cell size and alignment may differ
+    (the DSM is resampled bilinearly onto the orthophoto cells).
+    """
+    for path, src in ((ortho_path, ortho), (dsm_path, dsm)):
+        t = src.transform
+        if src.crs is None:
+            raise InputError(f"{path}: raster has no CRS")
+        if t.b != 0 or t.d != 0 or t.e >= 0 or abs(abs(t.a) - abs(t.e)) > 1e-9 * abs(t.a):
+            raise InputError(f"{path}: raster is rotated, not north-up or has non-square cells; resample it first")
+    if ortho.crs != dsm.crs:
+        raise InputError(f"{dsm_path}: CRS {dsm.crs} does not match the orthophoto's {ortho.crs} ({ortho_path})")
+    ob, db = ortho.bounds, dsm.bounds
+    tol = abs(dsm.transform.a)
+    if db.left > ob.left + tol or db.right < ob.right - tol or db.bottom > ob.bottom + tol or db.top < ob.top - tol:
+        raise InputError(
+            f"{dsm_path}: DSM extent {tuple(round(v, 2) for v in db)} does not cover the orthophoto "
+            f"{ortho_path} extent {tuple(round(v, 2) for v in ob)}"
+        )
+
+
 def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | Path, params: ObiaParams, tile_cells: int) -> ThresholdResult:
     """Classify a site orthophoto into grass/vegetated (0) and bare (1); 255 = no data.
 
@@ -62,8 +86,9 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
     with ortho, dsm:
         if ortho.count < 3:
             raise InputError(f"{ortho_path}: orthophoto needs at least 3 bands (R, G, B), has {ortho.count}")
-        if ortho.crs is None or dsm.crs is None or ortho.crs != dsm.crs:
-            raise InputError(f"{dsm_path}: CRS {dsm.crs} does not match the orthophoto's {ortho.crs}")
+        _check_grids(ortho, dsm, ortho_path, dsm_path)
+        if tile_cells < 4 * params.seed_bandwidth_cells:
+            raise ValueError(f"tile_cells {tile_cells} must be at least 4 seed band widths ({4 * params.seed_bandwidth_cells} cells)")
         t = ortho.transform
         grid = GridSpec(t.c, t.f, t.a, ortho.width, ortho.height, ortho.crs.to_string())
         halo = params.blur_radius_cells + params.slope_window_cells

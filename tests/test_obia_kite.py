@@ -1,0 +1,166 @@
+"""Kite-scale bare-soil map (kitegully.obia.kite): tiling, global threshold, bad inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rasterio
+from scipy import ndimage
+
+from kitegully import InputError
+from kitegully.io.raster import GridSpec, read_raster, write_raster
+from kitegully.obia.classify import ERODED, GRASS, NODATA
+from kitegully.obia.indices import EXG_RANGE, excess_green, gaussian_blur
+from kitegully.obia.kite import bare_soil_map
+from kitegully.obia.scene import ObiaParams
+from kitegully.obia.threshold import find_thresholds
+
+CRS = "EPSG:32632"
+CELL = 0.05  # m, a kite orthophoto cell
+N = 240  # cells: 12 m x 12 m
+PARAMS = ObiaParams()  # the paper's settings (band width 15, sigma 1, radius 2, 5x5 slope)
+BANDWIDTH = PARAMS.seed_bandwidth_cells
+
+
+def _site(seed: int = 3, bare_patches: bool = True):
+    """Synthetic orthophoto (8-bit RGB) + DSM of a grass slope with bare patches.
+
+    Grass and soil colours with 8-bit sensor noise (SD 3 DN) and a +-10 % brightness
+    field; bare patches are 0.2 m deep hollows in a 20 degree plane.  Returns the grid,
+    rgb (3, N, N) uint8, dsm float32 and the truth mask (1 = bare).
+    """
+    rng = np.random.default_rng(seed)
+    grid = GridSpec(500000.0, 4100000.0, CELL, N, N, CRS)
+    rows, cols = np.mgrid[0:N, 0:N]
+    truth = np.zeros((N, N), dtype=bool)
+    if bare_patches:
+        for r, c, rad in ((60, 70, 28), (170, 150, 40), (200, 40, 18), (70, 190, 22)):
+            truth |= (rows - r) ** 2 + ((cols - c) * 0.8) ** 2 <= rad ** 2
+    grass = np.array([60.0, 120.0, 40.0])
+    soil = np.array([130.0, 110.0, 90.0])
+    field = ndimage.gaussian_filter(rng.standard_normal((N, N)), 20)
+    light = 1.0 + 0.1 * field / field.std()
+    rgb = np.where(truth[None], soil[:, None, None], grass[:, None, None]) * light[None]
+    rgb = np.clip(np.round(rgb + rng.normal(0, 3.0, rgb.shape)), 1, 255).astype(np.uint8)
+    dsm = (300.0 - np.tan(np.radians(20)) * cols * CELL - 0.2 * ndimage.gaussian_filter(truth.astype(float), 2)).astype(np.float32)
+    return grid, rgb, dsm, truth.astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def site_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("kite")
+    grid, rgb, dsm, truth = _site()
+    write_raster(d / "orthophoto.tif", rgb, grid, nodata=None)
+    write_raster(d / "dsm.tif", dsm, grid)
+    return d, grid, rgb, dsm, truth
+
+
+def _run(d, name, tile, ortho="orthophoto.tif", dsm="dsm.tif", params=PARAMS):
+    out = d / f"{name}.tif"
+    thr = bare_soil_map(d / ortho, d / dsm, out, params, tile)
+    classes, grid = read_raster(out)
+    return thr, classes, grid
+
+
+def test_untiled_map_matches_truth_and_global_threshold(site_files):
+    d, grid, rgb, dsm, truth = site_files
+    thr, classes, out_grid = _run(d, "untiled", tile=N)
+    assert out_grid == grid
+    assert thr.bimodal and thr.valley is not None
+    # the valley lies between the two colours' ExG (soil 0.0, grass 0.64 for these DNs)
+    assert excess_green(*[np.array([v]) for v in (130, 110, 90)])[0] < thr.valley < excess_green(*[np.array([v]) for v in (60, 120, 40)])[0]
+    # the threshold is that of the whole image's blurred-ExG histogram on the fixed range
+    exg = gaussian_blur(excess_green(*rgb.astype(np.float32)), PARAMS.blur_sigma_cells, PARAMS.blur_radius_cells)
+    edges = np.linspace(*EXG_RANGE, PARAMS.hist_bins + 1)
+    ref = find_thresholds(np.histogram(exg, bins=edges)[0], 0.5 * (edges[1:] + edges[:-1]), PARAMS.min_class_fraction, PARAMS.max_valley_ratio)
+    assert thr.valley == pytest.approx(ref.valley, abs=1e-12)
+    # pure colours: only segments straddling a patch edge can be wrong, i.e. cells
+    # within one seed band width of the edge
+    wrong = classes != truth
+    edge = ndimage.binary_dilation(truth, iterations=BANDWIDTH) & ~ndimage.binary_erosion(truth, iterations=BANDWIDTH)
+    assert not np.any(wrong & ~edge)
+    assert wrong.mean() < 0.01
+
+
+def test_tiled_and_untiled_agree_except_at_tile_borders(site_files):
+    d, grid, rgb, dsm, truth = site_files
+    thr_full, full, _ = _run(d, "untiled2", tile=N)
+    thr_tiled, tiled, _ = _run(d, "tiled", tile=96)  # 3 x 3 tiles, last ones partial
+    # the histogram is accumulated over the tile cores, so the threshold is global
+    assert thr_tiled.valley == pytest.approx(thr_full.valley, abs=1e-12)
+    assert np.array_equal(thr_tiled.counts, thr_full.counts)
+    differ = full != tiled
+    # segments end at tile borders, so results may differ only where a segment that
+    # straddles a class edge is cut: within a band width of both a tile border and an edge
+    border = np.zeros((N, N), dtype=bool)
+    for b in (96, 192):
+        border[max(b - BANDWIDTH, 0): b + BANDWIDTH, :] = True
+        border[:, max(b - BANDWIDTH, 0): b + BANDWIDTH] = True
+    edge = ndimage.binary_dilation(truth, iterations=BANDWIDTH) & ~ndimage.binary_erosion(truth, iterations=BANDWIDTH)
+    assert not np.any(differ & ~(border | edge))
+    assert np.mean(tiled == truth) > 0.99
+
+
+def test_grass_only_site_is_not_forced_into_two_classes(tmp_path):
+    grid, rgb, dsm, _ = _site(seed=5, bare_patches=False)
+    write_raster(tmp_path / "orthophoto.tif", rgb, grid, nodata=None)
+    write_raster(tmp_path / "dsm.tif", dsm, grid)
+    thr, classes, _ = _run(tmp_path, "bare", tile=128)
+    assert not thr.bimodal and thr.valley is None
+    assert np.all(classes == GRASS)
+
+
+def test_nodata_in_orthophoto_and_dsm_is_nodata_in_the_map(tmp_path, site_files):
+    _, grid, rgb, dsm, _ = site_files
+    rgb = rgb.copy()
+    rgb[:, :20, :] = 0  # orthophoto nodata = 0 (outside the mosaic)
+    dsm = dsm.copy()
+    dsm[-30:, -30:] = np.nan
+    write_raster(tmp_path / "orthophoto.tif", rgb, grid, nodata=0)
+    write_raster(tmp_path / "dsm.tif", dsm, grid)
+    _, classes, _ = _run(tmp_path, "nodata", tile=128)
+    assert np.all(classes[:20] == NODATA)
+    assert np.all(classes[-30:, -30:] == NODATA)
+    assert np.all(np.isin(classes[20:-30], (GRASS, ERODED)))
+
+
+def test_coarser_dsm_on_another_grid_is_resampled(tmp_path, site_files):
+    _, grid, rgb, dsm, truth = site_files
+    coarse = GridSpec(grid.x0 - 0.3, grid.y0 + 0.3, 0.2, 66, 66, CRS)  # 20 cm DSM, larger, shifted
+    rr, cc = np.mgrid[0:66, 0:66]
+    x = coarse.x0 + (cc + 0.5) * 0.2 - grid.x0
+    write_raster(tmp_path / "orthophoto.tif", rgb, grid, nodata=None)
+    write_raster(tmp_path / "dsm.tif", (300.0 - np.tan(np.radians(20)) * x).astype(np.float32), coarse)
+    _, classes, out_grid = _run(tmp_path, "coarse", tile=N)
+    assert out_grid == grid
+    assert np.mean(classes == truth) > 0.99
+
+
+@pytest.mark.parametrize(
+    "problem, match",
+    [
+        ("crs", "does not match"),
+        ("extent", "does not cover"),
+        ("bands", "3 bands"),
+        ("missing", "cannot open"),
+        ("rotated", "rotated"),
+    ],
+)
+def test_bad_inputs_raise_input_error(tmp_path, site_files, problem, match):
+    _, grid, rgb, dsm, _ = site_files
+    ortho_grid, dsm_grid, ortho = grid, grid, rgb
+    if problem == "crs":
+        dsm_grid = GridSpec(grid.x0, grid.y0, grid.cell, N, N, "EPSG:32631")
+    elif problem == "extent":
+        dsm_grid = GridSpec(grid.x0 + 3.0, grid.y0, grid.cell, N, N, CRS)  # 3 m east: ortho's west strip uncovered
+    elif problem == "bands":
+        ortho = rgb[:2]
+    write_raster(tmp_path / "orthophoto.tif", ortho, ortho_grid, nodata=None)
+    write_raster(tmp_path / "dsm.tif", dsm, dsm_grid)
+    if problem == "rotated":
+        with rasterio.open(tmp_path / "dsm.tif", "r+") as dst:
+            dst.transform = rasterio.Affine(grid.cell, 0.01, grid.x0, 0.01, -grid.cell, grid.y0)
+    dsm_name = "nothere.tif" if problem == "missing" else "dsm.tif"
+    with pytest.raises(InputError, match=match) as err:
+        _run(tmp_path, "bad", tile=N, dsm=dsm_name)
+    assert ".tif" in str(err.value)
