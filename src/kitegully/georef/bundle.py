@@ -89,6 +89,7 @@ class BundleSettings:
     loss : ``huber`` (robust) or ``linear`` (plain least squares) on image residuals.
     loss_scale : Huber threshold in σ units.
     max_iterations : Levenberg–Marquardt iterations at most.
+    rel_tolerance : stop when an iteration lowers the cost by less than this fraction.
     """
 
     sigma_tie_px: float = 1.0
@@ -99,6 +100,7 @@ class BundleSettings:
     loss: str = "huber"
     loss_scale: float = 3.0
     max_iterations: int = 50
+    rel_tolerance: float = 1e-6
 
 
 def projection_jacobian(intr, rv, t, X):
@@ -253,7 +255,7 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
                 improved = True
                 break
             lam *= 10
-        if not improved or rel < 1e-9:
+        if not improved or rel < s.rel_tolerance:
             break
     out = block.copy()
     out.intr, out.rv, out.t = intr, rv, t

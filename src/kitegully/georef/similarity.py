@@ -134,20 +134,24 @@ def loo_residuals(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def robust_similarity(a: np.ndarray, b: np.ndarray, max_residual_m: float, min_points: int = 3) -> tuple[Similarity, np.ndarray]:
-    """Similarity with iterative rejection of the worst leave-one-out outlier.
+    """Similarity that leaves out a point which disagrees with the rest.
 
-    While more than ``min_points`` points remain and the largest leave-one-out residual
-    exceeds ``max_residual_m``, drop that point and refit. Returns the final transform
-    and a boolean inlier mask. O(n³) for n GCPs (n is small).
+    Repeatedly: fit all remaining points; if the worst residual exceeds
+    ``max_residual_m`` and a fit without that point brings every other residual within
+    ``max_residual_m``, the point spoils the solution and is dropped. If no single point
+    explains the misfit (the set is inconsistent as a whole) nothing is dropped; the
+    caller reports the misfit. Stops at ``min_points``. O(n²) for n GCPs.
     """
     inl = np.ones(len(a), bool)
     while inl.sum() > min_points:
         idx = np.flatnonzero(inl)
-        r = np.linalg.norm(loo_residuals(a[idx], b[idx]), axis=1)
-        if not np.any(np.isfinite(r)):
-            break
-        worst = int(np.nanargmax(r))
+        r = np.linalg.norm(umeyama(a[idx], b[idx]).apply(a[idx]) - b[idx], axis=1)
+        worst = int(np.argmax(r))
         if r[worst] <= max_residual_m:
+            break
+        rest = np.delete(idx, worst)
+        r_rest = np.linalg.norm(umeyama(a[rest], b[rest]).apply(a[rest]) - b[rest], axis=1)
+        if np.max(r_rest) > max_residual_m:
             break
         inl[idx[worst]] = False
     return umeyama(a[inl], b[inl]), inl

@@ -1,0 +1,166 @@
+"""Writing the georeferenced products: COLMAP model, calibration table, camera positions,
+sparse cloud (LAS) and the residual-vector figure.
+
+The COLMAP model is written in the *local* frame: site CRS coordinates minus the offset
+stored in ``transform.json`` (``offset_m``), so single-precision consumers (dense
+matching) keep millimetres. Every other product is in the site CRS itself.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import geopandas as gpd
+import laspy
+import numpy as np
+import pandas as pd
+import pycolmap
+from pyproj import CRS
+from shapely.geometry import Point
+
+from kitegully.georef.bundle import Block
+from kitegully.georef.geometry import camera_centres, rotvec_to_matrix
+from kitegully.georef.model import ModelIndex, write_block_to_reconstruction
+from kitegully.io.figures import new_figure, save_figure
+from kitegully.io.tables import write_table
+from kitegully.io.vectors import write_vector
+
+
+def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, offset: np.ndarray, out_dir: str | Path) -> pycolmap.Reconstruction:
+    """Write the adjusted model (COLMAP binary) in the local frame; returns it."""
+    out_dir = Path(out_dir)
+    if out_dir.exists():
+        shutil.rmtree(out_dir)
+    out_dir.mkdir(parents=True)
+    rec = write_block_to_reconstruction(rec, block, index, offset)
+    rec.write(out_dir)
+    return rec
+
+
+def write_transform(path: str | Path, crs: str, offset: np.ndarray, sim_dict: dict, report: dict) -> None:
+    """``transform.json``: site CRS, local-frame offset, model→local similarity, run report."""
+    doc = {"crs": crs, "offset_m": [float(v) for v in offset], "model_to_local": sim_dict, "report": report}
+    Path(path).write_text(json.dumps(clean_json(doc), indent=2) + "\n", encoding="utf-8")
+
+
+def clean_json(o):
+    """A JSON-safe copy: NumPy scalars/arrays to Python, NaN/inf to None."""
+    if isinstance(o, dict):
+        return {str(k): clean_json(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [clean_json(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return clean_json(o.tolist())
+    if isinstance(o, (np.bool_,)):
+        return bool(o)
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (float, np.floating)):
+        return float(o) if np.isfinite(o) else None
+    return o
+
+
+def _json_default(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return None if not np.isfinite(o) else float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o))
+
+
+def calibration_table(start: Block, adjusted: Block, index: ModelIndex, rec: pycolmap.Reconstruction) -> pd.DataFrame:
+    """One row per camera: model, size and intrinsics from SfM and after the GCP adjustment."""
+    rows = []
+    for k, cid in enumerate(index.camera_ids):
+        cam = rec.cameras[int(cid)]
+        row = {"camera_id": int(cid), "model": cam.model.name, "width_px": int(cam.width), "height_px": int(cam.height)}
+        for j, name in enumerate(("f_px", "cx_px", "cy_px", "k1", "k2")):
+            row[f"{name}_sfm"] = float(start.intr[k, j])
+            row[f"{name}_adjusted"] = float(adjusted.intr[k, j])
+        row["n_images"] = int(np.sum(adjusted.cam_of_image == k))
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def camera_positions(block: Block, index: ModelIndex, offset: np.ndarray, crs: str) -> gpd.GeoDataFrame:
+    """Projection centres (3-D points, site CRS) with omega/phi/kappa (deg) and image names."""
+    C = camera_centres(block.rv, block.t) + offset
+    R = rotvec_to_matrix(block.rv)  # camera from world
+    # photogrammetric angles of the world-from-camera rotation, [I] omega-phi-kappa convention
+    M = np.transpose(R, (0, 2, 1))
+    omega = np.degrees(np.arctan2(-M[:, 1, 2], M[:, 2, 2]))
+    phi = np.degrees(np.arcsin(np.clip(M[:, 0, 2], -1, 1)))
+    kappa = np.degrees(np.arctan2(-M[:, 0, 1], M[:, 0, 0]))
+    view = M[:, :, 2]
+    tilt = np.degrees(np.arccos(np.clip(-view[:, 2], -1, 1)))
+    df = pd.DataFrame({
+        "image": [n.split("/")[-1] for n in index.image_names],
+        "x_m": C[:, 0], "y_m": C[:, 1], "z_m": C[:, 2],
+        "omega_deg": omega, "phi_deg": phi, "kappa_deg": kappa, "tilt_from_nadir_deg": tilt,
+    })
+    return gpd.GeoDataFrame(df, geometry=[Point(x, y, z) for x, y, z in C], crs=crs)
+
+
+def write_las(rec: pycolmap.Reconstruction, offset: np.ndarray, crs: str, path: str | Path) -> int:
+    """Sparse cloud as LAS 1.4 (point format 7: xyz, RGB, and the track length as intensity)."""
+    pts = list(rec.points3D.values())
+    xyz = np.array([p.xyz for p in pts]).reshape(-1, 3) + offset
+    rgb = np.array([p.color for p in pts], dtype=np.uint16).reshape(-1, 3) * 257
+    tl = np.array([p.track.length() for p in pts], dtype=np.uint16)
+    header = laspy.LasHeader(point_format=7, version="1.4")
+    header.offsets = np.floor(xyz.min(axis=0)) if len(xyz) else np.zeros(3)
+    header.scales = np.array([0.001, 0.001, 0.001])
+    header.add_crs(CRS.from_user_input(crs))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.red, las.green, las.blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    las.intensity = tl
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    las.write(str(path))
+    return len(xyz)
+
+
+def residual_figure(
+    residuals: pd.DataFrame, loo: pd.DataFrame, survey: dict[str, np.ndarray], cameras: gpd.GeoDataFrame,
+    path: str | Path, arrow_scale: float | None, attribution: str | None = None,
+) -> None:
+    """Map of GCP residual vectors (plan arrows, colour = vertical residual) and leave-one-out ones."""
+    fig, ax = new_figure(figsize=(6.5, 5.5))
+    ax.scatter(cameras["x_m"], cameras["y_m"], s=6, c="0.6", marker="^", label="camera positions")
+    res = residuals.dropna(subset=["dx_m"])
+    xy = np.array([survey[g][:2] for g in residuals["gcp_id"]])
+    ax.scatter(xy[:, 0], xy[:, 1], s=25, facecolors="none", edgecolors="k", label="GCP (survey)")
+    for g, (x, y) in zip(residuals["gcp_id"], xy):
+        ax.annotate(g, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7)
+    extent = max(np.ptp(np.r_[xy[:, 0], cameras["x_m"]]), np.ptp(np.r_[xy[:, 1], cameras["y_m"]]), 1.0)
+    mags = np.r_[np.hypot(res["dx_m"], res["dy_m"]), np.hypot(loo["dx_m"].dropna(), loo["dy_m"].dropna())]
+    big = float(np.nanmax(mags)) if len(mags) and np.any(np.isfinite(mags)) else 1.0
+    scale = arrow_scale or (0.15 * extent / max(big, 1e-9))
+    dz_all = np.r_[res["dz_m"].to_numpy(float), loo["dz_m"].dropna().to_numpy(float)]
+    vmax = float(np.nanmax(np.abs(dz_all))) if len(dz_all) else 1.0
+    q = None
+    for df, style, label in ((res, "-", "residual after adjustment"), (loo.dropna(subset=["dx_m"]), "--", "leave-one-out check")):
+        if df.empty:
+            continue
+        p = np.array([survey[g][:2] for g in df["gcp_id"]])
+        q = ax.quiver(p[:, 0], p[:, 1], df["dx_m"] * scale, df["dy_m"] * scale, df["dz_m"], angles="xy", scale_units="xy",
+                      scale=1, cmap="RdBu_r", clim=(-vmax, vmax), width=0.006 if style == "-" else 0.004,
+                      linestyle=style, label=label, alpha=1.0 if style == "-" else 0.6)
+    if q is not None:
+        cb = fig.colorbar(q, ax=ax, shrink=0.8)
+        cb.set_label("vertical residual dz (m)")
+    ax.set_xlabel("easting (m)")
+    ax.set_ylabel("northing (m)")
+    ax.set_aspect("equal")
+    ax.set_title(f"GCP residual vectors (arrows ×{scale:.3g})")
+    ax.legend(loc="best", fontsize=7)
+    save_figure(fig, path, attribution=attribution)
+
+
+def write_residual_tables(residuals: pd.DataFrame, loo: pd.DataFrame, res_path: str | Path, loo_path: str | Path) -> None:
+    write_table(residuals, res_path)
+    write_table(loo, loo_path)

@@ -1,0 +1,287 @@
+"""The georeferencing run: observations → triangulation → robust similarity → GCP bundle
+adjustment, with quality flags and leave-one-out check points.
+
+Frames: the SfM model frame (arbitrary), and the *local* frame = site CRS minus a round
+``offset`` (kept so coordinates stay small for later stages). Every result in metres is
+in the site CRS.
+
+Flags (``flag`` column, ``;``-separated):
+
+* ``missing_images:N`` – N observations name images that are not in the image folder;
+* ``unregistered:N`` – N observations are in images SfM could not register;
+* ``inconsistent_coords:D`` – rows of this GCP give coordinates up to D m apart;
+* ``no_obs`` / ``single_obs`` – fewer than two usable observations: not used;
+* ``ray_miss`` – its rays do not meet (triangulation reprojection error above
+  ``qa.max_triangulation_px``): not used;
+* ``outlier`` – disagrees with the others after the transform (residual above
+  ``qa.max_residual_m`` while the others agree within it without it): not used;
+* ``poor_fit`` – used, but its residual exceeds 3 σ of its survey (σ from config).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from kitegully import InputError
+from kitegully.georef.bundle import Block, BundleSettings, adjust
+from kitegully.georef.gcp_io import GCP
+from kitegully.georef.geometry import camera_centres, project, triangulate
+from kitegully.georef.model import transform_block
+from kitegully.georef.similarity import Similarity, robust_similarity, tape_horn, umeyama
+from kitegully.sfm.images import ImageInfo, to_sfm_pixels
+
+log = logging.getLogger(__name__)
+
+RESIDUAL_COLUMNS = ["gcp_id", "n_obs", "dx_m", "dy_m", "dz_m", "d3_m", "reproj_px", "used", "flag"]
+
+
+@dataclass
+class GcpObs:
+    """A GCP's usable observations in the block (image rows and SfM pixels) and its flags."""
+
+    gcp: GCP
+    rows: np.ndarray
+    xy: np.ndarray
+    flags: list[str] = field(default_factory=list)
+
+
+@dataclass
+class GeorefResult:
+    block: Block
+    offset: np.ndarray
+    transform: Similarity
+    residuals: pd.DataFrame
+    loo: pd.DataFrame
+    report: dict
+
+
+def collect_observations(
+    gcps: list[GCP], infos: list[ImageInfo], image_rows: dict[str, int], pixel_frame: str, sfm_frame: str, pixel_scale: float,
+    coords_tolerance_m: float,
+) -> list[GcpObs]:
+    """Map each GCP's observations into the SfM frame, keeping those in registered images.
+
+    ``image_rows`` maps the prepared image name (``ImageInfo.sfm_name``) to the block row.
+    """
+    by_name = {i.name: i for i in infos}
+    out = []
+    for g in gcps:
+        rows, xy, missing, unreg = [], [], 0, 0
+        for name, px in zip(g.images, g.pixels):
+            info = by_name.get(name)
+            if info is None:
+                missing += 1
+                continue
+            if info.sfm_name not in image_rows:
+                unreg += 1
+                continue
+            rows.append(image_rows[info.sfm_name])
+            xy.append(to_sfm_pixels(px[None], info, pixel_frame, sfm_frame, pixel_scale)[0])
+        flags = []
+        if missing:
+            flags.append(f"missing_images:{missing}")
+        if unreg:
+            flags.append(f"unregistered:{unreg}")
+        if g.coord_spread_m > coords_tolerance_m:
+            flags.append(f"inconsistent_coords:{g.coord_spread_m:.2f}")
+        if len(rows) == 0:
+            flags.append("no_obs")
+        elif len(rows) == 1:
+            flags.append("single_obs")
+        out.append(GcpObs(g, np.array(rows, int), np.array(xy, float).reshape(-1, 2), flags))
+    return out
+
+
+def triangulate_gcps(block: Block, obs: list[GcpObs]) -> tuple[np.ndarray, np.ndarray]:
+    """Each GCP intersected from its rays in the block's frame, and its RMS reprojection error (px)."""
+    X = np.full((len(obs), 3), np.nan)
+    rp = np.full(len(obs), np.nan)
+    for k, o in enumerate(obs):
+        if len(o.rows) < 2:
+            continue
+        ci = block.cam_of_image[o.rows]
+        Xk, _ = triangulate(block.intr[ci], block.rv[o.rows], block.t[o.rows], o.xy, np.zeros(len(o.rows), int), 1)
+        if not np.all(np.isfinite(Xk)):
+            continue
+        X[k] = Xk[0]
+        p = project(block.intr[ci], block.rv[o.rows], block.t[o.rows], np.repeat(Xk, len(o.rows), 0))
+        rp[k] = np.sqrt(np.mean(np.sum((p - o.xy) ** 2, axis=1)))
+    return X, rp
+
+
+def reprojection_of(block: Block, o: GcpObs, X: np.ndarray) -> float:
+    """RMS distance (px) between the measured pixels and the projection of ``X``."""
+    if len(o.rows) == 0:
+        return float("nan")
+    ci = block.cam_of_image[o.rows]
+    p = project(block.intr[ci], block.rv[o.rows], block.t[o.rows], np.repeat(X[None], len(o.rows), 0))
+    return float(np.sqrt(np.mean(np.sum((p - o.xy) ** 2, axis=1))))
+
+
+def _with_gcps(block: Block, obs: list[GcpObs], use: np.ndarray, start: np.ndarray) -> Block:
+    b = block.copy()
+    idx = np.flatnonzero(use)
+    b.gcp_xyz = start[idx]
+    b.gcp_obs_image = np.concatenate([obs[k].rows for k in idx]) if len(idx) else np.zeros(0, int)
+    b.gcp_obs_gcp = np.concatenate([np.full(len(obs[k].rows), j) for j, k in enumerate(idx)]) if len(idx) else np.zeros(0, int)
+    b.gcp_obs_xy = np.concatenate([obs[k].xy for k in idx]) if len(idx) else np.zeros((0, 2))
+    return b
+
+
+def solve(
+    block: Block, obs: list[GcpObs], survey_local: np.ndarray, X_model: np.ndarray, use: np.ndarray,
+    method: str, settings: BundleSettings, tape_edges: list[tuple[str, str, float]] | None = None,
+) -> tuple[Block, Similarity, dict]:
+    """One georeferencing solution from the GCPs in ``use``: similarity, then (optionally) the GCP bundle.
+
+    Returns the block in the local frame, the model→local similarity and a report.
+    """
+    ids = [o.gcp.gcp_id for o in obs]
+    if method == "tape_horn":
+        model_xyz = {ids[k]: X_model[k] for k in np.flatnonzero(use)}
+        gps_xyz = {ids[k]: survey_local[k] for k in np.flatnonzero(use)}
+        sim = tape_horn(model_xyz, gps_xyz, tape_edges or [])
+    else:
+        sim = umeyama(X_model[use], survey_local[use])
+    local = transform_block(block, sim)
+    report: dict = {"similarity_scale": sim.scale}
+    if method == "gcp_bundle":
+        start = sim.apply(np.nan_to_num(X_model))
+        b = _with_gcps(local, obs, use, start)
+        local, rep = adjust(b, survey_local[use], settings)
+        report.update(rep)
+    return local, sim, report
+
+
+def georeference(
+    block_model: Block,
+    gcps: list[GCP],
+    infos: list[ImageInfo],
+    image_rows: dict[str, int],
+    params: dict,
+    sfm_frame: str,
+    tape_edges: list[tuple[str, str, float]] | None = None,
+) -> GeorefResult:
+    """The whole georeferencing with QA and leave-one-out; see the module docstring.
+
+    ``params`` is the ``georef`` config section. Raises :class:`InputError` naming the
+    GCPs when fewer than three are usable.
+    """
+    qa, bp = params["qa"], params["bundle"]
+    settings = BundleSettings(
+        sigma_tie_px=bp["sigma_tie_px"], sigma_gcp_px=bp["sigma_gcp_px"],
+        sigma_gcp_xy_m=params["sigma_gcp_xy_m"], sigma_gcp_z_m=params["sigma_gcp_z_m"],
+        refine=tuple(bp["refine_intrinsics"]), loss=bp["loss"], loss_scale=bp["loss_scale"],
+        max_iterations=bp["max_iterations"],
+    )
+    obs = collect_observations(
+        gcps, infos, image_rows, params["gcp_pixel_frame"], sfm_frame, params["gcp_pixel_scale"], qa["coords_tolerance_m"]
+    )
+    survey = np.array([o.gcp.xyz for o in obs])
+    offset = np.round(np.median(survey, axis=0) / 100.0) * 100.0
+    offset[2] = 0.0
+    survey_local = survey - offset
+    X_model, rp_model = triangulate_gcps(block_model, obs)
+    cand = np.array([len(o.rows) >= 2 and np.all(np.isfinite(X_model[k])) for k, o in enumerate(obs)])
+    for k, o in enumerate(obs):
+        if cand[k] and rp_model[k] > qa["max_triangulation_px"]:
+            o.flags.append("ray_miss")
+            cand[k] = False
+    if cand.sum() < 3:
+        bad = ", ".join(f"{o.gcp.gcp_id} ({';'.join(o.flags) or 'ok'})" for o in obs)
+        raise InputError(f"fewer than three usable GCPs (need at least 3 seen in two registered images whose rays meet): {bad}")
+    use = cand.copy()
+    idx = np.flatnonzero(cand)
+    if params["method"] != "tape_horn":
+        _, inl = robust_similarity(X_model[idx], survey_local[idx], qa["max_residual_m"])
+        for k, ok in zip(idx, inl):
+            if not ok:
+                obs[k].flags.append("outlier")
+                use[k] = False
+    log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
+    local, sim, report = solve(block_model, obs, survey_local, X_model, use, params["method"], settings, tape_edges)
+
+    sig = np.array([params["sigma_gcp_xy_m"]] * 2 + [params["sigma_gcp_z_m"]])
+    X_final, _ = triangulate_gcps(local, obs)
+    rows = []
+    for k, o in enumerate(obs):
+        d = X_final[k] - survey_local[k]
+        if use[k] and np.any(np.abs(d) > 3 * sig):
+            o.flags.append("poor_fit")
+        rows.append(_row(o, d, reprojection_of(local, o, survey_local[k]), bool(use[k])))
+    residuals = pd.DataFrame(rows, columns=RESIDUAL_COLUMNS)
+
+    loo_rows = []
+    n_use = int(use.sum())
+    for k in np.flatnonzero(use):
+        o = obs[k]
+        if n_use - 1 < 3:
+            loo_rows.append(_row(o, np.full(3, np.nan), float("nan"), False, extra="too_few_gcps_to_leave_one_out"))
+            continue
+        use_k = use.copy()
+        use_k[k] = False
+        loc_k, _, _ = solve(block_model, obs, survey_local, X_model, use_k, params["method"], settings, tape_edges)
+        Xk, _ = triangulate_gcps(loc_k, [o])
+        d = Xk[0] - survey_local[k]
+        loo_rows.append(_row(o, d, reprojection_of(loc_k, o, survey_local[k]), False, extra="checkpoint"))
+    loo = pd.DataFrame(loo_rows, columns=RESIDUAL_COLUMNS)
+
+    report.update(_stats(residuals, loo, qa, obs, use))
+    report["offset_m"] = offset.tolist()
+    report["method"] = params["method"]
+    report["gsd_m"] = ground_sampling_distance(local)
+    return GeorefResult(local, offset, sim, residuals, loo, report)
+
+
+def _row(o: GcpObs, d: np.ndarray, reproj: float, used: bool, extra: str = "") -> dict:
+    flags = list(o.flags) + ([extra] if extra else [])
+    return {
+        "gcp_id": o.gcp.gcp_id, "n_obs": int(len(o.rows)), "dx_m": d[0], "dy_m": d[1], "dz_m": d[2],
+        "d3_m": float(np.linalg.norm(d)) if np.all(np.isfinite(d)) else float("nan"),
+        "reproj_px": reproj, "used": used, "flag": ";".join(flags),
+    }
+
+
+def _rmse(v: np.ndarray) -> float:
+    v = v[np.isfinite(v)]
+    return float(np.sqrt(np.mean(v**2))) if len(v) else float("nan")
+
+
+def _stats(res: pd.DataFrame, loo: pd.DataFrame, qa: dict, obs: list[GcpObs], use: np.ndarray) -> dict:
+    u = res[res["used"]]
+    out = {
+        "n_gcps_in_file": len(obs),
+        "n_gcps_used": int(use.sum()),
+        "gcp_rmse_xy_m": _rmse(np.hypot(u["dx_m"].to_numpy(float), u["dy_m"].to_numpy(float))),
+        "gcp_rmse_z_m": _rmse(u["dz_m"].to_numpy(float)),
+        "loo_rmse_xy_m": _rmse(np.hypot(loo["dx_m"].to_numpy(float), loo["dy_m"].to_numpy(float))),
+        "loo_rmse_z_m": _rmse(loo["dz_m"].to_numpy(float)),
+        "loo_rmse_3d_m": _rmse(loo["d3_m"].to_numpy(float)),
+    }
+    reasons = []
+    if out["n_gcps_used"] < qa["min_gcps_trusted"]:
+        reasons.append(f"only {out['n_gcps_used']} GCPs usable (at least {qa['min_gcps_trusted']} wanted)")
+    if not np.isfinite(out["loo_rmse_3d_m"]):
+        reasons.append("no leave-one-out check was possible")
+    elif out["loo_rmse_3d_m"] > qa["required_accuracy_m"]:
+        reasons.append(f"leave-one-out RMSE {out['loo_rmse_3d_m']:.2f} m exceeds the required {qa['required_accuracy_m']} m")
+    flagged = res.loc[res["flag"].str.contains("poor_fit|outlier|ray_miss"), "gcp_id"].tolist()
+    if flagged:
+        reasons.append(f"GCPs flagged: {', '.join(flagged)}")
+    out["trusted"] = not reasons
+    out["trust_reasons"] = reasons
+    return out
+
+
+def ground_sampling_distance(block: Block) -> float:
+    """Median ground sampling distance (m per SfM pixel): camera-to-point depth / focal length."""
+    C = camera_centres(block.rv, block.t)
+    if len(block.obs_image) == 0:
+        return float("nan")
+    depth = np.linalg.norm(block.points[block.obs_point] - C[block.obs_image], axis=1)
+    f = block.intr[block.cam_of_image[block.obs_image], 0]
+    return float(np.median(depth / f))

@@ -1,0 +1,93 @@
+"""QA of the georeferencing run on a synthetic block: flags, outliers, leave-one-out, errors.
+
+Built on the synthetic block of test_georef_bundle (GSD 0.05 m, tie noise 0.3 px, GCP
+pixel noise 0.5 px, survey noise 0.01 m), here without a dome.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kitegully import InputError
+from kitegully.georef.gcp_io import GCP
+from kitegully.georef.pipeline import georeference
+from kitegully.sfm.images import ImageInfo
+from test_georef_bundle import GSD, synthetic_block
+
+PARAMS = {
+    "method": "gcp_bundle",
+    "gcp_pixel_frame": "stored",
+    "gcp_pixel_scale": 1.0,
+    "sigma_gcp_xy_m": 0.01,
+    "sigma_gcp_z_m": 0.01,
+    "qa": {"max_triangulation_px": 3.0, "max_residual_m": 0.25, "coords_tolerance_m": 0.05,
+           "min_gcps_trusted": 4, "required_accuracy_m": 2 * GSD},
+    "bundle": {"sigma_tie_px": 0.3, "sigma_gcp_px": 0.5, "refine_intrinsics": ["f", "k1", "k2"], "loss": "huber",
+               "loss_scale": 3.0, "max_iterations": 30, "rel_tolerance": 1e-6},
+}
+
+
+def _setup(displace_pixel=None, displace_survey=None, drop=()):
+    model, survey, G, C, _ = synthetic_block(dome=0.0, k1_start=-0.05)
+    names = [f"img_{i:02d}.jpg" for i in range(len(model.rv))]
+    infos = [ImageInfo(n, n, 1, 1600, 1200, 1600, 1200, 1.0, "", 1200.0) for n in names]
+    rows = {n: i for i, n in enumerate(names)}
+    gcps = []
+    for g in range(len(survey)):
+        sel = model.gcp_obs_gcp == g
+        px = model.gcp_obs_xy[sel].copy()
+        if displace_pixel and displace_pixel[0] == g:
+            px[0] += displace_pixel[1]
+        xyz = survey[g].copy() + [340000.0, 5500000.0, 0.0]
+        if displace_survey and displace_survey[0] == g:
+            xyz += displace_survey[1]
+        imgs = [names[i] for i in model.gcp_obs_image[sel]]
+        if g in drop:
+            imgs, px = imgs[:1], px[:1]
+        gcps.append(GCP(f"T{g}", xyz, imgs + ["absent.jpg"], np.vstack([px, [[10.0, 10.0]]])))
+    return model, gcps, infos, rows
+
+
+def test_clean_block_meets_gsd_targets_and_is_trusted():
+    model, gcps, infos, rows = _setup()
+    r = georeference(model, gcps, infos, rows, PARAMS, "stored")
+    res = r.residuals
+    assert res["used"].all()
+    assert np.sqrt(np.mean(res["dx_m"] ** 2 + res["dy_m"] ** 2)) <= GSD
+    assert np.sqrt(np.mean(res["dz_m"] ** 2)) <= 1.5 * GSD
+    assert r.report["loo_rmse_3d_m"] <= 2 * GSD
+    assert len(r.loo) == len(gcps) and r.loo["flag"].str.contains("checkpoint").all()
+    assert res["flag"].str.contains("missing_images:1").all()
+    assert r.report["trusted"], r.report["trust_reasons"]
+
+
+def test_displaced_observation_is_flagged_and_left_out():
+    # 25 px on one of a GCP's observations: its rays no longer meet (threshold 3 px)
+    model, gcps, infos, rows = _setup(displace_pixel=(2, [25.0, -10.0]))
+    PARAMS2 = {**PARAMS, "method": "similarity"}
+    r = georeference(model, gcps, infos, rows, PARAMS2, "stored")
+    row = r.residuals.set_index("gcp_id").loc["T2"]
+    assert "ray_miss" in row["flag"] and not row["used"]
+    assert r.residuals.drop(index=2)["used"].all()
+
+
+def test_displaced_survey_is_an_outlier_and_does_not_spoil_the_rest():
+    model, gcps, infos, rows = _setup(displace_survey=(4, np.array([1.5, -1.0, 0.5])))
+    r = georeference(model, gcps, infos, rows, {**PARAMS, "method": "similarity"}, "stored")
+    res = r.residuals.set_index("gcp_id")
+    assert "outlier" in res.loc["T4", "flag"] and not res.loc["T4", "used"]
+    assert res.loc["T4", "d3_m"] > 1.0  # its true misfit (1.9 m) is reported
+    others = res.drop(index="T4")
+    assert others["used"].all() and others["d3_m"].max() < 0.25
+    assert not r.report["trusted"]
+
+
+def test_single_observation_and_too_few_gcps():
+    model, gcps, infos, rows = _setup(drop=(0, 1, 2, 3, 4))
+    with pytest.raises(InputError, match="fewer than three usable GCPs") as err:
+        georeference(model, gcps, infos, rows, PARAMS, "stored")
+    assert "T0 (missing_images:1;single_obs)" in str(err.value)
+    model, gcps, infos, rows = _setup(drop=(0,))
+    r = georeference(model, gcps, infos, rows, {**PARAMS, "method": "similarity"}, "stored")
+    assert "single_obs" in r.residuals.loc[0, "flag"] and not r.residuals.loc[0, "used"]

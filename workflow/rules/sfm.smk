@@ -1,0 +1,33 @@
+# Structure from motion with pycolmap (issue 5): prepared images, SIFT, matching, incremental
+# mapping with one shared self-calibrated camera. Real sites read config["inputs"]; twin
+# sites read the rendered photos of the flight stage.
+
+if "sfm" in config:
+
+    def sfm_images_dir(wildcards=None):
+        """Folder of the photographs: config inputs for real sites, flight outputs for twins."""
+        if IS_TWIN:
+            return result("flight", "observed/images")
+        return config["inputs"]["images_dir"]
+
+    rule sfm_reconstruct:
+        input:
+            images=sfm_images_dir(),
+        output:
+            work=directory(result("sfm", "work")),
+            model=directory(result("sfm", "model")),
+            summary=report(result("sfm", "summary.json"), caption=caption("sfm_summary"), category="Structure from motion"),
+            images_csv=report(result("sfm", "images.csv"), caption=caption("sfm_images"), category="Structure from motion"),
+            image_info=result("sfm", "image_info.json"),
+        params:
+            sfm=config["sfm"],
+            seed=config["seed"],
+        threads: config["sfm"]["threads"]
+        log:
+            logfile("sfm", "sfm_reconstruct"),
+        benchmark:
+            benchfile("sfm", "sfm_reconstruct")
+        script:
+            "../scripts/sfm_reconstruct.py"
+
+    add_targets(result("sfm", "summary.json"))
