@@ -14,7 +14,7 @@ import pandas as pd
 from kitegully import InputError
 from kitegully.twin.camera import Camera
 from kitegully.twin.flight import pose_from_row
-from kitegully.twin.render import Scene, visible
+from kitegully.twin.render import Scene, surface_height, visible
 
 
 def target_pixels(
@@ -28,7 +28,7 @@ def target_pixels(
     """True pixel position of every target in every image it projects into.
 
     A target counts as ``fully_in_view`` when its centre and the four corners of its
-    square (``size_m``, axis-aligned, at the centre's height) project inside the image,
+    square (``size_m``, axis-aligned, corners on the surface) project inside the image,
     ``edge_margin_px`` away from the border, and none of those five points is hidden by
     the surface (ray cast, ``occlusion_tolerance_m``). Cost: O(images × targets) rays.
 
@@ -43,8 +43,10 @@ def target_pixels(
         uv = camera.project(centres, pose)
         near = camera.in_image(np.nan_to_num(uv, nan=-1e9), -0.5)
         for i in np.flatnonzero(near):
-            pts = np.column_stack([centres[i, 0] + offs[:, 0] * half[i], centres[i, 1] + offs[:, 1] * half[i],
-                                   np.full(5, centres[i, 2])])
+            px, py = centres[i, 0] + offs[:, 0] * half[i], centres[i, 1] + offs[:, 1] * half[i]
+            pz = surface_height(scene, px, py)
+            pz[0] = centres[i, 2]
+            pts = np.column_stack([px, py, np.where(np.isfinite(pz), pz, centres[i, 2])])
             puv = camera.project(pts, pose)
             inside = bool(np.all(camera.in_image(np.nan_to_num(puv, nan=-1e9), edge_margin_px)))
             seen = bool(np.all(visible(scene, pose, pts, occlusion_tolerance_m))) if inside else False

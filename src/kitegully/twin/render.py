@@ -536,3 +536,19 @@ def photograph(
     sigma = np.sqrt(effects.read_noise_dn**2 + effects.shot_noise_dn2_per_dn * dn)
     dn = dn + sigma * rng.standard_normal(dn.shape, dtype=np.float32)
     return np.clip(np.rint(dn), 0, 255).astype(np.uint8), ev
+
+
+@numba.njit(parallel=True, cache=True)
+def _heights(dsm, x0, y0, cell, x, y, out):
+    for i in numba.prange(x.shape[0]):
+        out[i] = _height(dsm, x0, y0, cell, x[i], y[i])
+
+
+def surface_height(scene: Scene, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear surface height at map points (NaN outside the DSM), as the ray caster sees it."""
+    x = np.ascontiguousarray(np.ravel(x), dtype=np.float64)
+    y = np.ascontiguousarray(np.ravel(y), dtype=np.float64)
+    out = np.empty(len(x))
+    _heights(scene.dsm, scene.x0, scene.y0, scene.cell, x, y, out)
+    out[~np.isfinite(out)] = np.nan
+    return out

@@ -20,7 +20,7 @@ import pandas as pd
 from kitegully.twin.camera import Camera
 from kitegully.twin.exif import exif_bytes, write_jpeg
 from kitegully.twin.flight import pose_from_row
-from kitegully.twin.render import Photographic, Scene, photograph, render_reflectance
+from kitegully.twin.render import Photographic, Scene, photograph, render_reflectance, surface_height
 
 log = logging.getLogger(__name__)
 
@@ -47,7 +47,7 @@ def render_flight(
 ) -> pd.DataFrame:
     """Render and write every image of ``poses``; returns per-image facts.
 
-    Returns columns ``image, gsd_centre_m, ev_offset, blur_px, hit_fraction, render_s``.
+    Returns columns ``image, gsd_m`` (median over the image), ``ev_offset, blur_px, hit_fraction, render_s``.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -59,6 +59,8 @@ def render_flight(
         refl, depth = render_reflectance(scene, camera, pose, channels, supersampling, background)
         cy, cx = int(round(camera.cy)), int(round(camera.cx))
         d0 = float(depth[cy, cx])
+        # GSD: median over the pixels that see the twin, range along the ray / f
+        gsd = float(np.nanmedian(depth)) / camera.f if np.isfinite(depth).any() else float("nan")
         ray = camera.rays_camera(np.array([camera.cx]), np.array([camera.cy]))[0] @ pose.R
         ground = pose.C + ray * (d0 if np.isfinite(d0) else (pose.C[2] - scene.zmin))
         blur = blur_vector(camera, p, ground, effects.exposure_time_s)
@@ -70,17 +72,35 @@ def render_flight(
         rows.append(
             dict(
                 image=p["image"],
-                gsd_centre_m=d0 / camera.f,
+                gsd_m=gsd,
                 ev_offset=ev,
                 blur_px=float(np.hypot(*blur)),
                 hit_fraction=float(np.isfinite(depth).mean()),
                 render_s=dt,
             )
         )
-        log.info("image %d/%d %s: GSD %.3f m, blur %.2f px, %.1f s", i + 1, len(poses), p["image"], d0 / camera.f,
+        log.info("image %d/%d %s: GSD %.3f m, blur %.2f px, %.1f s", i + 1, len(poses), p["image"], gsd,
                  np.hypot(*blur), dt)
     log.info("rendered %d images in %.1f s", len(poses), time.perf_counter() - t_all)
     return pd.DataFrame(rows)
+
+
+def _ground_points(scene: Scene, extent, cell_m: float):
+    xmin, ymin, xmax, ymax = extent
+    xs = np.arange(xmin + cell_m / 2, xmax, cell_m)
+    ys = np.arange(ymax - cell_m / 2, ymin, -cell_m)
+    X, Y = np.meshgrid(xs, ys)
+    Z = surface_height(scene, X, Y)
+    zfill = float(np.nanmedian(scene.dsm))
+    return xs, ys, np.column_stack([X.ravel(), Y.ravel(), np.where(np.isfinite(Z), Z, zfill)])
+
+
+def _seen(camera: Camera, poses: pd.DataFrame, P: np.ndarray) -> np.ndarray:
+    seen = np.zeros((len(poses), len(P)), dtype=bool)
+    for i, (_, p) in enumerate(poses.iterrows()):
+        uv = camera.project(P, pose_from_row(p))
+        seen[i] = camera.in_image(np.nan_to_num(uv, nan=-1e9))
+    return seen
 
 
 def coverage(
@@ -93,26 +113,19 @@ def coverage(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, pd.DataFrame]:
     """Images seeing each ground point (occlusion ignored) and forward overlap per image pair.
 
-    Ground points lie on a ``cell_m`` grid over ``extent`` at the DSM height. Returns
-    (x centres, y centres, counts as rows × cols, overlap table of consecutive images of a
-    strip with column ``forward_overlap``); the core area is ``extent`` shrunk by
-    ``core_buffer_m``. Cost: O(images × grid points).
+    Ground points lie on a ``cell_m`` grid over ``extent`` at the DSM height. The forward
+    overlap of consecutive images of a strip is the share of image i's ground points also
+    seen by image i+1, on a coarser grid that extends past the site (off-site ground at the
+    DSM's median height) so images at the strip ends are measured whole. Returns (x
+    centres, y centres, counts as rows × cols, overlap table). Cost: O(images × points).
     """
-    xmin, ymin, xmax, ymax = extent
-    xs = np.arange(xmin + cell_m / 2, xmax, cell_m)
-    ys = np.arange(ymax - cell_m / 2, ymin, -cell_m)
-    X, Y = np.meshgrid(xs, ys)
-    r = (scene.y0 - Y) / scene.cell - 0.5
-    c = (X - scene.x0) / scene.cell - 0.5
-    ri = np.clip(np.rint(r).astype(int), 0, scene.dsm.shape[0] - 1)
-    ci = np.clip(np.rint(c).astype(int), 0, scene.dsm.shape[1] - 1)
-    Z = scene.dsm[ri, ci].astype(float)
-    P = np.column_stack([X.ravel(), Y.ravel(), np.nan_to_num(Z.ravel(), nan=scene.zmin)])
-    seen = np.zeros((len(poses), len(P)), dtype=bool)
-    for i, (_, p) in enumerate(poses.iterrows()):
-        uv = camera.project(P, pose_from_row(p))
-        seen[i] = camera.in_image(np.nan_to_num(uv, nan=-1e9))
-    counts = seen.sum(axis=0).reshape(X.shape)
+    xs, ys, P = _ground_points(scene, extent, cell_m)
+    counts = _seen(camera, poses, P).sum(axis=0).reshape(len(ys), len(xs))
+    reach = float((poses["z_m"] - scene.zmin).max()) * np.hypot(camera.width, camera.height) / (2 * camera.f)
+    big = (poses["x_m"].min() - reach, poses["y_m"].min() - reach, poses["x_m"].max() + reach, poses["y_m"].max() + reach)
+    big_cell = max(cell_m, float(np.sqrt((big[2] - big[0]) * (big[3] - big[1]) / 2e5)))
+    _, _, Q = _ground_points(scene, big, big_cell)
+    seen = _seen(camera, poses, Q)
     rows = []
     strips = poses["strip"].to_numpy()
     for i in range(len(poses) - 1):
