@@ -109,6 +109,7 @@ def build_site(tw: dict, crs: str, seed: int, epoch: int = 1) -> TwinSite:
     network = gl.trace_network(valley, fields, gcfg, grid.bounds, z_trace, tgrid, seed)
     retreat, widen = {}, None
     if epoch == 2:
+        gl.assign_attributes(network, gcfg, valley, seed)  # epoch-1 attributes decide which heads have a headcut
         retreat = epochs.retreat_heads(network, tw["epoch2"], seed)
         widen = epochs.widening(network, tw["epoch2"], seed)
     gl.assign_attributes(network, gcfg, valley, seed, widen)
@@ -206,7 +207,9 @@ def compute_tile(site: TwinSite, r0: int, c0: int, nrow: int, ncol: int) -> Tile
     lc = np.where(building, lcm.CODE["building"], lc)
     lc = np.where(water, lcm.CODE["water"], lc).astype(np.uint8)
     phase = lcm.furrow_phase(f, pi, u)
-    z = z + np.where(lc == lcm.CODE["ploughed"], f.furrow_amplitude * np.sin(2 * np.pi * phase / f.furrow_period), 0.0)
+    # furrows are ridges (>= 0) on ploughed plots outside gully strips, so erosion never raises them
+    furrowed = (lcm.plot_class(f, pi) == lcm.CODE["ploughed"]) & ~strip & ~track & ~building & ~water
+    z = z + np.where(furrowed, 0.5 * f.furrow_amplitude * (1.0 + np.sin(2 * np.pi * phase / f.furrow_period)), 0.0)
     if site.epoch == 2:
         e2 = tw["epoch2"]
         codes = [lcm.CODE[c] for c in e2["sheet_erosion_classes"]]
