@@ -1,0 +1,269 @@
+"""Compiled kernels of the dense matcher (numba, ``cache=True``).
+
+All kernels work on one tile: a grid of ``H × W`` ground cells with local coordinates
+``xs`` (W,) and ``ys`` (H,) of the cell centres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True)
+def _project(R, C, p, X, Y, Z):
+    dx = X - C[0]
+    dy = Y - C[1]
+    dz = Z - C[2]
+    xc = R[0, 0] * dx + R[0, 1] * dy + R[0, 2] * dz
+    yc = R[1, 0] * dx + R[1, 1] * dy + R[1, 2] * dz
+    zc = R[2, 0] * dx + R[2, 1] * dy + R[2, 2] * dz
+    if zc <= 1e-6:
+        return -1e9, -1e9, zc
+    x = xc / zc
+    y = yc / zc
+    r2 = x * x + y * y
+    d = 1.0 + p[3] * r2 + p[4] * r2 * r2
+    return p[0] * x * d + p[1], p[0] * y * d + p[2], zc
+
+
+@njit(cache=True)
+def _bilinear(img, u, v):
+    h, w = img.shape[0], img.shape[1]
+    if not (u >= 0.0 and v >= 0.0 and u <= w - 1.0 and v <= h - 1.0):
+        return np.nan
+    i0 = min(int(v), h - 2) if h > 1 else 0
+    j0 = min(int(u), w - 2) if w > 1 else 0
+    a = v - i0
+    b = u - j0
+    return ((1 - a) * ((1 - b) * img[i0, j0] + b * img[i0, j0 + 1])
+            + a * ((1 - b) * img[i0 + 1, j0] + b * img[i0 + 1, j0 + 1]))
+
+
+@njit(cache=True, parallel=True)
+def sample_view(img, R, C, p, level, xs, ys, Z, out):
+    """Resample image ``img`` (pyramid ``level``) at ground points ``(xs[j], ys[i], Z[i, j])``.
+
+    ``out`` (H, W) receives NaN where a point falls outside the image or behind the camera.
+    O(H·W).
+    """
+    sc = 1.0 / (2.0 ** level)
+    for i in prange(Z.shape[0]):
+        for j in range(Z.shape[1]):
+            z = Z[i, j]
+            if not np.isfinite(z):
+                out[i, j] = np.nan
+                continue
+            u, v, d = _project(R, C, p, xs[j], ys[i], z)
+            if d <= 0.0:
+                out[i, j] = np.nan
+                continue
+            out[i, j] = _bilinear(img, (u + 0.5) * sc - 0.5, (v + 0.5) * sc - 0.5)
+
+
+@njit(cache=True, parallel=True)
+def sample_view_bands(img, R, C, p, level, xs, ys, Z, out):
+    """Like :func:`sample_view` for an (h, w, B) image into ``out`` (B, H, W). O(H·W·B)."""
+    sc = 1.0 / (2.0 ** level)
+    nb = img.shape[2]
+    for i in prange(Z.shape[0]):
+        for j in range(Z.shape[1]):
+            z = Z[i, j]
+            ok = np.isfinite(z)
+            u = v = -1.0
+            if ok:
+                u, v, d = _project(R, C, p, xs[j], ys[i], z)
+                u = (u + 0.5) * sc - 0.5
+                v = (v + 0.5) * sc - 0.5
+                ok = d > 0 and u >= 0.0 and v >= 0.0 and u <= img.shape[1] - 1.0 and v <= img.shape[0] - 1.0
+            for b in range(nb):
+                out[b, i, j] = _bilinear(img[:, :, b], u, v) if ok else np.nan
+
+
+@njit(cache=True, parallel=True)
+def multiview_ncc(stack, half, min_std, score, nviews):
+    """Multi-image normalised cross-correlation of ground windows.
+
+    ``stack`` (V, H, W) holds the V images resampled on the ground grid at one candidate
+    surface. For each cell, every view whose ``(2·half+1)²`` window is complete and has a
+    standard deviation ≥ ``min_std`` is normalised to zero mean and unit norm (vector
+    ``a_v``); the score is the mean pairwise NCC, obtained without forming pairs as
+    ``(‖Σ a_v‖² − n) / (n (n − 1))``. ``score`` gets NaN and ``nviews`` the count of
+    usable views where fewer than two remain. O(H·W·V·(2·half+1)²).
+    """
+    V, H, W = stack.shape
+    m = 2 * half + 1
+    n = m * m
+    min_ss = n * min_std * min_std
+    for i in prange(H):
+        buf = np.empty(n, dtype=np.float64)
+        acc = np.empty(n, dtype=np.float64)
+        for j in range(W):
+            score[i, j] = np.nan
+            nviews[i, j] = 0
+            if i < half or j < half or i >= H - half or j >= W - half:
+                continue
+            acc[:] = 0.0
+            nv = 0
+            for v in range(V):
+                k = 0
+                s = 0.0
+                ok = True
+                for a in range(i - half, i + half + 1):
+                    for b in range(j - half, j + half + 1):
+                        x = stack[v, a, b]
+                        if not np.isfinite(x):
+                            ok = False
+                            break
+                        buf[k] = x
+                        s += x
+                        k += 1
+                    if not ok:
+                        break
+                if not ok:
+                    continue
+                mean = s / n
+                ss = 0.0
+                for k in range(n):
+                    buf[k] -= mean
+                    ss += buf[k] * buf[k]
+                if ss < min_ss or ss <= 0.0:
+                    continue
+                inv = 1.0 / np.sqrt(ss)
+                for k in range(n):
+                    acc[k] += buf[k] * inv
+                nv += 1
+            nviews[i, j] = nv
+            if nv >= 2:
+                t = 0.0
+                for k in range(n):
+                    t += acc[k] * acc[k]
+                score[i, j] = (t - nv) / (nv * (nv - 1.0))
+
+
+@njit(cache=True)
+def _sgm_direction(cost, dr, dc, p1, p2, total):
+    H, W, K = cost.shape
+    L = np.empty((H, W, K), dtype=np.float32)
+    r_start, r_end, r_step = (0, H, 1) if dr >= 0 else (H - 1, -1, -1)
+    c_start, c_end, c_step = (0, W, 1) if dc >= 0 else (W - 1, -1, -1)
+    for r in range(r_start, r_end, r_step):
+        for c in range(c_start, c_end, c_step):
+            pr = r - dr
+            pc = c - dc
+            if pr < 0 or pr >= H or pc < 0 or pc >= W:
+                for d in range(K):
+                    L[r, c, d] = cost[r, c, d]
+            else:
+                mprev = L[pr, pc, 0]
+                for d in range(1, K):
+                    if L[pr, pc, d] < mprev:
+                        mprev = L[pr, pc, d]
+                for d in range(K):
+                    best = L[pr, pc, d]
+                    if d > 0 and L[pr, pc, d - 1] + p1 < best:
+                        best = L[pr, pc, d - 1] + p1
+                    if d < K - 1 and L[pr, pc, d + 1] + p1 < best:
+                        best = L[pr, pc, d + 1] + p1
+                    if mprev + p2 < best:
+                        best = mprev + p2
+                    L[r, c, d] = cost[r, c, d] + best - mprev
+            for d in range(K):
+                total[r, c, d] += L[r, c, d]
+
+
+_DIRS = np.array([[0, 1], [0, -1], [1, 0], [-1, 0], [1, 1], [-1, -1], [1, -1], [-1, 1]], dtype=np.int64)
+
+
+def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np.ndarray:
+    """Semi-global aggregation of a cost volume (H, W, K) along 4 or 8 directions.
+
+    Labels are neighbouring steps of the elevation search; a change of one step costs
+    ``p1``, a larger jump ``p2``. O(directions · H·W·K) time, O(H·W·K) extra memory.
+    """
+    cost = np.ascontiguousarray(cost, dtype=np.float32)
+    total = np.zeros_like(cost)
+    for dr, dc in _DIRS[: int(directions)]:
+        _sgm_direction(cost, int(dr), int(dc), np.float32(p1), np.float32(p2), total)
+    return total
+
+
+@njit(cache=True)
+def _height_nearest(dsm, x0, y0, cell, x, y):
+    j = int(np.floor((x - x0) / cell))
+    i = int(np.floor((y0 - y) / cell))
+    if i < 0 or j < 0 or i >= dsm.shape[0] or j >= dsm.shape[1]:
+        return np.nan
+    return dsm[i, j]
+
+
+@njit(cache=True, parallel=True)
+def occlusion_mask(dsm, x0, y0, cell, zmax, xs, ys, Z, C, step, tolerance, out):
+    """True where the line of sight from ground point ``(xs[j], ys[i], Z[i, j])`` to the
+    camera centre ``C`` passes below the surface ``dsm`` (grid with top-left corner
+    ``(x0, y0)`` and cell ``cell``, local coordinates) by more than ``tolerance``.
+
+    The ray is marched in horizontal steps of ``step`` until it rises above ``zmax``.
+    O(H·W·L/step) with L the horizontal run of the ray below ``zmax``.
+    """
+    for i in prange(Z.shape[0]):
+        for j in range(Z.shape[1]):
+            z = Z[i, j]
+            out[i, j] = False
+            if not np.isfinite(z):
+                continue
+            dx = C[0] - xs[j]
+            dy = C[1] - ys[i]
+            dz = C[2] - z
+            hd = np.sqrt(dx * dx + dy * dy)
+            if dz <= 0.0:
+                out[i, j] = True
+                continue
+            if hd < 1e-9:
+                continue
+            slope = dz / hd
+            t = step
+            while True:
+                zr = z + slope * t
+                if zr > zmax or t > hd:
+                    break
+                zs = _height_nearest(dsm, x0, y0, cell, xs[j] + dx * t / hd, ys[i] + dy * t / hd)
+                if np.isfinite(zs) and zs > zr + tolerance:
+                    out[i, j] = True
+                    break
+                t += step
+
+
+@njit(cache=True, parallel=True)
+def openness_kernel(z, cell, radius, out):
+    """Positive openness (degrees): mean over 8 directions of 90° minus the highest
+    elevation angle within ``radius`` cells. NaN cells are skipped. O(H·W·8·radius)."""
+    H, W = z.shape
+    di = (0, 1, 1, 1, 0, -1, -1, -1)
+    dj = (1, 1, 0, -1, -1, -1, 0, 1)
+    for i in prange(H):
+        for j in range(W):
+            z0 = z[i, j]
+            if not np.isfinite(z0):
+                out[i, j] = np.nan
+                continue
+            tot = 0.0
+            nd = 0
+            for k in range(8):
+                best = -1e30
+                step_len = cell * (1.4142135623730951 if di[k] != 0 and dj[k] != 0 else 1.0)
+                for r in range(1, radius + 1):
+                    a = i + di[k] * r
+                    b = j + dj[k] * r
+                    if a < 0 or b < 0 or a >= H or b >= W:
+                        break
+                    zz = z[a, b]
+                    if not np.isfinite(zz):
+                        continue
+                    g = (zz - z0) / (r * step_len)
+                    if g > best:
+                        best = g
+                if best > -1e29:
+                    tot += 90.0 - np.degrees(np.arctan(best))
+                    nd += 1
+            out[i, j] = tot / nd if nd > 0 else np.nan

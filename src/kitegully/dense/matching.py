@@ -1,0 +1,229 @@
+"""Object-space multi-view matching of one tile, coarse to fine (after MicMac's Malt).
+
+For each ground cell the matcher searches the elevation that maximises the multi-image
+normalised cross-correlation of small ground windows resampled from every image that sees
+the cell. The search runs over an image pyramid: at the coarsest level every elevation
+between the tile's bounds is tried; each finer level searches a few steps around the
+upsampled surface of the level above. Costs are aggregated semi-globally (SGM) along 4 or
+8 directions, the winner is refined to sub-step precision with a parabola, and cells seen
+by fewer than two usable images or with a low correlation are masked.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from kitegully import InputError
+from kitegully.dense.kernels import multiview_ncc, sample_view, sgm_aggregate
+from kitegully.dense.views import PyramidCache, ViewSet
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class MatchParams:
+    """Parameters of the matcher (the ``dense.matching`` config section).
+
+    Attributes
+    ----------
+    levels : int
+        Pyramid levels of the ground grid (cell × 2**l, l = levels−1 … 0).
+    window_half_cells : int
+        Correlation window half-size (cells); the window is (2h+1)².
+    z_step_cells : float
+        Elevation step of the search at each level as a parallax, in cells of that level:
+        ``dz = z_step_cells · cell · H/B`` with H/B the tile's height-to-base ratio
+        (median over image pairs), so that one step shifts the image windows by about
+        ``z_step_cells`` cells whatever the geometry (MicMac's ZPas).
+    refine_radius_steps : int
+        Steps searched either side of the upsampled surface at finer levels.
+    max_labels : int
+        Upper bound on elevation labels at the coarsest level (the step grows if needed).
+    z_margin_m : float
+        Margin added to the tie-point elevation range of a tile (m).
+    p1, p2 : float
+        SGM penalties (cost units, cost = (1 − NCC)/2) for a one-step change and a jump.
+    sgm_directions : int
+        4 or 8 aggregation directions.
+    min_correlation : float
+        Cells whose NCC at the chosen elevation is lower are masked.
+    min_views : int
+        Cells need at least this many usable images (≥ 2).
+    min_std_dn : float
+        Windows with a grey-level SD below this (DN, 0–255) are textureless and unused.
+    nan_cost : float
+        Cost of a candidate no two images can judge.
+    """
+
+    levels: int = 4
+    window_half_cells: int = 2
+    z_step_cells: float = 0.5
+    refine_radius_steps: int = 3
+    max_labels: int = 96
+    z_margin_m: float = 2.0
+    p1: float = 0.02
+    p2: float = 0.12
+    sgm_directions: int = 8
+    min_correlation: float = 0.5
+    min_views: int = 2
+    min_std_dn: float = 1.0
+    nan_cost: float = 1.0
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "MatchParams":
+        p = cls(**{k: cfg[k] for k in cls.__dataclass_fields__ if k in cfg})
+        if p.sgm_directions not in (4, 8):
+            raise InputError(f"dense.matching.sgm_directions: must be 4 or 8, got {p.sgm_directions}")
+        if p.min_views < 2:
+            raise InputError("dense.matching.min_views: must be at least 2")
+        return p
+
+
+@dataclass
+class TileResult:
+    """Surface of one tile at level 0: elevation (local), NCC and usable image count."""
+
+    z: np.ndarray
+    ncc: np.ndarray
+    nviews: np.ndarray
+
+
+def _fill_nearest(z: np.ndarray) -> np.ndarray:
+    bad = ~np.isfinite(z)
+    if not bad.any() or bad.all():
+        return z
+    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+    return z[tuple(idx)]
+
+
+def view_levels(views: ViewSet, idx: list[int], z_ground: float, cell: float) -> np.ndarray:
+    """Image pyramid level per view whose pixels are closest to (not coarser than) ``cell``."""
+    gsd = np.array([views.images[i].gsd_at(z_ground) for i in idx])
+    ratio = np.maximum(cell / np.maximum(gsd, 1e-9), 1.0)
+    return np.floor(np.log2(ratio) + 1e-6).astype(int)
+
+
+def visible_views(views: ViewSet, x: tuple[float, float], y: tuple[float, float], z: tuple[float, float]) -> list[int]:
+    """Images whose frame intersects the box ``x × y × z`` (local coordinates)."""
+    X = np.array([[a, b, c] for a in x for b in y for c in z], float)
+    out = []
+    for k, v in enumerate(views.images):
+        u, w, d = v.project(X)
+        if np.any(d <= 0):
+            continue
+        if u.max() < 0 or w.max() < 0 or u.min() > v.width - 1 or w.min() > v.height - 1:
+            continue
+        out.append(k)
+    return out
+
+
+def height_base_ratio(views: ViewSet, idx: list[int], z_ground: float, max_ratio: float = 20.0) -> float:
+    """Median over image pairs of flying height / horizontal base, clipped to [1, ``max_ratio``]."""
+    C = np.array([views.images[i].C for i in idx])
+    if len(C) < 2:
+        return max_ratio
+    iu = np.triu_indices(len(C), 1)
+    base = np.hypot(*(C[:, None, :2] - C[None, :, :2]).transpose(2, 0, 1))[iu]
+    height = np.median(C[:, 2]) - z_ground
+    b = np.median(base)
+    return float(np.clip(height / max(b, 1e-9), 1.0, max_ratio))
+
+
+def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarray, cell: float,
+               z_range: tuple[float, float], params: MatchParams) -> TileResult:
+    """Match one tile coarse to fine.
+
+    Parameters
+    ----------
+    xs, ys
+        Local coordinates of the level-0 cell centres (W,), (H,); W and H must be
+        multiples of ``2**(levels − 1)``.
+    z_range
+        (low, high) local elevation bounds of the search.
+
+    Cost: O(Σ_levels H_l·W_l·K_l·(V·w² + directions)) with K_l labels and V images.
+    """
+    H, W = len(ys), len(xs)
+    L = params.levels
+    f = 2 ** (L - 1)
+    if H % f or W % f:
+        raise ValueError(f"tile size {H}x{W} is not a multiple of {f}")
+    zlo, zhi = float(z_range[0]), float(z_range[1])
+    x0, y0 = xs[0] - cell / 2, ys[0] + cell / 2
+    idx = visible_views(views, (x0, x0 + W * cell), (y0 - H * cell, y0), (zlo, zhi))
+    nan = np.full((H, W), np.nan, np.float32)
+    if len(idx) < params.min_views:
+        return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
+    zmid = 0.5 * (zlo + zhi)
+    hb = height_base_ratio(views, idx, zmid)
+    z_prev = None
+    for lev in range(L - 1, -1, -1):
+        cl = cell * 2 ** lev
+        hl, wl = H // 2 ** lev, W // 2 ** lev
+        xl = x0 + (np.arange(wl) + 0.5) * cl
+        yl = y0 - (np.arange(hl) + 0.5) * cl
+        dz = params.z_step_cells * cl * hb
+        if z_prev is None:
+            K = int(np.ceil((zhi - zlo) / dz)) + 1
+            if K > params.max_labels:
+                K = params.max_labels
+                dz = (zhi - zlo) / (K - 1)
+            base = np.full((hl, wl), zlo, np.float64)
+        else:
+            up = cv2.resize(z_prev.astype(np.float32), (wl, hl), interpolation=cv2.INTER_LINEAR).astype(np.float64)
+            K = 2 * params.refine_radius_steps + 1
+            # the search window stays inside the tile's elevation bounds
+            base = np.clip(up - params.refine_radius_steps * dz, zlo, max(zlo, zhi - (K - 1) * dz))
+        levels = view_levels(views, idx, zmid, cl)
+        imgs = [cache.level(i, int(s)) for i, s in zip(idx, levels)]
+        stack = np.empty((len(idx), hl, wl), np.float32)
+        score = np.empty((K, hl, wl), np.float32)
+        nvw = np.empty((K, hl, wl), np.int16)
+        for k in range(K):
+            Z = base + k * dz
+            for n, (i, s) in enumerate(zip(idx, levels)):
+                v = views.images[i]
+                sample_view(imgs[n], v.R, v.C, v.params(), int(s), xl, yl, Z, stack[n])
+            multiview_ncc(stack, params.window_half_cells, params.min_std_dn, score[k], nvw[k])
+        cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
+        agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
+        d = np.argmin(agg, axis=2)
+        # sub-step refinement: parabola through the aggregated costs around the winner
+        dc = np.clip(d, 1, K - 2) if K >= 3 else d
+        r, c = np.indices(d.shape)
+        if K >= 3:
+            cm, c0, cp = agg[r, c, dc - 1], agg[r, c, dc], agg[r, c, dc + 1]
+            den = cm - 2 * c0 + cp
+            with np.errstate(divide="ignore", invalid="ignore"):
+                off = np.where((den > 1e-12) & (d == dc), 0.5 * (cm - cp) / den, 0.0)
+            off = np.clip(off, -0.5, 0.5)
+        else:
+            off = np.zeros(d.shape)
+        z = base + (d + off) * dz
+        ncc = score[d, r, c]
+        nv = nvw[d, r, c]
+        seen = nvw.max(axis=0) >= params.min_views
+        if lev > 0:
+            # keep only confident cells as the prior of the next level; the others take
+            # the value of the nearest confident cell (ambiguous low-texture/low-base areas)
+            good = seen & (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
+            zf = np.where(good, z, np.nan)
+            if not np.isfinite(zf).any():
+                return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
+            zf = _fill_nearest(zf)
+            z_prev = ndimage.median_filter(zf, size=3, mode="nearest")
+        else:
+            keep = (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
+            # a winner on the first or last label has no cost minimum inside the searched
+            # interval (surface outside the tile's elevation bounds or a lost prior)
+            keep &= (d > 0) & (d < K - 1)
+            z = np.where(keep, z, np.nan).astype(np.float32)
+            log.debug("tile level %d: %d labels, %d views, %.0f%% kept", lev, K, len(idx), 100 * keep.mean())
+            return TileResult(z, np.where(np.isfinite(ncc), ncc, np.nan).astype(np.float32), nv.astype(np.int16))
+    raise AssertionError("unreachable")

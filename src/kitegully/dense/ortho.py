@@ -1,0 +1,106 @@
+"""True orthophoto: every cell takes its colour from the image that sees it best.
+
+For each orthophoto cell the surface point comes from the DSM (holes filled with the
+nearest valid elevation); among the images whose frame contains it and whose line of
+sight is not blocked by the DSM, the one with the smallest off-nadir angle wins, and its
+colour is resampled bilinearly from the pyramid level closest to the orthophoto cell.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from kitegully.dense.kernels import occlusion_mask, sample_view_bands
+from kitegully.dense.matching import view_levels, visible_views
+from kitegully.dense.views import PyramidCache, ViewSet
+from kitegully.io.raster import GridSpec
+
+log = logging.getLogger(__name__)
+
+
+def fill_nearest(z: np.ndarray) -> np.ndarray:
+    """NaN cells take the value of the nearest valid cell (all-NaN input is returned as is)."""
+    bad = ~np.isfinite(z)
+    if not bad.any() or bad.all():
+        return z
+    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+    return z[tuple(idx)]
+
+
+def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 1, tile_cells: int = 512,
+               overlap_m: float = 20.0, occlusion_tolerance_m: float = 0.3, max_cached_images: int = 16,
+               arrays: list[np.ndarray] | None = None) -> tuple[np.ndarray, GridSpec, np.ndarray]:
+    """Mosaic a true orthophoto on the DSM grid refined ``upsample`` times.
+
+    Parameters
+    ----------
+    dsm, grid
+        Surface (site elevations, NaN holes) and its grid in the site CRS.
+    overlap_m
+        DSM margin around each tile used for the occlusion test (m).
+    occlusion_tolerance_m
+        A line of sight is blocked where the DSM rises above it by more than this.
+
+    Returns
+    -------
+    image : (B, H, W) uint8, 0 = nodata (valid values are clipped to 1–255)
+    ortho_grid : the orthophoto grid
+    source : (H, W) int16 index of the chosen image, −1 where none
+
+    Cost: O(cells · V · (1 + ray march length / cell)).
+    """
+    ocell = grid.cell / upsample
+    og = GridSpec(grid.x0, grid.y0, ocell, grid.width * upsample, grid.height * upsample, grid.crs)
+    filled = fill_nearest(dsm.astype(np.float64))
+    if not np.isfinite(filled).any():
+        raise ValueError("orthophoto: the DSM has no valid cell")
+    zloc = filled - views.offset[2]
+    cache = PyramidCache(views, max_cached_images, arrays)
+    nb = cache.level(0, 0, colour=True).shape[2]
+    out = np.zeros((nb, og.height, og.width), np.uint8)
+    source = np.full((og.height, og.width), -1, np.int16)
+    x0l, y0l = grid.x0 - views.offset[0], grid.y0 - views.offset[1]
+    marg = int(np.ceil(overlap_m / grid.cell))
+    T = max(1, tile_cells // upsample)
+    for r0 in range(0, grid.height, T):
+        for c0 in range(0, grid.width, T):
+            h, w = min(T, grid.height - r0), min(T, grid.width - c0)
+            # DSM window with margin for the occlusion test
+            ra, rb = max(0, r0 - marg), min(grid.height, r0 + h + marg)
+            ca, cb = max(0, c0 - marg), min(grid.width, c0 + w + marg)
+            zwin = np.ascontiguousarray(zloc[ra:rb, ca:cb])
+            zt = zloc[r0:r0 + h, c0:c0 + w].astype(np.float32)
+            zo = cv2.resize(zt, (w * upsample, h * upsample), interpolation=cv2.INTER_LINEAR).astype(np.float64) \
+                if upsample > 1 else zt.astype(np.float64)
+            xs = x0l + (c0 * upsample + np.arange(w * upsample) + 0.5) * ocell
+            ys = y0l - (r0 * upsample + np.arange(h * upsample) + 0.5) * ocell
+            zr = (float(zwin.min()), float(zwin.max()))
+            idx = visible_views(views, (xs[0], xs[-1]), (ys[-1], ys[0]), zr)
+            best = np.full(zo.shape, -np.inf)
+            tile_out = np.zeros((nb,) + zo.shape, np.float32)
+            tile_src = np.full(zo.shape, -1, np.int16)
+            levels = view_levels(views, idx, float(np.median(zo)), ocell)
+            buf = np.empty((nb,) + zo.shape, np.float32)
+            occ = np.empty(zo.shape, np.bool_)
+            for i, s in zip(idx, levels):
+                v = views.images[i]
+                img = cache.level(i, int(s), colour=True)
+                sample_view_bands(img, v.R, v.C, v.params(), int(s), xs, ys, zo, buf)
+                occlusion_mask(zwin, x0l + ca * grid.cell, y0l - ra * grid.cell, grid.cell, zr[1], xs, ys, zo,
+                               v.C, grid.cell / 2, occlusion_tolerance_m, occ)
+                dist = np.sqrt((v.C[0] - xs[None, :]) ** 2 + (v.C[1] - ys[:, None]) ** 2 + (v.C[2] - zo) ** 2)
+                score = (v.C[2] - zo) / dist
+                take = np.isfinite(buf[0]) & ~occ & (score > best)
+                best[take] = score[take]
+                tile_out[:, take] = buf[:, take]
+                tile_src[take] = i
+            sl = (slice(r0 * upsample, (r0 + h) * upsample), slice(c0 * upsample, (c0 + w) * upsample))
+            valid = tile_src >= 0
+            out[(slice(None),) + sl] = np.where(valid, np.clip(np.rint(tile_out), 1, 255), 0).astype(np.uint8)
+            source[sl] = tile_src
+    log.info("orthophoto: %d x %d cells at %.3f m, %.1f%% filled", og.width, og.height, ocell, 100 * (source >= 0).mean())
+    return out, og, source

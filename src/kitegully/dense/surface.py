@@ -1,0 +1,109 @@
+"""Tiled dense matching of a whole site into a DSM grid, with bounded memory.
+
+The grid is cut into square core tiles; each tile is matched on its core plus an overlap
+margin (so windows and SGM paths near its edges see real neighbours) and only the core is
+kept. Memory per tile is O((tile + 2·overlap)² · labels) and images are held in an LRU
+pyramid cache, so the peak does not grow with the site.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from kitegully import InputError
+from kitegully.dense.matching import MatchParams, match_tile, visible_views
+from kitegully.dense.views import PyramidCache, ViewSet
+from kitegully.io.raster import GridSpec
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DenseResult:
+    """DSM (site elevations, NaN nodata), NCC, usable and geometrically seeing image counts."""
+
+    dsm: np.ndarray
+    ncc: np.ndarray
+    nviews: np.ndarray
+    nseen: np.ndarray
+    seconds: float
+    tiles: int
+
+    def coverage(self) -> float:
+        """Share of the cells seen by ≥ 2 images that got a valid elevation."""
+        seen = self.nseen >= 2
+        return float(np.isfinite(self.dsm)[seen].mean()) if seen.any() else float("nan")
+
+
+def tile_z_range(views: ViewSet, box: tuple[float, float, float, float], margin: float,
+                 min_points: int = 10) -> tuple[float, float]:
+    """Local elevation bounds for a tile from the tie points inside ``box`` (xmin, ymin,
+    xmax, ymax, local); falls back to all tie points when the tile has fewer than
+    ``min_points``. The 1st–99th percentile range is widened by ``margin``."""
+    P = views.sparse_points
+    if len(P) == 0:
+        raise InputError("dense matching: the model has no tie points to bound the elevation search")
+    inside = (P[:, 0] >= box[0]) & (P[:, 0] <= box[2]) & (P[:, 1] >= box[1]) & (P[:, 1] <= box[3])
+    z = P[inside, 2] if inside.sum() >= min_points else P[:, 2]
+    lo, hi = np.percentile(z, [1, 99]) if len(z) >= 20 else (z.min(), z.max())
+    return float(lo - margin), float(hi + margin)
+
+
+def count_seen(views: ViewSet, idx: list[int], xs: np.ndarray, ys: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Number of images (among ``idx``) whose frame contains each ground point. O(cells·V)."""
+    X = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None], z), axis=-1)
+    n = np.zeros(z.shape, np.int16)
+    for i in idx:
+        v = views.images[i]
+        u, w, d = v.project(X)
+        n += ((d > 0) & (u >= 0) & (w >= 0) & (u <= v.width - 1) & (w <= v.height - 1)).astype(np.int16)
+    return n
+
+
+def dense_surface(views: ViewSet, grid: GridSpec, params: MatchParams, tile_cells: int = 256,
+                  overlap_cells: int = 16, max_cached_images: int = 32,
+                  arrays: list[np.ndarray] | None = None) -> DenseResult:
+    """Match all tiles of ``grid`` (site CRS) and assemble the DSM.
+
+    ``arrays`` optionally gives the images in memory (same order as ``views.images``).
+    Cost: O(tiles · per-tile cost of :func:`match_tile`); memory O(grid) for the outputs plus
+    O(tile² · labels) working memory and the image cache.
+    """
+    f = 2 ** (params.levels - 1)
+    T = max(f, int(np.ceil(tile_cells / f)) * f)
+    O = int(np.ceil(overlap_cells / f)) * f
+    cache = PyramidCache(views, max_cached_images, arrays)
+    dsm = np.full((grid.height, grid.width), np.nan, np.float32)
+    ncc = np.full_like(dsm, np.nan)
+    nviews = np.zeros(dsm.shape, np.int16)
+    nseen = np.zeros(dsm.shape, np.int16)
+    xs_all = grid.x0 - views.offset[0] + (np.arange(-O, grid.width + T + O) + 0.5) * grid.cell
+    ys_all = grid.y0 - views.offset[1] - (np.arange(-O, grid.height + T + O) + 0.5) * grid.cell
+    t0 = time.perf_counter()
+    starts = [(r, c) for r in range(0, grid.height, T) for c in range(0, grid.width, T)]
+    for n, (r0, c0) in enumerate(starts):
+        xs = xs_all[c0: c0 + T + 2 * O]
+        ys = ys_all[r0: r0 + T + 2 * O]
+        box = (xs[0], ys[-1], xs[-1], ys[0])
+        zr = tile_z_range(views, box, params.z_margin_m)
+        res = match_tile(views, cache, xs, ys, grid.cell, zr, params)
+        h = min(T, grid.height - r0)
+        w = min(T, grid.width - c0)
+        core = (slice(O, O + h), slice(O, O + w))
+        dsm[r0:r0 + h, c0:c0 + w] = res.z[core] + views.offset[2]
+        ncc[r0:r0 + h, c0:c0 + w] = res.ncc[core]
+        nviews[r0:r0 + h, c0:c0 + w] = res.nviews[core]
+        zc = res.z[core].astype(np.float64)
+        if np.isfinite(zc).any():
+            zc = np.where(np.isfinite(zc), zc, np.nanmedian(zc))
+        else:
+            zc = np.full(zc.shape, 0.5 * (zr[0] + zr[1]))
+        idx = visible_views(views, (box[0], box[2]), (box[1], box[3]), zr)
+        nseen[r0:r0 + h, c0:c0 + w] = count_seen(views, idx, xs[O:O + w], ys[O:O + h], zc)
+        if (n + 1) % max(1, len(starts) // 10) == 0 or n + 1 == len(starts):
+            log.info("dense matching: tile %d/%d done (%.1f s)", n + 1, len(starts), time.perf_counter() - t0)
+    return DenseResult(dsm, ncc, nviews, nseen, time.perf_counter() - t0, len(starts))
