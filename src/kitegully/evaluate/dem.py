@@ -39,8 +39,8 @@ def sample_bilinear(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray)
     return np.where(inside, v, np.nan)
 
 
-def sample_nearest(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, fill=-1) -> np.ndarray:
-    """Value of the cell containing each map point (``fill`` outside the grid)."""
+def sample_nearest(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, fill=0) -> np.ndarray:
+    """Value of the cell containing each map point (``fill`` outside the grid, 0 by default)."""
     r, c = grid.rowcol(np.asarray(x, float), np.asarray(y, float))
     r = np.rint(r).astype(int)
     c = np.rint(c).astype(int)
