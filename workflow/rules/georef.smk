@@ -51,3 +51,24 @@ if "georef" in config and "sfm" in config:
         result("georef", "camera_positions.gpkg"),
         result("georef", "camera_calibration.csv"),
     )
+
+    if IS_TWIN:
+
+        rule georef_evaluate:
+            """Evaluation only: reads the flight truth (camera poses, image GSD)."""
+            input:
+                cameras=result("georef", "camera_positions.gpkg"),
+                residuals=result("georef", "gcp_residuals.csv"),
+                loo=result("georef", "loo_checkpoints.csv"),
+                sfm_summary=result("sfm", "summary.json"),
+                poses=result("flight", "truth/poses.csv"),
+                image_stats=result("flight", "image_stats.csv"),
+            output:
+                table=report(result("georef", "twin_camera_errors.csv"), caption=caption("georef_twin_evaluation"), category="Georeferencing"),
+                summary=result("georef", "twin_evaluation.json"),
+            log:
+                logfile("georef", "georef_evaluate"),
+            script:
+                "../scripts/georef_evaluate.py"
+
+        add_targets(result("georef", "twin_evaluation.json"))

@@ -1,0 +1,58 @@
+"""Twin-site evaluation of SfM + georeferencing against the flight truth (evaluation only).
+
+Targets of issue 5 for the default twin, in ground sampling distances (GSD, the median
+GSD of the rendered images): all images registered, camera positions within 2 GSD of
+truth, GCP RMSE ≤ 1 GSD horizontally and ≤ 1.5 GSD vertically, leave-one-out RMSE ≤ 2 GSD.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+
+def evaluate_twin(cameras: pd.DataFrame, truth_poses: pd.DataFrame, residuals: pd.DataFrame, loo: pd.DataFrame,
+                  gsd_m: float, n_images: int) -> tuple[pd.DataFrame, dict]:
+    """Per-image camera position errors and the target checks.
+
+    ``cameras`` has ``image, x_m, y_m, z_m`` (estimated, site CRS); ``truth_poses`` the
+    same columns from ``flight/truth/poses.csv``.
+    """
+    t = truth_poses.set_index("image")[["x_m", "y_m", "z_m"]]
+    c = cameras.set_index("image")[["x_m", "y_m", "z_m"]]
+    common = c.index.intersection(t.index)
+    d = c.loc[common] - t.loc[common]
+    table = pd.DataFrame({
+        "image": common, "dx_m": d["x_m"].to_numpy(), "dy_m": d["y_m"].to_numpy(), "dz_m": d["z_m"].to_numpy(),
+    })
+    table["d3_m"] = np.sqrt(table["dx_m"] ** 2 + table["dy_m"] ** 2 + table["dz_m"] ** 2)
+    table["d3_gsd"] = table["d3_m"] / gsd_m
+    u = residuals[residuals["used"]]
+
+    def rmse(v):
+        v = np.asarray(v, float)
+        v = v[np.isfinite(v)]
+        return float(np.sqrt(np.mean(v**2))) if len(v) else float("nan")
+
+    gcp_h = rmse(np.hypot(u["dx_m"], u["dy_m"]))
+    gcp_v = rmse(u["dz_m"])
+    loo3 = rmse(loo["d3_m"])
+    summary = {
+        "gsd_m": gsd_m,
+        "n_images": int(n_images),
+        "n_registered": int(len(c)),
+        "camera_max_error_m": float(table["d3_m"].max()) if len(table) else float("nan"),
+        "camera_rmse_m": rmse(table["d3_m"]),
+        "gcp_rmse_h_m": gcp_h,
+        "gcp_rmse_v_m": gcp_v,
+        "loo_rmse_3d_m": loo3,
+    }
+    summary["targets"] = {
+        "all_images_registered": summary["n_registered"] == n_images,
+        "cameras_within_2_gsd": bool(len(table) and table["d3_gsd"].max() <= 2.0),
+        "gcp_h_within_1_gsd": bool(gcp_h <= gsd_m),
+        "gcp_v_within_1.5_gsd": bool(gcp_v <= 1.5 * gsd_m),
+        "loo_within_2_gsd": bool(loo3 <= 2 * gsd_m),
+    }
+    summary["all_targets_met"] = all(summary["targets"].values())
+    return table, summary
