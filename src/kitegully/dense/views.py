@@ -106,23 +106,24 @@ def _intrinsics(cam, where: str) -> tuple[float, float, float, float, float]:
     raise InputError(f"{where}: camera model {name} is not supported (use SIMPLE_PINHOLE, SIMPLE_RADIAL or RADIAL)")
 
 
-def read_offset(model_dir: str | Path) -> np.ndarray:
-    """Local-coordinate offset of a georeferenced model folder.
+def read_offset(transform_json: str | Path | None) -> np.ndarray:
+    """Offset of a georeferenced model's local frame (site = model + offset).
 
-    Looks for ``offset.json`` (keys ``x, y, z`` or a list of three numbers) in the folder;
-    without it the model is taken to be in site coordinates (offset 0).
+    Reads ``offset_m`` (three numbers) from the georeferencing stage's ``transform.json``;
+    ``None`` means the model is already in site coordinates (offset 0).
     """
-    path = Path(model_dir) / "offset.json"
-    if not path.exists():
+    if transform_json is None:
         return np.zeros(3)
+    path = Path(transform_json)
     try:
         obj = json.loads(path.read_text(encoding="utf-8"))
-        vals = [obj["x"], obj["y"], obj["z"]] if isinstance(obj, dict) else list(obj)
-        off = np.asarray(vals, dtype=float)
+        off = np.asarray(obj["offset_m"], dtype=float)
         if off.shape != (3,) or not np.all(np.isfinite(off)):
             raise ValueError
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the georeferencing transform ({exc})") from None
     except (ValueError, KeyError, TypeError):
-        raise InputError(f"{path}: expected {{\"x\": .., \"y\": .., \"z\": ..}} with three finite numbers") from None
+        raise InputError(f"{path}: expected a key offset_m with three finite numbers (site = model + offset)") from None
     return off
 
 

@@ -8,7 +8,7 @@ statistics follow the style of Feurer et al. 2018 Table 3 (mean, median, SD, RMS
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -181,3 +181,166 @@ def profile_comparison(model: np.ndarray, grid: GridSpec, reference: np.ndarray,
         s = profile_stats((zm - zr)[m])
         rows.append({"profile": name, **{(k if k == "n" else f"{k}_m"): s[k] for k in PROFILE_STAT_NAMES}})
     return prof, pd.DataFrame(rows)
+
+
+# --------------------------------------------------------------------------- stage runners
+
+
+def read_class_names(path: str | Path) -> dict[int, str]:
+    """``code, name`` CSV of land-cover classes → {code: name}."""
+    path = Path(path)
+    try:
+        df = pd.read_csv(path)
+        return {int(c): str(n) for c, n in zip(df["code"], df["name"])}
+    except (OSError, KeyError, ValueError, pd.errors.ParserError) as exc:
+        raise InputError(f"{path}: cannot read land-cover classes with columns code, name ({exc})") from None
+
+
+def codes_of(names: dict[int, str], wanted: Sequence[str]) -> list[int]:
+    return [c for c, n in names.items() if n in set(wanted)]
+
+
+def _map_axes(ax):
+    ax.set_xlabel("Easting (m)")
+    ax.set_ylabel("Northing (m)")
+    ax.ticklabel_format(useOffset=False, style="plain")
+    ax.set_aspect("equal")
+
+
+def checkpoint_figures(errors: pd.DataFrame, hist_png: str | Path, map_png: str | Path, bins: int,
+                       limit_m: float, stats: dict[str, float]) -> None:
+    """Histogram (Table 3 style annotation) and map of checkpoint errors (diverging colours)."""
+    from kitegully.io.figures import new_figure, save_figure
+
+    e = errors["error_m"].to_numpy()
+    ok = np.isfinite(e)
+    fig, ax = new_figure(figsize=(5, 3.5))
+    if ok.any():
+        ax.hist(e[ok], bins=bins, color="0.4", edgecolor="white")
+    ax.axvline(0.0, color="k", lw=0.8)
+    ax.set(xlabel="error e = z_DSM − z_checkpoint (m)", ylabel="checkpoints",
+           title=f"n = {stats['n']}, mean {stats['mean']:+.3f} m, SD {stats['sd']:.3f} m, NMAD {stats['nmad']:.3f} m")
+    save_figure(fig, hist_png)
+    fig, ax = new_figure(figsize=(6, 5))
+    sc = ax.scatter(errors["x_m"][ok], errors["y_m"][ok], c=e[ok], cmap="RdBu_r", vmin=-limit_m, vmax=limit_m, s=14,
+                    edgecolors="k", linewidths=0.2, label="checkpoint")
+    if (~ok).any():
+        ax.scatter(errors["x_m"][~ok], errors["y_m"][~ok], marker="x", c="0.5", s=12, label="no DSM value")
+    fig.colorbar(sc, ax=ax, shrink=0.8, label="error (m)")
+    ax.legend(loc="best")
+    _map_axes(ax)
+    ax.set_title("Checkpoint errors of the DSM")
+    save_figure(fig, map_png)
+
+
+def run_checkpoint_validation(dsm_path, checkpoints_path, cfg: Mapping, out: Mapping,
+                              landcover_path=None, classes_path=None) -> pd.DataFrame:
+    """Checkpoint errors, ``statistic, value_m`` summary, histogram and map.
+
+    With a land-cover raster (twin sites, evaluation only), also writes ``out["groups"]``:
+    statistics for all, bare-ground (``cfg["bare_classes"]``) and other checkpoints.
+    """
+    from kitegully.io.raster import read_raster
+    from kitegully.io.tables import write_table
+
+    dsm, grid = read_raster(dsm_path)
+    if not np.isfinite(dsm).any():
+        raise InputError(f"{dsm_path}: the DSM is all nodata")
+    pts = read_checkpoints(checkpoints_path)
+    err = checkpoint_errors(dsm, grid, pts)
+    if landcover_path is not None:
+        lc, lgrid = read_raster(landcover_path)
+        names = read_class_names(classes_path)
+        codes = sample_nearest(lc, lgrid, err["x_m"].to_numpy(), err["y_m"].to_numpy())
+        err["landcover"] = [names.get(int(c), "unknown") for c in codes]
+        bare = err["landcover"].isin(cfg["bare_classes"]).to_numpy()
+        groups = {"all": np.ones(len(err), bool), "bare": bare, "other": ~bare}
+        rows = {g: error_stats(err["error_m"].to_numpy()[m]) for g, m in groups.items()}
+        tab = pd.DataFrame({"statistic": list(STAT_NAMES), **{f"{g}_m": [rows[g][k] for k in STAT_NAMES] for g in groups}})
+        write_table(tab, out["groups"])
+    write_table(err, out["errors"])
+    stats = error_stats(err["error_m"].to_numpy())
+    write_table(summary_table(err["error_m"].to_numpy()), out["summary"])
+    n_missing = int(err["error_m"].isna().sum())
+    if n_missing:
+        import logging
+
+        logging.getLogger(__name__).warning("%d of %d checkpoints fall on DSM nodata or outside it", n_missing, len(err))
+    checkpoint_figures(err, out["histogram"], out["map"], cfg["histogram_bins"], cfg["error_limit_m"], stats)
+    return err
+
+
+def auto_profile(centrelines_path, length_m: float) -> list[list[float]]:
+    """A straight section across the longest gully centreline, centred on its midpoint."""
+    from kitegully.io.vectors import read_vector
+
+    gdf = read_vector(centrelines_path)
+    if len(gdf) == 0:
+        raise InputError(f"{centrelines_path}: no gully centreline to place the profile across")
+    line = gdf.geometry.iloc[int(np.argmax(gdf.geometry.length.to_numpy()))]
+    L = line.length
+    p = line.interpolate(0.5 * L)
+    a, b = line.interpolate(0.5 * L - 1.0), line.interpolate(0.5 * L + 1.0)
+    t = np.array([b.x - a.x, b.y - a.y])
+    t /= np.linalg.norm(t)
+    n = np.array([-t[1], t[0]]) * 0.5 * length_m
+    return [[p.x - n[0], p.y - n[1]], [p.x + n[0], p.y + n[1]]]
+
+
+def run_truth_validation(dsm_path, truth_dsm_path, truth_dtm_path, landcover_path, classes_path,
+                         centrelines_path, cfg: Mapping, out: Mapping) -> dict:
+    """Twin only: DSM − truth error raster, stats by land cover, error map, and the profile
+    comparison (Fig. 10 / Table 5) along the configured or automatic polyline."""
+    import logging
+
+    from kitegully.io.figures import new_figure, save_figure
+    from kitegully.io.raster import read_raster, write_raster
+    from kitegully.io.tables import write_table
+
+    log = logging.getLogger(__name__)
+    dsm, grid = read_raster(dsm_path)
+    tdsm, tgrid = read_raster(truth_dsm_path)
+    err = error_raster(dsm, grid, tdsm, tgrid)
+    write_raster(out["error_raster"], err, grid, tags={"units": "m", "definition": "DSM - truth DSM"})
+    lc, lgrid = read_raster(landcover_path)
+    names = read_class_names(classes_path)
+    lc_on = lc if lgrid == grid else resample_to(lc, lgrid, grid, nearest=True)
+    tab = stats_by_class(err, lc_on, names)
+    tab.insert(1, "area_pct", [100.0 * float(np.isfinite(err).mean())] +
+               [100.0 * float(np.mean(lc_on == c)) for c in sorted(names) if (lc_on == c).any()])
+    write_table(tab, out["by_landcover"])
+    lim = cfg["error_limit_m"]
+    fig, ax = new_figure(figsize=(7, 5.5))
+    step = max(1, int(np.ceil(max(err.shape) / cfg["figure_max_px"])))
+    xmin, ymin, xmax, ymax = grid.bounds
+    im = ax.imshow(err[::step, ::step], extent=(xmin, xmax, ymin, ymax), cmap="RdBu_r", vmin=-lim, vmax=lim,
+                   interpolation="nearest")
+    fig.colorbar(im, ax=ax, shrink=0.8, label="DSM − truth DSM (m)")
+    _map_axes(ax)
+    ax.set_title("DSM error against the twin's true surface")
+    save_figure(fig, out["error_map"])
+    # profile (Feurer et al. 2018 Fig. 10 / Table 5)
+    pc = cfg["profile"]
+    verts = pc["polyline"] if pc["polyline"] else auto_profile(centrelines_path, pc["auto_length_m"])
+    ref_path = truth_dtm_path if pc["reference"] == "dtm" else truth_dsm_path
+    ref, rgrid = read_raster(ref_path)
+    prof, ptab = profile_comparison(dsm, grid, ref, rgrid, verts, pc["spacing_m"], lc, lgrid,
+                                    codes_of(names, cfg["vegetation_classes"]))
+    write_table(prof, out["profile"])
+    write_table(ptab, out["profile_stats"])
+    fig, (a1, a2) = new_figure(2, 1, figsize=(7, 5), sharex=True)
+    a1.plot(prof["distance_m"], prof["z_ref_m"], "k-", lw=1.2, label=f"truth {pc['reference'].upper()}")
+    a1.plot(prof["distance_m"], prof["z_model_m"], "-", color="tab:orange", lw=1.0, label="kite DSM")
+    v = prof["vegetation"].to_numpy()
+    if v.any():
+        a1.plot(prof["distance_m"][v], prof["z_model_m"][v], ".", color="tab:green", ms=3, label="vegetation")
+    a1.set_ylabel("elevation (m)")
+    a1.legend(loc="best")
+    a2.plot(prof["distance_m"], prof["error_m"], "-", color="tab:red", lw=0.8)
+    a2.axhline(0, color="k", lw=0.6)
+    a2.set(xlabel="distance along profile (m)", ylabel="DSM − reference (m)")
+    a1.set_title("Profile across a gully (cf. Feurer et al. 2018 Fig. 10)")
+    save_figure(fig, out["profile_png"])
+    s = error_stats(err)
+    log.info("DSM - truth: mean %+.3f m, SD %.3f m, NMAD %.3f m over %d cells", s["mean"], s["sd"], s["nmad"], s["n"])
+    return s
