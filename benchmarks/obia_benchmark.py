@@ -9,9 +9,13 @@ On one synthetic close-range scene (config ``obia.scenes``, first scene) it time
   that is impossible);
 * scikit-image SLIC and Felzenszwalb on the RGB orthophoto,
 
-and compares the segmentations: number of segments, adapted Rand error and variation of
-information against ours, and the overall accuracy the ExG classification reaches
-when it uses each segmentation (segment mean ExG against the same valley threshold).
+and compares the segmentations: number of seeds and segments, adjusted Rand index,
+area-weighted best-match IoU and variation of information against ours, and the overall
+accuracy the ExG classification reaches when it uses each segmentation (segment mean
+ExG against the same valley threshold).  Every SAGA input is first imported into a
+native SAGA grid (``io_gdal 0``) so tools 2 and 3 see one grid system; tool 3 also runs
+from our seeds to separate the seeding from the growing.  SAGA times include process
+start and grid I/O; the GeoTIFF import is reported but not counted.
 
     .venv/bin/python benchmarks/obia_benchmark.py [--site config/sites/kamech_twin.yaml]
         [--scene 0] [--no-install] [--out results/benchmarks/obia]
@@ -32,12 +36,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import rasterio
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
 from kitegully.config import load_yaml  # noqa: E402
-from kitegully.io.raster import read_raster, write_raster  # noqa: E402
+from kitegully.io.raster import write_raster  # noqa: E402
 from kitegully.io.tables import write_table  # noqa: E402
 from kitegully.obia.accuracy import accuracies, confusion_matrix  # noqa: E402
 from kitegully.obia.classify import classify_segments, segment_means  # noqa: E402
@@ -70,31 +75,101 @@ def ensure_saga(install: bool) -> str | None:
     return shutil.which("saga_cmd")
 
 
-def run_saga(exe: str, feats: np.ndarray, grid, bandwidth: int, workdir: Path) -> tuple[np.ndarray, float] | None:
-    """SAGA Seed Generation (tool 2) + Seeded Region Growing (tool 3); (labels, seconds)."""
-    paths = []
-    for k in range(feats.shape[-1]):
-        p = workdir / f"feature_{k}.tif"
-        write_raster(p, feats[..., k].astype(np.float32), grid)
-        paths.append(str(p))
-    seeds = workdir / "seeds.sdat"
-    segments = workdir / "segments.sdat"
+def _saga(exe: str, *args: str) -> None:
+    """Run one saga_cmd call; raise RuntimeError with SAGA's own message when it fails."""
+    proc = subprocess.run([exe, "-f=q", *args], capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"saga_cmd {' '.join(args[:2])} failed: {(proc.stdout + proc.stderr).strip()[-1500:]}")
+
+
+def _to_sgrd(exe: str, data: np.ndarray, grid, stem: Path) -> str:
+    """Write ``data`` (float32, NaN = no data) as GeoTIFF and import it as a SAGA grid.
+
+    SAGA's tools 2 and 3 need all inputs on one SAGA grid system; GeoTIFFs opened by
+    GDAL on the fly and the ``.sdat`` seeds written by tool 2 do not always match
+    ("could not initialize data objects"), so every input becomes a native ``.sgrd``.
+    """
+    write_raster(stem.with_suffix(".tif"), data.astype(np.float32), grid)
+    _saga(exe, "io_gdal", "0", "-FILES", str(stem.with_suffix(".tif")), "-GRIDS", str(stem.with_suffix(".sgrd")))
+    return str(stem.with_suffix(".sgrd"))
+
+
+def _read_saga_segments(path: Path, valid: np.ndarray) -> np.ndarray:
+    """SAGA segment ids (0-based seed index) as labels 1..n, 0 outside ``valid``."""
+    with rasterio.open(path.with_suffix(".sdat")) as src:
+        seg = src.read(1, masked=True)
+    labels = np.where(np.ma.getmaskarray(seg) | ~np.isfinite(seg.filled(np.nan)), 0, seg.filled(-1).astype(np.int64) + 1)
+    return np.where(valid, labels, 0)
+
+
+def run_saga(exe: str, feats: np.ndarray, valid: np.ndarray, our_seeds: np.ndarray, grid, bandwidth: int, workdir: Path) -> dict:
+    """SAGA Seed Generation (tool 2) + Seeded Region Growing (tool 3) on the same features.
+
+    Tool 3 runs with SAGA's own seeds and with our seeds (isolates the growing).  SAGA
+    compares candidates with the seed cell's features (its seed table is never updated;
+    REFRESH only redraws the GUI), so our growing in ``reference="seed"`` mode is its
+    exact counterpart.
+    Settings matching ours: variance minima, band-width smoothing, no re-normalisation
+    (features are already z-normalised), 4-neighbourhood, feature-space distance only,
+    no similarity threshold.  Returns labels, seed counts and seconds per step.
+    """
     t0 = time.perf_counter()
-    steps = [
-        [exe, "imagery_segmentation", "2", "-FEATURES", ";".join(paths), "-VARIANCE", str(workdir / "variance.sdat"),
-         "-SEED_GRID", str(seeds), "-SEED_TYPE", "0", "-METHOD", "0", "-BAND_WIDTH", str(bandwidth), "-NORMALIZE", "0"],
-        [exe, "imagery_segmentation", "3", "-SEEDS", str(seeds), "-FEATURES", ";".join(paths), "-SEGMENTS", str(segments),
-         "-SIMILARITY", str(workdir / "similarity.sdat"), "-TABLE", str(workdir / "seeds_table.txt"), "-NORMALIZE", "0", "-NEIGHBOUR", "0", "-METHOD", "0", "-SIG_1", "1", "-SIG_2", "1", "-THRESHOLD", "0"],
-    ]
-    for cmd in steps:
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            print(f"SAGA failed ({' '.join(cmd[:3])}): {proc.stdout[-1500:]} {proc.stderr[-1500:]}")
-            return None
-    seconds = time.perf_counter() - t0
-    labels, _ = read_raster(segments)
-    labels = np.nan_to_num(labels, nan=0).astype(np.int64)
-    return labels, seconds
+    paths = [_to_sgrd(exe, np.where(valid, feats[..., k], np.nan), grid, workdir / f"feature_{k}") for k in range(feats.shape[-1])]
+    ours = _to_sgrd(exe, np.where(our_seeds > 0, our_seeds, np.nan), grid, workdir / "our_seeds")
+    out = {"import_s": time.perf_counter() - t0}
+    flist = ";".join(paths)
+    t0 = time.perf_counter()
+    _saga(exe, "imagery_segmentation", "2", "-FEATURES", flist, "-VARIANCE", str(workdir / "variance.sgrd"),
+          "-SEED_GRID", str(workdir / "seeds.sgrd"), "-SEED_TYPE", "0", "-METHOD", "0",
+          "-BAND_WIDTH", str(bandwidth), "-NORMALIZE", "0")
+    out["seeds_s"] = time.perf_counter() - t0
+    with rasterio.open(workdir / "seeds.sdat") as src:
+        s = src.read(1, masked=True)
+    out["n_seeds"] = int(np.count_nonzero(~np.ma.getmaskarray(s) & valid))
+    for tag, seeds in (("saga", str(workdir / "seeds.sgrd")), ("ours", ours)):
+        seg = workdir / f"segments_{tag}.sgrd"
+        t0 = time.perf_counter()
+        _saga(exe, "imagery_segmentation", "3", "-SEEDS", seeds, "-FEATURES", flist, "-SEGMENTS", str(seg),
+              "-SIMILARITY", str(workdir / f"similarity_{tag}.sgrd"), "-TABLE", str(workdir / f"seeds_{tag}.txt"),
+              "-NORMALIZE", "0", "-NEIGHBOUR", "0", "-METHOD", "1", "-SIG_1", "1", "-SIG_2", "1", "-THRESHOLD", "0")
+        out[f"grow_{tag}_s"] = time.perf_counter() - t0
+        out[f"labels_{tag}"] = _read_saga_segments(seg, valid)
+    return out
+
+
+def _contingency(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sparse contingency table of two label rasters over cells labelled in both: (n_ij, a_i, b_j)."""
+    ok = (a > 0) & (b > 0)
+    a = a[ok].astype(np.int64)
+    b = b[ok].astype(np.int64)
+    key = a * (int(b.max()) + 1) + b
+    pairs, n_ij = np.unique(key, return_counts=True)
+    ia, ib = pairs // (int(b.max()) + 1), pairs % (int(b.max()) + 1)
+    return n_ij, ia, ib
+
+
+def adjusted_rand_index(a: np.ndarray, b: np.ndarray) -> float:
+    """Adjusted Rand index (Hubert & Arabie 1985) of two segmentations; 1 = identical. O(N log N)."""
+    n_ij, ia, ib = _contingency(a, b)
+    comb = lambda x: x.astype(np.float64) * (x - 1) / 2.0  # noqa: E731
+    n = n_ij.sum()
+    sum_ij = comb(n_ij).sum()
+    sum_a = comb(np.bincount(ia, weights=n_ij)).sum()
+    sum_b = comb(np.bincount(ib, weights=n_ij)).sum()
+    expected = sum_a * sum_b / comb(np.array(n))
+    top = 0.5 * (sum_a + sum_b)
+    return float((sum_ij - expected) / (top - expected)) if top != expected else 1.0
+
+
+def best_match_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Area-weighted mean over segments of ``a`` of the best IoU with any segment of ``b``."""
+    n_ij, ia, ib = _contingency(a, b)
+    size_a = np.bincount(ia, weights=n_ij)
+    size_b = np.bincount(ib, weights=n_ij)
+    iou = n_ij / (size_a[ia] + size_b[ib] - n_ij)
+    best = np.zeros(size_a.size)
+    np.maximum.at(best, ia, iou)
+    return float((best * size_a).sum() / size_a.sum())
 
 
 def main() -> None:
@@ -105,7 +180,7 @@ def main() -> None:
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "obia"))
     args = ap.parse_args()
 
-    from skimage.metrics import adapted_rand_error, variation_of_information
+    from skimage.metrics import variation_of_information
     from skimage.segmentation import felzenszwalb, slic
 
     site = load_yaml(args.site)
@@ -129,39 +204,61 @@ def main() -> None:
 
     rows = []
 
-    def add(method: str, labels: np.ndarray, seconds: float) -> None:
+    def add(method: str, labels: np.ndarray, seconds: float, seeds: int | None = None, note: str = "") -> None:
         lab = np.where(valid, labels, 0).astype(np.int64)
         ours = ref.segments.astype(np.int64)
-        are = adapted_rand_error(ours + 1, lab + 1)[0]
-        vi = sum(variation_of_information(ours, lab))
-        rows.append({"method": method, "time_s": seconds, "segments": int(len(np.unique(lab[lab > 0]))),
-                     "adapted_rand_error_vs_ours": are, "variation_of_information_vs_ours": vi,
-                     "classification_oa_pct": score(lab)})
-        print(rows[-1])
+        rows.append({
+            "method": method, "time_s": seconds, "seeds": seeds,
+            "segments": int(len(np.unique(lab[lab > 0]))),
+            "mean_segment_area_m2": float((lab > 0).sum() * scene.grid.cell ** 2 / max(len(np.unique(lab[lab > 0])), 1)),
+            "adjusted_rand_index_vs_ours": adjusted_rand_index(ours, lab),
+            "best_match_iou_vs_ours": best_match_iou(ours, lab),
+            "variation_of_information_vs_ours": float(sum(variation_of_information(ours, lab))),
+            "classification_oa_pct": score(lab),
+            "note": note,
+        })
+        print({k: v for k, v in rows[-1].items()}, flush=True)
 
     t0 = time.perf_counter()
     slope = wood_slope(scene.dem, scene.grid.cell, params.slope_window_cells)
     feats = normalise_features([rgb[0], rgb[1], rgb[2], slope], valid)
     seeds = generate_seeds(feats, valid, params.seed_bandwidth_cells)
+    t_seeds = time.perf_counter() - t0
+    t0 = time.perf_counter()
     labels, _ = seeded_region_growing(feats, seeds, valid, params.position_weight)
-    add("kitegully SRG (seeds + numba growing)", labels, time.perf_counter() - t0)
+    t_grow = time.perf_counter() - t0
+    add("kitegully SRG (seeds + numba growing)", labels, t_seeds + t_grow, int(seeds.max()),
+        f"features+seeds {t_seeds:.2f} s, growing {t_grow:.2f} s")
 
     exe = ensure_saga(not args.no_install)
     if exe:
         with tempfile.TemporaryDirectory() as tmp:
-            got = run_saga(exe, feats, scene.grid, params.seed_bandwidth_cells, Path(tmp))
+            try:
+                got = run_saga(exe, feats, valid, seeds, scene.grid, params.seed_bandwidth_cells, Path(tmp))
+            except RuntimeError as exc:
+                print(f"SAGA comparison failed: {exc}")
+                got = None
         if got is not None:
-            add("SAGA imagery_segmentation 2 + 3", *got)
+            add("SAGA imagery_segmentation 2 + 3", got["labels_saga"], got["seeds_s"] + got["grow_saga_s"], got["n_seeds"],
+                f"seeds {got['seeds_s']:.2f} s, growing {got['grow_saga_s']:.2f} s (+ {got['import_s']:.2f} s GeoTIFF->sgrd import, not counted)")
+            add("SAGA imagery_segmentation 3 from our seeds", got["labels_ours"], got["grow_ours_s"], int(seeds.max()),
+                "isolates the growing step: same seeds, SAGA's growing (distance to the seed cell)")
+            t0 = time.perf_counter()
+            lab_seed, _ = seeded_region_growing(feats, seeds, valid, params.position_weight, reference="seed")
+            t_seed = time.perf_counter() - t0
+            add("kitegully SRG, reference=seed (SAGA's rule)", lab_seed, t_seed, int(seeds.max()),
+                f"growing only; agreement with SAGA from our seeds: ARI {adjusted_rand_index(got['labels_ours'], lab_seed):.4f}, "
+                f"best-match IoU {best_match_iou(got['labels_ours'], lab_seed):.4f}")
     else:
         print("SAGA GIS not available: comparison skipped")
 
     img = np.moveaxis(scene.rgb, 0, -1).astype(np.float64) / 255.0
     t0 = time.perf_counter()
     lab = slic(img, n_segments=int(seeds.max()), compactness=10.0, start_label=1, mask=valid)
-    add("scikit-image SLIC", lab, time.perf_counter() - t0)
+    add("scikit-image SLIC", lab, time.perf_counter() - t0, None, "RGB only, n_segments = our seed count, compactness 10")
     t0 = time.perf_counter()
     lab = felzenszwalb(img, scale=100, sigma=0.5, min_size=50) + 1
-    add("scikit-image Felzenszwalb", lab, time.perf_counter() - t0)
+    add("scikit-image Felzenszwalb", lab, time.perf_counter() - t0, None, "RGB only, scale 100, sigma 0.5, min_size 50")
 
     out = Path(args.out)
     write_table(pd.DataFrame(rows), out / "obia_benchmark.csv", floatfmt=".3g")

@@ -7,9 +7,11 @@ import copy
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import ndimage
 
 from kitegully.config import load_yaml
 from kitegully.obia.accuracy import accuracies, confusion_matrix
+from kitegully.obia.indices import excess_green
 from kitegully.obia.scene import ObiaParams, classify_scene, marker_mask
 from kitegully.twin.closerange import generate_scene, scene_origin
 
@@ -35,13 +37,21 @@ def test_generator_is_deterministic_and_consistent(obia_cfg):
     a = _scene(obia_cfg, "scene_01")
     b = _scene(obia_cfg, "scene_01")
     assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.dem, b.dem)
-    cell = obia_cfg["scenes"]["cell_m"]
-    n = round(obia_cfg["scenes"]["size_m"] / cell)
+    sc = obia_cfg["scenes"]
+    cell = sc["cell_m"]
+    n = a.rgb.shape[1]
     assert a.rgb.shape == (3, n, n) and a.rgb.dtype == np.uint8
-    # reference area = requested area minus the grass clods, up to half a cell along
-    # the outline (perimeter of a 8 m² blob < 4 * sqrt(8) * 1.5 m)
+    # the scene frames the patch and its surroundings, never larger than size_m
+    assert n <= round(sc["size_m"] / cell)
+    rows, cols = np.nonzero(a.truth_eroded)
+    assert min(rows.min(), cols.min(), n - 1 - rows.max(), n - 1 - cols.max()) >= 0.3 / cell - 1
+    # reference area = requested area minus the grass clods, up to half a cell along the
+    # outline plus the mapper's boundary drift: cover 0.35-0.65 lies within +-0.1 edge
+    # widths of the 50 % line (smoothstep), i.e. +-6 cm at the gradual edge
+    # (perimeter of a 8 m² blob < 4 * sqrt(8) * 1.5 m)
     requested = a.meta["area_requested_m2"]
-    tol = 0.5 * cell * 4 * np.sqrt(requested) * 1.5
+    perimeter = 4 * np.sqrt(requested) * 1.5
+    tol = (0.5 * cell + 0.1 * sc["gradual_edge_width_m"]) * perimeter
     assert a.meta["area_ref_m2"] == pytest.approx(requested - a.meta["clod_area_m2"], abs=tol)
     # markers: 4 spheres of radius 10 cm, all on grass
     assert len(a.markers) == obia_cfg["scenes"]["marker_count"]
@@ -51,6 +61,28 @@ def test_generator_is_deterministic_and_consistent(obia_cfg):
     # slope of the plane within the configured range
     lo, hi = obia_cfg["scenes"]["slope_deg"]
     assert lo <= a.meta["slope_deg"] <= hi
+
+
+def test_pioneer_plants_green_the_patch_but_stay_eroded_in_the_truth(obia_cfg):
+    cfg = copy.deepcopy(obia_cfg)
+    cfg["scenes"]["regrowth_cover"] = [0.0, 0.0]
+    bare = _scene(cfg, "scene_01")
+    cfg["scenes"]["regrowth_cover"] = [0.3, 0.3]
+    regrown = _scene(cfg, "scene_01")
+    assert np.array_equal(bare.truth_eroded, regrown.truth_eroded)
+    inside = ndimage.binary_erosion(bare.truth_eroded == 1, iterations=10)
+    exg = [excess_green(*s.rgb.astype(np.float32))[inside].mean() for s in (bare, regrown)]
+    # 30 % green tufts on soil raise the mean ExG of the patch floor
+    assert exg[1] > exg[0] + 0.01
+
+
+def test_senescent_grass_is_closer_to_soil_than_green_grass(obia_cfg):
+    col = obia_cfg["scenes"]["colours"]
+    exg = {k: float(excess_green(*[np.array([v]) for v in col[k]])[0]) for k in ("grass_green", "grass_brown", "soil")}
+    # dead tillers lose the chlorophyll green peak (R > G > B)
+    r, g, b = col["grass_brown"]
+    assert r > g > b
+    assert exg["soil"] < exg["grass_brown"] < exg["grass_green"]
 
 
 def test_marker_mask_covers_the_spheres(obia_cfg):

@@ -36,7 +36,7 @@ class ObiaParams:
     blur_radius_cells: int = 2
     hist_bins: int = 256
     min_class_fraction: float = 0.01
-    max_valley_ratio: float = 0.7
+    max_valley_ratio: float = 0.9
     unimodal_class: str = "grass"
     segment_feature: str = "blurred"
     min_area_m2: float = 0.0

@@ -3,7 +3,9 @@
 Every valid cell joins exactly one region.  The boundary cells of all regions wait in
 one binary min-heap keyed by their squared feature-space distance to the running mean
 of the region that reached them (optionally plus a weighted squared distance to that
-region's seed, SAGA's "feature space and position" [I]).  The cell with the smallest
+region's seed, SAGA's "feature space and position" [I]).  With ``reference="seed"`` the
+distance is taken to the seed's own features instead of the running region mean, which
+is what SAGA's ``imagery_segmentation`` tool 3 does (its seed table is never updated).  The cell with the smallest
 key is labelled, its region mean is updated and its unlabelled 4-neighbours are pushed.
 A cell can be pushed once per labelled neighbour, so the heap holds at most 4N entries
 and the whole growth costs O(N log N).
@@ -60,12 +62,13 @@ def _heap_pop(keys, cells, labs, size):
 
 
 @njit(cache=True)
-def _distance(feat, cell, lab, sums, counts, seed_r, seed_c, ncols, pos_w):
+def _distance(feat, cell, lab, sums, counts, seed_feat, use_seed, seed_r, seed_c, ncols, pos_w):
     k = feat.shape[1]
     d = 0.0
     n = counts[lab]
     for j in range(k):
-        diff = feat[cell, j] - sums[lab, j] / n
+        ref = seed_feat[lab, j] if use_seed else sums[lab, j] / n
+        diff = feat[cell, j] - ref
         d += diff * diff
     if pos_w > 0.0:
         dr = cell // ncols - seed_r[lab]
@@ -75,7 +78,7 @@ def _distance(feat, cell, lab, sums, counts, seed_r, seed_c, ncols, pos_w):
 
 
 @njit(cache=True)
-def _grow(feat, labels, nrows, ncols, nseeds, pos_w):
+def _grow(feat, labels, nrows, ncols, nseeds, pos_w, use_seed):
     n = nrows * ncols
     k = feat.shape[1]
     sums = np.zeros((nseeds + 1, k), dtype=np.float64)
@@ -90,6 +93,11 @@ def _grow(feat, labels, nrows, ncols, nseeds, pos_w):
             counts[lab] += 1.0
             seed_r[lab] = cell // ncols
             seed_c[lab] = cell % ncols
+    seed_feat = np.zeros((nseeds + 1, k), dtype=np.float64)
+    for lab in range(1, nseeds + 1):
+        if counts[lab] > 0:
+            for j in range(k):
+                seed_feat[lab, j] = sums[lab, j] / counts[lab]
     cap = 4 * n + 4
     keys = np.empty(cap, dtype=np.float64)
     cells = np.empty(cap, dtype=np.int64)
@@ -109,7 +117,7 @@ def _grow(feat, labels, nrows, ncols, nseeds, pos_w):
                     continue
                 nb = rr * ncols + cc
                 if labels[nb] == 0:
-                    key = _distance(feat, nb, lab, sums, counts, seed_r, seed_c, ncols, pos_w)
+                    key = _distance(feat, nb, lab, sums, counts, seed_feat, use_seed, seed_r, seed_c, ncols, pos_w)
                     size = _heap_push(keys, cells, labs, size, key, nb, lab)
     while size > 0:
         cell, lab, size = _heap_pop(keys, cells, labs, size)
@@ -128,7 +136,7 @@ def _grow(feat, labels, nrows, ncols, nseeds, pos_w):
                 continue
             nb = rr * ncols + cc
             if labels[nb] == 0:
-                key = _distance(feat, nb, lab, sums, counts, seed_r, seed_c, ncols, pos_w)
+                key = _distance(feat, nb, lab, sums, counts, seed_feat, use_seed, seed_r, seed_c, ncols, pos_w)
                 size = _heap_push(keys, cells, labs, size, key, nb, lab)
     return labels
 
@@ -138,6 +146,7 @@ def seeded_region_growing(
     seeds: np.ndarray,
     valid: np.ndarray | None = None,
     position_weight: float = 0.0,
+    reference: str = "mean",
 ) -> tuple[np.ndarray, int]:
     """Grow regions from seeds until every valid cell belongs to one.
 
@@ -152,6 +161,9 @@ def seeded_region_growing(
     position_weight
         Weight of the squared distance (in cells) to the region's seed added to the
         squared feature distance; 0 = feature space only.
+    reference
+        ``"mean"``: distance to the running region mean (Adams & Bischof 1994);
+        ``"seed"``: distance to the seed's features (SAGA's Seeded Region Growing).
 
     Returns
     -------
@@ -166,7 +178,9 @@ def seeded_region_growing(
     labels = np.where(valid, seeds, -1).astype(np.int32).ravel()
     nseeds = int(labels.max()) if labels.size else 0
     feat = np.ascontiguousarray(features.reshape(rows * cols, -1), dtype=np.float32)
-    labels = _grow(feat, labels, rows, cols, max(nseeds, 0), float(position_weight))
+    if reference not in ("mean", "seed"):
+        raise ValueError(f"reference must be 'mean' or 'seed', got {reference!r}")
+    labels = _grow(feat, labels, rows, cols, max(nseeds, 0), float(position_weight), reference == "seed")
     labels = labels.reshape(rows, cols)
     orphans = labels == 0
     n = nseeds

@@ -5,18 +5,30 @@ Each scene is what 001's terrestrial SfM delivered: a 2 cm RGB orthophoto and DE
 the truth a careful manual mapper would draw.  What makes the scenes hard is modelled
 explicitly, not tuned to any classifier:
 
+* the patch outline is lobed at a few cm (turf torn along its root mat), which the
+  manual reference smooths over;
 * the patch has sharp scarps on its upslope and lateral edges and a gradual transition
-  at its downslope edge (a band where grass cover thins out with tufts);
-* grass clods lie inside the patch (raised, grass-covered);
+  at its downslope edge: a band where the grass cover thins out into discrete tufts
+  with bare soil between them (each 2 cm cell is grass or soil, the share of grass
+  cells follows the cover);
+* grass clods lie inside the patch (raised, grass-covered), and pioneer plants have
+  re-colonised part of the patch floor (succession; sparse green tufts on soil);
 * low sun casts shadows from the scarps onto the patch floor, shaded light is bluish;
-* grass colour goes from green (July) to straw brown (September) by a greenness value,
-  with dry blotches and dark gaps between blades; soil has moisture patches and stones;
+* grass colour goes from green (July) to senescent brown (September) by a greenness
+  value: the share of green tillers, mixed at blade scale with dead ones whose
+  reflectance has lost the chlorophyll green peak (R > G > B, close to soil); dry
+  blotches and dark gaps between blades; soil has moisture patches and stones;
 * white spherical GCP markers (radius 10 cm) stand on the grass;
-* the camera adds gamma encoding, blur and sensor noise, quantised to 8 bit.
+* the orthophoto is a mosaic of several photos, each with its own exposure and white
+  balance (seamlines between Voronoi cells); the camera adds gamma encoding, blur and
+  sensor noise, quantised to 8 bit.
 
-The truth mask is ``eroded`` where the smooth vegetation-cover field is below 50 %
-(clods count as grass); the markers are written as a separate truth mask and as an
-observed marker list (surveyed centres with RTK noise).
+The truth mask is the manual mapper's reading of the fuzzy boundary: ``eroded`` where
+the smooth vegetation-cover field is below a cover threshold that drifts along the
+boundary within ``reference_cover_threshold`` (observer subjectivity at gradual edges,
+001 sect. 4); clods count as grass, pioneer plants on the patch floor as eroded.  The
+markers are written as a separate truth mask and as an observed marker list (surveyed
+centres with RTK noise).
 
 Cost: O(N * K) for N cells, K shadow-ray steps (about depth / tan(sun elevation) / cell).
 """
@@ -79,6 +91,13 @@ def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], sigma_cells:
     return (white / sd if sd > 0 else white).astype(np.float32)
 
 
+def _uniform_field(rng: np.random.Generator, shape: tuple[int, int], sigma_cells: float) -> np.ndarray:
+    """Spatially correlated field with a uniform marginal on (0, 1) (Gaussian field -> CDF)."""
+    from scipy.special import ndtr
+
+    return ndtr(_smooth_noise(rng, shape, sigma_cells)).astype(np.float32)
+
+
 def _smoothstep(t: np.ndarray) -> np.ndarray:
     t = np.clip(t, 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
@@ -126,10 +145,10 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
         Scene name (also seeds its random stream).
     params
         Generator parameters shared by the scenes (config ``obia.scenes`` without
-        ``list``): ``cell_m, size_m, slope_deg, patch_depth_m, scarp_width_m,
+        ``list``): ``cell_m, size_m, aoi_margin_m, slope_deg, patch_depth_m, scarp_width_m,
         gradual_edge_width_m, patch_elongation, patch_roughness, clods, clod_area_m2,
-        marker_count, marker_radius_m, marker_survey_sd_m, colours, grass_gap_fraction,
-        texture, camera``.
+        edge_raggedness_m, edge_raggedness_scale_m, regrowth_cover, reference_cover_threshold, marker_count, marker_radius_m,
+        marker_survey_sd_m, colours, grass_gap_fraction, texture, camera``.
     scene
         Per-scene values: ``area_m2`` (0 = no eroded patch), ``greenness`` (1 = green
         July grass, 0 = brown September grass), ``sun_elevation_deg``,
@@ -141,7 +160,15 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
     """
     rng = scene_rng(seed, name)
     cell = float(params["cell_m"])
-    n = int(round(float(params["size_m"]) / cell))
+    # the photographer frames the eroded area and its direct surroundings (001 sect. 3.1):
+    # square scene = patch reach + a margin each side, at most size_m; size_m without patch
+    area = float(scene["area_m2"])
+    side = float(params["size_m"])
+    if area > 0:
+        radius_fn, r0 = _patch_radius(rng, area, params["patch_elongation"], params["patch_roughness"])
+        reach = float(np.max(radius_fn(np.linspace(0, 2 * np.pi, 720))))
+        side = min(side, 2.0 * (reach + float(params["aoi_margin_m"])))
+    n = int(round(side / cell))
     grid = GridSpec(float(origin[0]), float(origin[1]), cell, n, n, crs)
     xs = (np.arange(n) + 0.5) * cell
     ys = (np.arange(n) + 0.5) * cell  # distance south of the top edge
@@ -157,13 +184,11 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
     dem += tex["grass_roughness_m"] * _smooth_noise(rng, (n, n), 1.0)
 
     # --- eroded patch: vegetation cover v (1 grass, 0 bare), smooth for the truth
-    area = float(scene["area_m2"])
-    v_smooth = np.ones((n, n), dtype=np.float64)
+    v_smooth = np.ones((n, n), dtype=np.float64)  # cover as the mapper generalises it
+    v_phys = v_smooth  # actual cover: torn, lobed turf edge
     clod_mask = np.zeros((n, n), dtype=bool)
     centre = (size / 2, -size / 2)
     if area > 0:
-        radius_fn, r0 = _patch_radius(rng, area, params["patch_elongation"], params["patch_roughness"])
-        reach = float(np.max(radius_fn(np.linspace(0, 2 * np.pi, 720))))
         margin = min(reach + 0.3, size / 2)
         centre = (rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2,
                   -(rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2))
@@ -175,6 +200,9 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
         downslope = np.clip(np.cos(theta), 0.0, 1.0) ** 2
         w = params["scarp_width_m"] + (params["gradual_edge_width_m"] - params["scarp_width_m"]) * downslope
         v_smooth = _smoothstep((s + w / 2) / w)
+        # turf tears along its root mat: lobes of a few cm that a manual mapper smooths over
+        rag = float(params["edge_raggedness_m"]) * _smooth_noise(rng, (n, n), float(params["edge_raggedness_scale_m"]) / cell)
+        v_phys = _smoothstep((s + rag + w / 2) / w)
         # clods of grass inside the patch
         n_clods = int(rng.integers(params["clods"][0], params["clods"][1] + 1))
         inner = np.argwhere(s < -0.3)
@@ -189,16 +217,32 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
             clod_mask |= (u / ax) ** 2 + (t / ay) ** 2 <= 1.0
         depth = rng.uniform(*params["patch_depth_m"])
         floor_tilt = 0.05 * (X - centre[0])  # floor slightly steeper than the slope [I]
-        v_geom = np.where(clod_mask, 1.0, v_smooth)
         clod_relief = ndimage.gaussian_filter(clod_mask.astype(np.float64), 1.5)
-        dem += -(depth + floor_tilt.clip(-depth * 0.5, depth * 0.5)) * (1.0 - v_smooth) + depth * 0.7 * clod_relief * (1 - v_smooth)
-        v_smooth = v_geom
-    truth_eroded = (v_smooth < 0.5).astype(np.uint8)
+        dem += -(depth + floor_tilt.clip(-depth * 0.5, depth * 0.5)) * (1.0 - v_phys) + depth * 0.7 * clod_relief * (1 - v_phys)
+        v_smooth = np.where(clod_mask, 1.0, v_smooth)
+        v_phys = np.where(clod_mask, 1.0, v_phys)
+    # manual reference: boundary drawn at a cover level that drifts along the outline
+    c_lo, c_hi = params["reference_cover_threshold"]
+    c_ref = 0.5 * (c_lo + c_hi) + 0.5 * (c_hi - c_lo) * np.tanh(_smooth_noise(rng, (n, n), 1.0 / cell))
+    truth_eroded = (v_smooth < c_ref).astype(np.uint8)
 
-    # visible cover: thin, tufted vegetation in the transition zone
-    tuft = _smooth_noise(rng, (n, n), 2.0)
-    band = 4.0 * v_smooth * (1.0 - v_smooth)
-    v_vis = np.clip(v_smooth + 0.35 * band * tuft, 0.0, 1.0)
+    # visible cover: discrete tufts.  A cell is grass where the cover exceeds a uniform
+    # tuft field, so a band of cover v shows grass on a share v of its cells [I]
+    tuft_sigma = float(tex["tuft_size_m"]) / cell / 2.0
+    soft = float(tex["tuft_edge_softness"])
+
+    def tufts(cover: np.ndarray, sigma: float) -> np.ndarray:
+        # u in (soft/2, 1 - soft/2): cover 0 gives no grass, cover 1 full grass
+        u = 0.5 * soft + (1.0 - soft) * _uniform_field(rng, (n, n), sigma)
+        return _smoothstep((cover - u) / soft + 0.5)
+
+    v_vis = tufts(v_phys, tuft_sigma)
+    # pioneer plants on the patch floor: tufts in a share of the bare cells, denser
+    # where the patch is older (smooth field at 1 m) [I]
+    regrowth = rng.uniform(*params["regrowth_cover"]) if area > 0 else 0.0
+    if regrowth > 0:
+        density = np.clip(regrowth * 2.0 * _uniform_field(rng, (n, n), 1.0 / cell), 0.0, 1.0)
+        v_vis = np.maximum(v_vis, tufts(density, 0.5 * tuft_sigma) * (1.0 - v_phys))
 
     # --- GCP markers: white spheres on the grass, away from the patch
     marker_r = float(params["marker_radius_m"])
@@ -210,7 +254,7 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
         tries += 1
         mx, my = rng.uniform(0.4, size - 0.4), -rng.uniform(0.4, size - 0.4)
         ci, cj = int(-my / cell), int(mx / cell)
-        if v_smooth[max(ci - 25, 0):ci + 25, max(cj - 25, 0):cj + 25].min() < 0.99:
+        if v_phys[max(ci - 25, 0):ci + 25, max(cj - 25, 0):cj + 25].min() < 0.99:
             continue
         if any(np.hypot(mx - r["_x"], my - r["_y"]) < 1.0 for r in rows):
             continue
@@ -237,7 +281,12 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
     col = params["colours"]
     green = np.asarray(col["grass_green"], dtype=np.float64)
     brown = np.asarray(col["grass_brown"], dtype=np.float64)
-    g_local = np.clip(float(scene["greenness"]) + tex["greenness_variation"] * _smooth_noise(rng, (n, n), 25.0), 0.0, 1.0)
+    g_local = np.clip(
+        float(scene["greenness"])
+        + tex["greenness_variation"] * _smooth_noise(rng, (n, n), 25.0)
+        + tex["greenness_blade_sd"] * _smooth_noise(rng, (n, n), 0.6),
+        0.0, 1.0,
+    )
     grass = brown[None, None, :] + g_local[..., None] * (green - brown)[None, None, :]
     blade = np.exp(tex["grass_blade_sd"] * _smooth_noise(rng, (n, n), 0.6))
     gap = np.clip(float(params["grass_gap_fraction"]) * (1.0 + _smooth_noise(rng, (n, n), 0.8)), 0.0, 0.9)
@@ -273,6 +322,14 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
 
     # --- camera: blur (mosaicking), exposure, gamma, noise, 8 bit
     cam = params["camera"]
+    n_img = int(cam["mosaic_images"])
+    if n_img > 1:
+        # each Voronoi cell of the mosaic comes from one photo: own exposure and white balance
+        pts = rng.uniform(0.0, n, (n_img, 2))
+        rr, cc = np.mgrid[0:n, 0:n]
+        owner = np.argmin([(rr - pr) ** 2 + (cc - pc) ** 2 for pr, pc in pts], axis=0)
+        gains = np.exp(rng.normal(0.0, cam["mosaic_exposure_sd"], (n_img, 1)) + rng.normal(0.0, cam["mosaic_colour_sd"], (n_img, 3)))
+        radiance = radiance * gains[owner]
     radiance = ndimage.gaussian_filter(radiance, (cam["blur_sigma_px"], cam["blur_sigma_px"], 0))
     exposure = cam["target_median"] / float(np.median(radiance.mean(axis=-1)))
     encoded = np.clip(radiance * exposure * rng.uniform(0.9, 1.1), 0.0, 1.0) ** (1.0 / cam["gamma"])
@@ -292,6 +349,7 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
         "diffuse_fraction": diffuse,
         "shadow_fraction": float(1.0 - lit.mean()) if diffuse < 1.0 else 0.0,
         "clod_area_m2": float((clod_mask & (truth_eroded == 0)).sum() * cell * cell),
+        "regrowth_cover": float(regrowth),
         "markers": int(placed),
     }
     return CloseRangeScene(name, grid, rgb, dem_abs, truth_eroded, truth_markers, markers, meta)
