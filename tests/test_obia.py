@@ -201,3 +201,22 @@ def test_classify_scene_rejects_bad_input():
         classify_scene(np.zeros((3, 10, 10)), np.zeros((9, 10)), 0.02, ObiaParams(), source="ortho.tif")
     with pytest.raises(InputError, match="no valid cells"):
         classify_scene(np.zeros((3, 10, 10)), np.full((10, 10), np.nan), 0.02, ObiaParams(), source="ortho.tif")
+
+
+def test_region_growing_seed_reference_splits_at_equal_seed_distance():
+    # SAGA's rule: each cell joins the seed whose own features are nearest, so on a
+    # monotone profile f = x^2 with seeds at f = 0 and f = 1 the border is at f = 0.5
+    n = 201
+    x = np.linspace(0.0, 1.0, n)
+    f = np.tile(x ** 2, (3, 1))[..., None].astype(np.float32)
+    seeds = np.zeros((3, n), dtype=np.int32)
+    seeds[1, 0], seeds[1, -1] = 1, 2
+    lab, _ = seeded_region_growing(f, seeds, reference="seed")
+    border = np.flatnonzero(lab[1] == 2)[0]
+    assert abs(border - np.searchsorted(x ** 2, 0.5)) <= 1
+    # the running-mean rule (Adams & Bischof) compares with the growing regions' means,
+    # which drift towards the border, so the border moves
+    lab_mean, _ = seeded_region_growing(f, seeds, reference="mean")
+    assert np.flatnonzero(lab_mean[1] == 2)[0] != border
+    with pytest.raises(ValueError):
+        seeded_region_growing(f, seeds, reference="median")
