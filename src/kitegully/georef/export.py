@@ -128,35 +128,40 @@ def residual_figure(
     residuals: pd.DataFrame, loo: pd.DataFrame, survey: dict[str, np.ndarray], cameras: gpd.GeoDataFrame,
     path: str | Path, arrow_scale: float | None, attribution: str | None = None,
 ) -> None:
-    """Map of GCP residual vectors (plan arrows, colour = vertical residual) and leave-one-out ones."""
+    """Map of GCP residual vectors: plan arrows (after adjustment: black; leave-one-out:
+    orange, dashed) and the vertical residual as a filled circle on a diverging scale."""
     fig, ax = new_figure(figsize=(6.5, 5.5))
-    ax.scatter(cameras["x_m"], cameras["y_m"], s=6, c="0.6", marker="^", label="camera positions")
-    res = residuals.dropna(subset=["dx_m"])
+    ax.scatter(cameras["x_m"], cameras["y_m"], s=6, c="0.6", marker="^", label="camera positions", zorder=1)
     xy = np.array([survey[g][:2] for g in residuals["gcp_id"]])
-    ax.scatter(xy[:, 0], xy[:, 1], s=25, facecolors="none", edgecolors="k", label="GCP (survey)")
     for g, (x, y) in zip(residuals["gcp_id"], xy):
-        ax.annotate(g, (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7)
+        ax.annotate(g, (x, y), xytext=(5, 5), textcoords="offset points", fontsize=7)
+    res = residuals.dropna(subset=["dx_m"])
+    lo = loo.dropna(subset=["dx_m"])
     extent = max(np.ptp(np.r_[xy[:, 0], cameras["x_m"]]), np.ptp(np.r_[xy[:, 1], cameras["y_m"]]), 1.0)
-    mags = np.r_[np.hypot(res["dx_m"], res["dy_m"]), np.hypot(loo["dx_m"].dropna(), loo["dy_m"].dropna())]
-    big = float(np.nanmax(mags)) if len(mags) and np.any(np.isfinite(mags)) else 1.0
+    mags = np.r_[np.hypot(res["dx_m"], res["dy_m"]), np.hypot(lo["dx_m"], lo["dy_m"])]
+    big = float(np.nanmax(mags)) if len(mags) else 1.0
     scale = arrow_scale or (0.15 * extent / max(big, 1e-9))
-    dz_all = np.r_[res["dz_m"].to_numpy(float), loo["dz_m"].dropna().to_numpy(float)]
-    vmax = float(np.nanmax(np.abs(dz_all))) if len(dz_all) else 1.0
-    q = None
-    for df, style, label in ((res, "-", "residual after adjustment"), (loo.dropna(subset=["dx_m"]), "--", "leave-one-out check")):
-        if df.empty:
-            continue
-        p = np.array([survey[g][:2] for g in df["gcp_id"]])
-        q = ax.quiver(p[:, 0], p[:, 1], df["dx_m"] * scale, df["dy_m"] * scale, df["dz_m"], angles="xy", scale_units="xy",
-                      scale=1, cmap="RdBu_r", clim=(-vmax, vmax), width=0.006 if style == "-" else 0.004,
-                      linestyle=style, label=label, alpha=1.0 if style == "-" else 0.6)
-    if q is not None:
-        cb = fig.colorbar(q, ax=ax, shrink=0.8)
+    unused = ~residuals["used"].to_numpy(bool)
+    ax.scatter(xy[unused, 0], xy[unused, 1], s=40, facecolors="none", edgecolors="k", linewidths=0.8,
+               label="GCP not used", zorder=2)
+    dz = res["dz_m"].to_numpy(float)
+    vmax = max(float(np.nanmax(np.abs(dz))) if len(dz) else 1.0, 1e-6)
+    if len(res):
+        p = np.array([survey[g][:2] for g in res["gcp_id"]])
+        sc = ax.scatter(p[:, 0], p[:, 1], c=dz, cmap="RdBu_r", vmin=-vmax, vmax=vmax, s=60, edgecolors="k",
+                        linewidths=0.6, zorder=3, label="GCP (colour: dz after adjustment)")
+        cb = fig.colorbar(sc, ax=ax, shrink=0.8)
         cb.set_label("vertical residual dz (m)")
+        ax.quiver(p[:, 0], p[:, 1], res["dx_m"] * scale, res["dy_m"] * scale, angles="xy", scale_units="xy", scale=1,
+                  color="k", width=0.006, zorder=4, label="plan residual after adjustment")
+    if len(lo):
+        p = np.array([survey[g][:2] for g in lo["gcp_id"]])
+        ax.quiver(p[:, 0], p[:, 1], lo["dx_m"] * scale, lo["dy_m"] * scale, angles="xy", scale_units="xy", scale=1,
+                  color="tab:orange", width=0.004, linestyle="--", zorder=4, label="leave-one-out plan residual")
     ax.set_xlabel("easting (m)")
     ax.set_ylabel("northing (m)")
     ax.set_aspect("equal")
-    ax.set_title(f"GCP residual vectors (arrows ×{scale:.3g})")
+    ax.set_title(f"GCP residuals (arrows exaggerated ×{scale:.3g})")
     ax.legend(loc="best", fontsize=7)
     save_figure(fig, path, attribution=attribution)
 
