@@ -41,29 +41,9 @@ def _bilinear(img, u, v):
 
 
 @njit(cache=True, parallel=True)
-def sample_view(img, R, C, p, level, xs, ys, Z, out):
-    """Resample image ``img`` (pyramid ``level``) at ground points ``(xs[j], ys[i], Z[i, j])``.
-
-    ``out`` (H, W) receives NaN where a point falls outside the image or behind the camera.
-    O(H·W).
-    """
-    sc = 1.0 / (2.0 ** level)
-    for i in prange(Z.shape[0]):
-        for j in range(Z.shape[1]):
-            z = Z[i, j]
-            if not np.isfinite(z):
-                out[i, j] = np.nan
-                continue
-            u, v, d = _project(R, C, p, xs[j], ys[i], z)
-            if d <= 0.0:
-                out[i, j] = np.nan
-                continue
-            out[i, j] = _bilinear(img, (u + 0.5) * sc - 0.5, (v + 0.5) * sc - 0.5)
-
-
-@njit(cache=True, parallel=True)
 def sample_view_bands(img, R, C, p, level, xs, ys, Z, out):
-    """Like :func:`sample_view` for an (h, w, B) image into ``out`` (B, H, W). O(H·W·B)."""
+    """Resample an (h, w, B) image (pyramid ``level``) at ground points ``(xs[j], ys[i], Z[i, j])``
+    into ``out`` (B, H, W); NaN outside the image or behind the camera. O(H·W·B)."""
     sc = 1.0 / (2.0 ** level)
     nb = img.shape[2]
     for i in prange(Z.shape[0]):
@@ -78,67 +58,6 @@ def sample_view_bands(img, R, C, p, level, xs, ys, Z, out):
                 ok = d > 0 and u >= 0.0 and v >= 0.0 and u <= img.shape[1] - 1.0 and v <= img.shape[0] - 1.0
             for b in range(nb):
                 out[b, i, j] = _bilinear(img[:, :, b], u, v) if ok else np.nan
-
-
-@njit(cache=True, parallel=True)
-def multiview_ncc(stack, half, min_std, score, nviews):
-    """Multi-image normalised cross-correlation of ground windows.
-
-    ``stack`` (V, H, W) holds the V images resampled on the ground grid at one candidate
-    surface. For each cell, every view whose ``(2·half+1)²`` window is complete and has a
-    standard deviation ≥ ``min_std`` is normalised to zero mean and unit norm (vector
-    ``a_v``); the score is the mean pairwise NCC, obtained without forming pairs as
-    ``(‖Σ a_v‖² − n) / (n (n − 1))``. ``score`` gets NaN and ``nviews`` the count of
-    usable views where fewer than two remain. O(H·W·V·(2·half+1)²).
-    """
-    V, H, W = stack.shape
-    m = 2 * half + 1
-    n = m * m
-    min_ss = n * min_std * min_std
-    for i in prange(H):
-        buf = np.empty(n, dtype=np.float64)
-        acc = np.empty(n, dtype=np.float64)
-        for j in range(W):
-            score[i, j] = np.nan
-            nviews[i, j] = 0
-            if i < half or j < half or i >= H - half or j >= W - half:
-                continue
-            acc[:] = 0.0
-            nv = 0
-            for v in range(V):
-                k = 0
-                s = 0.0
-                ok = True
-                for a in range(i - half, i + half + 1):
-                    for b in range(j - half, j + half + 1):
-                        x = stack[v, a, b]
-                        if not np.isfinite(x):
-                            ok = False
-                            break
-                        buf[k] = x
-                        s += x
-                        k += 1
-                    if not ok:
-                        break
-                if not ok:
-                    continue
-                mean = s / n
-                ss = 0.0
-                for k in range(n):
-                    buf[k] -= mean
-                    ss += buf[k] * buf[k]
-                if ss < min_ss or ss <= 0.0:
-                    continue
-                inv = 1.0 / np.sqrt(ss)
-                for k in range(n):
-                    acc[k] += buf[k] * inv
-                nv += 1
-            nviews[i, j] = nv
-            if nv >= 2:
-                t = 0.0
-                for k in range(n):
-                    t += acc[k] * acc[k]
-                score[i, j] = (t - nv) / (nv * (nv - 1.0))
 
 
 @njit(cache=True)
@@ -267,3 +186,93 @@ def openness_kernel(z, cell, radius, out):
                     tot += 90.0 - np.degrees(np.arctan(best))
                     nd += 1
             out[i, j] = tot / nd if nd > 0 else np.nan
+
+
+@njit(cache=True, parallel=True)
+def sample_stack(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
+    """Resample every view at every candidate surface ``base + k·dz`` (k = 0 … K−1).
+
+    ``imgs`` is a typed list of (h, w) float32 pyramid levels, one per view, with
+    ``levels`` their pyramid levels; ``out`` (K, V, H, W) gets NaN outside an image or
+    behind its camera. One parallel region for the whole level keeps thread
+    synchronisation negligible. O(K·V·H·W).
+    """
+    K, V, H, W = out.shape
+    for i in prange(H):
+        for v in range(V):
+            img = imgs[v]
+            sc = 1.0 / (2.0 ** levels[v])
+            R = Rs[v]
+            C = Cs[v]
+            p = Ps[v]
+            for j in range(W):
+                for k in range(K):
+                    z = base[i, j] + k * dz
+                    u, w, d = _project(R, C, p, xs[j], ys[i], z)
+                    if d <= 0.0 or not np.isfinite(z):
+                        out[k, v, i, j] = np.nan
+                    else:
+                        out[k, v, i, j] = _bilinear(img, (u + 0.5) * sc - 0.5, (w + 0.5) * sc - 0.5)
+
+
+@njit(cache=True, parallel=True)
+def multiview_ncc_stack(stack, half, min_std, score, nviews):
+    """Multi-image normalised cross-correlation of ground windows for every candidate.
+
+    ``stack`` (K, V, H, W) holds the V images resampled on the ground grid at K candidate
+    surfaces. For each cell and candidate, every view whose ``(2·half+1)²`` window is
+    complete and has a standard deviation ≥ ``min_std`` is normalised to zero mean and unit
+    norm (vector ``a_v``); the score is the mean pairwise NCC, obtained without forming
+    pairs as ``(‖Σ a_v‖² − n) / (n (n − 1))``. ``score`` (K, H, W) gets NaN where fewer
+    than two views remain, ``nviews`` the count of usable views.
+    O(K·H·W·V·(2·half+1)²).
+    """
+    K, V, H, W = stack.shape
+    m = 2 * half + 1
+    n = m * m
+    min_ss = n * min_std * min_std
+    for i in prange(H):
+        buf = np.empty(n, dtype=np.float64)
+        acc = np.empty(n, dtype=np.float64)
+        for k in range(K):
+            for j in range(W):
+                score[k, i, j] = np.nan
+                nviews[k, i, j] = 0
+                if i < half or j < half or i >= H - half or j >= W - half:
+                    continue
+                acc[:] = 0.0
+                nv = 0
+                for v in range(V):
+                    q = 0
+                    s = 0.0
+                    ok = True
+                    for a in range(i - half, i + half + 1):
+                        for b in range(j - half, j + half + 1):
+                            x = stack[k, v, a, b]
+                            if not np.isfinite(x):
+                                ok = False
+                                break
+                            buf[q] = x
+                            s += x
+                            q += 1
+                        if not ok:
+                            break
+                    if not ok:
+                        continue
+                    mean = s / n
+                    ss = 0.0
+                    for q in range(n):
+                        buf[q] -= mean
+                        ss += buf[q] * buf[q]
+                    if ss < min_ss or ss <= 0.0:
+                        continue
+                    inv = 1.0 / np.sqrt(ss)
+                    for q in range(n):
+                        acc[q] += buf[q] * inv
+                    nv += 1
+                nviews[k, i, j] = nv
+                if nv >= 2:
+                    t = 0.0
+                    for q in range(n):
+                        t += acc[q] * acc[q]
+                    score[k, i, j] = (t - nv) / (nv * (nv - 1.0))

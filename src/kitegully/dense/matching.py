@@ -20,7 +20,9 @@ import numpy as np
 from scipy import ndimage
 
 from kitegully import InputError
-from kitegully.dense.kernels import multiview_ncc, sample_view, sgm_aggregate
+from numba.typed import List
+
+from kitegully.dense.kernels import multiview_ncc_stack, sample_stack, sgm_aggregate
 from kitegully.dense.views import PyramidCache, ViewSet
 
 log = logging.getLogger(__name__)
@@ -162,6 +164,9 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
     zmid = 0.5 * (zlo + zhi)
     hb = height_base_ratio(views, idx, zmid)
+    Rs = np.ascontiguousarray([views.images[i].R for i in idx], dtype=np.float64)
+    Cs = np.ascontiguousarray([views.images[i].C for i in idx], dtype=np.float64)
+    Ps = np.ascontiguousarray([views.images[i].params() for i in idx], dtype=np.float64)
     z_prev = None
     for lev in range(L - 1, -1, -1):
         cl = cell * 2 ** lev
@@ -181,16 +186,15 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
             # the search window stays inside the tile's elevation bounds
             base = np.clip(up - params.refine_radius_steps * dz, zlo, max(zlo, zhi - (K - 1) * dz))
         levels = view_levels(views, idx, zmid, cl)
-        imgs = [cache.level(i, int(s)) for i, s in zip(idx, levels)]
-        stack = np.empty((len(idx), hl, wl), np.float32)
+        imgs = List()
+        for i, s in zip(idx, levels):
+            imgs.append(cache.level(i, int(s)))
+        stack = np.empty((K, len(idx), hl, wl), np.float32)
+        sample_stack(imgs, Rs, Cs, Ps, levels.astype(np.int64), xl, yl, base, float(dz), stack)
         score = np.empty((K, hl, wl), np.float32)
         nvw = np.empty((K, hl, wl), np.int16)
-        for k in range(K):
-            Z = base + k * dz
-            for n, (i, s) in enumerate(zip(idx, levels)):
-                v = views.images[i]
-                sample_view(imgs[n], v.R, v.C, v.params(), int(s), xl, yl, Z, stack[n])
-            multiview_ncc(stack, params.window_half_cells, params.min_std_dn, score[k], nvw[k])
+        multiview_ncc_stack(stack, params.window_half_cells, params.min_std_dn, score, nvw)
+        del stack
         cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
         agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
         d = np.argmin(agg, axis=2)
