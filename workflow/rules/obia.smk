@@ -7,155 +7,157 @@
 
 from kitegully.twin.closerange import scene_names as _obia_scene_names
 
-OBIA = config["obia"]
-OBIA_SCENES = _obia_scene_names(len(OBIA["scenes"]["list"])) if IS_TWIN else []
+if "obia" in config:
+
+    OBIA = config["obia"]
+    OBIA_SCENES = _obia_scene_names(len(OBIA["scenes"]["list"])) if IS_TWIN else []
 
 
-def _obia_scene(name):
-    return result("obia", "scenes/{scene}/" + name)
+    def _obia_scene(name):
+        return result("obia", "scenes/{scene}/" + name)
 
 
-wildcard_constraints:
-    scene="scene_[0-9]+",
+    wildcard_constraints:
+        scene="scene_[0-9]+",
 
 
-rule obia_scene:
-    """Synthetic close-range scene: orthophoto, DEM, surveyed markers and truth masks."""
-    output:
-        orthophoto=_obia_scene("orthophoto.tif"),
-        dem=_obia_scene("dem.tif"),
-        markers=_obia_scene("markers.csv"),
-        truth_eroded=_obia_scene("truth/eroded.tif"),
-        truth_markers=_obia_scene("truth/markers.tif"),
-        truth_meta=_obia_scene("truth/scene.json"),
-    params:
-        scenes=OBIA["scenes"],
-        seed=config["seed"],
-        crs=config["site"]["crs"],
-    log:
-        logfile("obia", "generate_{scene}"),
-    benchmark:
-        benchfile("obia", "generate_{scene}")
-    threads: 1
-    script:
-        "../scripts/obia_scene.py"
+    rule obia_scene:
+        """Synthetic close-range scene: orthophoto, DEM, surveyed markers and truth masks."""
+        output:
+            orthophoto=_obia_scene("orthophoto.tif"),
+            dem=_obia_scene("dem.tif"),
+            markers=_obia_scene("markers.csv"),
+            truth_eroded=_obia_scene("truth/eroded.tif"),
+            truth_markers=_obia_scene("truth/markers.tif"),
+            truth_meta=_obia_scene("truth/scene.json"),
+        params:
+            scenes=OBIA["scenes"],
+            seed=config["seed"],
+            crs=config["site"]["crs"],
+        log:
+            logfile("obia", "generate_{scene}"),
+        benchmark:
+            benchfile("obia", "generate_{scene}")
+        threads: 1
+        script:
+            "../scripts/obia_scene.py"
 
 
-rule obia_classify:
-    """Seeded region growing on R, G, B, slope; ExG valley threshold; grass / eroded."""
-    input:
-        orthophoto=_obia_scene("orthophoto.tif"),
-        dem=_obia_scene("dem.tif"),
-        markers=_obia_scene("markers.csv"),
-    output:
-        segments=_obia_scene("segments.tif"),
-        exg=_obia_scene("exg_blurred.tif"),
-        classification=_obia_scene("classification.tif"),
-        classification_otsu=_obia_scene("classification_otsu.tif"),
-        polygons=_obia_scene("eroded_areas.gpkg"),
-        histogram=_obia_scene("exg_histogram.csv"),
-        info=_obia_scene("threshold.json"),
-    params:
-        obia=OBIA,
-    log:
-        logfile("obia", "classify_{scene}"),
-    benchmark:
-        benchfile("obia", "classify_{scene}")
-    threads: 1
-    script:
-        "../scripts/obia_classify.py"
+    rule obia_classify:
+        """Seeded region growing on R, G, B, slope; ExG valley threshold; grass / eroded."""
+        input:
+            orthophoto=_obia_scene("orthophoto.tif"),
+            dem=_obia_scene("dem.tif"),
+            markers=_obia_scene("markers.csv"),
+        output:
+            segments=_obia_scene("segments.tif"),
+            exg=_obia_scene("exg_blurred.tif"),
+            classification=_obia_scene("classification.tif"),
+            classification_otsu=_obia_scene("classification_otsu.tif"),
+            polygons=_obia_scene("eroded_areas.gpkg"),
+            histogram=_obia_scene("exg_histogram.csv"),
+            info=_obia_scene("threshold.json"),
+        params:
+            obia=OBIA,
+        log:
+            logfile("obia", "classify_{scene}"),
+        benchmark:
+            benchfile("obia", "classify_{scene}")
+        threads: 1
+        script:
+            "../scripts/obia_classify.py"
 
 
-rule obia_evaluate:
-    """Confusion matrices against the truth mask and the per-scene figure (001 Figs 3-4)."""
-    input:
-        orthophoto=_obia_scene("orthophoto.tif"),
-        segments=_obia_scene("segments.tif"),
-        classification=_obia_scene("classification.tif"),
-        classification_otsu=_obia_scene("classification_otsu.tif"),
-        histogram=_obia_scene("exg_histogram.csv"),
-        info=_obia_scene("threshold.json"),
-        truth_eroded=_obia_scene("truth/eroded.tif"),
-    output:
-        confusion=_obia_scene("confusion.json"),
-        figure=report(
-            _obia_scene("scene_figure.png"),
-            caption=caption("obia_scene"),
-            category="Bare soil (OBIA)",
-            subcategory="Close-range scenes",
-            labels={"scene": "{scene}"},
-        ),
-    log:
-        logfile("obia", "evaluate_{scene}"),
-    script:
-        "../scripts/obia_evaluate.py"
+    rule obia_evaluate:
+        """Confusion matrices against the truth mask and the per-scene figure (001 Figs 3-4)."""
+        input:
+            orthophoto=_obia_scene("orthophoto.tif"),
+            segments=_obia_scene("segments.tif"),
+            classification=_obia_scene("classification.tif"),
+            classification_otsu=_obia_scene("classification_otsu.tif"),
+            histogram=_obia_scene("exg_histogram.csv"),
+            info=_obia_scene("threshold.json"),
+            truth_eroded=_obia_scene("truth/eroded.tif"),
+        output:
+            confusion=_obia_scene("confusion.json"),
+            figure=report(
+                _obia_scene("scene_figure.png"),
+                caption=caption("obia_scene"),
+                category="Bare soil (OBIA)",
+                subcategory="Close-range scenes",
+                labels={"scene": "{scene}"},
+            ),
+        log:
+            logfile("obia", "evaluate_{scene}"),
+        script:
+            "../scripts/obia_evaluate.py"
 
 
-rule obia_summary:
-    """Accuracy (001 Table 3), eroded areas (001 Table 2), valley vs Otsu over all scenes."""
-    input:
-        confusion=expand(_obia_scene("confusion.json"), scene=OBIA_SCENES),
-    output:
-        accuracy=report(result("obia", "accuracy.csv"), caption=caption("obia_accuracy"), category="Bare soil (OBIA)", subcategory="Tables"),
-        accuracy_md=result("obia", "accuracy.md"),
-        areas=report(result("obia", "eroded_areas.csv"), caption=caption("obia_eroded_areas"), category="Bare soil (OBIA)", subcategory="Tables"),
-        areas_md=result("obia", "eroded_areas.md"),
-        comparison=report(result("obia", "valley_vs_otsu.csv"), caption=caption("obia_valley_vs_otsu"), category="Bare soil (OBIA)", subcategory="Tables"),
-        comparison_md=result("obia", "valley_vs_otsu.md"),
-        figure=report(result("obia", "accuracy_summary.png"), caption=caption("obia_summary"), category="Bare soil (OBIA)", subcategory="Tables"),
-    log:
-        logfile("obia", "summary"),
-    script:
-        "../scripts/obia_summary.py"
+    rule obia_summary:
+        """Accuracy (001 Table 3), eroded areas (001 Table 2), valley vs Otsu over all scenes."""
+        input:
+            confusion=expand(_obia_scene("confusion.json"), scene=OBIA_SCENES),
+        output:
+            accuracy=report(result("obia", "accuracy.csv"), caption=caption("obia_accuracy"), category="Bare soil (OBIA)", subcategory="Tables"),
+            accuracy_md=result("obia", "accuracy.md"),
+            areas=report(result("obia", "eroded_areas.csv"), caption=caption("obia_eroded_areas"), category="Bare soil (OBIA)", subcategory="Tables"),
+            areas_md=result("obia", "eroded_areas.md"),
+            comparison=report(result("obia", "valley_vs_otsu.csv"), caption=caption("obia_valley_vs_otsu"), category="Bare soil (OBIA)", subcategory="Tables"),
+            comparison_md=result("obia", "valley_vs_otsu.md"),
+            figure=report(result("obia", "accuracy_summary.png"), caption=caption("obia_summary"), category="Bare soil (OBIA)", subcategory="Tables"),
+        log:
+            logfile("obia", "summary"),
+        script:
+            "../scripts/obia_summary.py"
 
 
-rule obia_kite_scale:
-    """Bare-soil map of the site's kite orthophoto (tiled OBIA with a global threshold)."""
-    input:
-        orthophoto=result("dense", "orthophoto.tif"),
-        dsm=result("dense", "dsm.tif"),
-    output:
-        bare_soil=result("obia", "kite/bare_soil.tif"),
-        polygons=result("obia", "kite/bare_soil.gpkg"),
-        info=result("obia", "kite/threshold.json"),
-    params:
-        obia=OBIA,
-    log:
-        logfile("obia", "kite_scale"),
-    benchmark:
-        benchfile("obia", "kite_scale")
-    threads: 1
-    script:
-        "../scripts/obia_kite_scale.py"
+    rule obia_kite_scale:
+        """Bare-soil map of the site's kite orthophoto (tiled OBIA with a global threshold)."""
+        input:
+            orthophoto=result("dense", "orthophoto.tif"),
+            dsm=result("dense", "dsm.tif"),
+        output:
+            bare_soil=result("obia", "kite/bare_soil.tif"),
+            polygons=result("obia", "kite/bare_soil.gpkg"),
+            info=result("obia", "kite/threshold.json"),
+        params:
+            obia=OBIA,
+        log:
+            logfile("obia", "kite_scale"),
+        benchmark:
+            benchfile("obia", "kite_scale")
+        threads: 1
+        script:
+            "../scripts/obia_kite_scale.py"
 
 
-rule obia_kite_accuracy:
-    """Kite-scale bare-soil map against the twin's land-cover truth (twin sites only)."""
-    input:
-        bare_soil=result("obia", "kite/bare_soil.tif"),
-        landcover=result("twin", "truth/landcover.tif"),
-        landcover_classes=result("twin", "truth/landcover_classes.csv"),
-    output:
-        accuracy=report(result("obia", "kite/accuracy.csv"), caption=caption("obia_kite_accuracy"), category="Bare soil (OBIA)", subcategory="Kite scale"),
-        areas=result("obia", "kite/eroded_areas.csv"),
-    params:
-        bare_classes=OBIA["kite_scale"]["eroded_landcover_classes"],
-        site=SITE,
-    log:
-        logfile("obia", "kite_accuracy"),
-    script:
-        "../scripts/obia_kite_accuracy.py"
+    rule obia_kite_accuracy:
+        """Kite-scale bare-soil map against the twin's land-cover truth (twin sites only)."""
+        input:
+            bare_soil=result("obia", "kite/bare_soil.tif"),
+            landcover=result("twin", "truth/landcover.tif"),
+            landcover_classes=result("twin", "truth/landcover_classes.csv"),
+        output:
+            accuracy=report(result("obia", "kite/accuracy.csv"), caption=caption("obia_kite_accuracy"), category="Bare soil (OBIA)", subcategory="Kite scale"),
+            areas=result("obia", "kite/eroded_areas.csv"),
+        params:
+            bare_classes=OBIA["kite_scale"]["eroded_landcover_classes"],
+            site=SITE,
+        log:
+            logfile("obia", "kite_accuracy"),
+        script:
+            "../scripts/obia_kite_accuracy.py"
 
 
-if IS_TWIN and OBIA_SCENES:
-    add_targets(
-        result("obia", "accuracy.csv"),
-        result("obia", "eroded_areas.csv"),
-        result("obia", "valley_vs_otsu.csv"),
-        result("obia", "accuracy_summary.png"),
-        *expand(_obia_scene("scene_figure.png"), scene=OBIA_SCENES),
-    )
-if OBIA["kite_scale"]["enabled"]:
-    add_targets(result("obia", "kite/bare_soil.tif"), result("obia", "kite/bare_soil.gpkg"))
-    if IS_TWIN:
-        add_targets(result("obia", "kite/accuracy.csv"))
+    if IS_TWIN and OBIA_SCENES:
+        add_targets(
+            result("obia", "accuracy.csv"),
+            result("obia", "eroded_areas.csv"),
+            result("obia", "valley_vs_otsu.csv"),
+            result("obia", "accuracy_summary.png"),
+            *expand(_obia_scene("scene_figure.png"), scene=OBIA_SCENES),
+        )
+    if OBIA["kite_scale"]["enabled"]:
+        add_targets(result("obia", "kite/bare_soil.tif"), result("obia", "kite/bare_soil.gpkg"))
+        if IS_TWIN:
+            add_targets(result("obia", "kite/accuracy.csv"))
