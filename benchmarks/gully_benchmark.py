@@ -41,6 +41,9 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 PYSHEDS_PIN = "pysheds==0.5"
+# pysheds 0.5 fails to compile under numba 0.68 (itertools.count in a jitted function);
+# its venv pins the last numba/numpy pair it works with.
+PYSHEDS_VENV_PINS = [PYSHEDS_PIN, "numba==0.61.2", "numpy==2.2.6"]
 CRS = "EPSG:32632"
 
 
@@ -159,12 +162,13 @@ def grass_fill(grass: str, tif: Path, work: Path) -> tuple[float, np.ndarray] | 
 
 def ensure_pysheds(venv: Path) -> Path | None:
     py = venv / "bin" / "python"
-    if py.exists() and subprocess.run([str(py), "-c", "import pysheds"], capture_output=True).returncode == 0:
+    check = "import pysheds, numba; assert numba.__version__ == '0.61.2'"
+    if py.exists() and subprocess.run([str(py), "-c", check], capture_output=True).returncode == 0:
         return py
     print(f"installing {PYSHEDS_PIN} into its own venv {venv} (once) ...", flush=True)
     p = subprocess.run([sys.executable, "-m", "venv", str(venv)], capture_output=True, text=True)
     if p.returncode == 0:
-        p = subprocess.run([str(py), "-m", "pip", "install", "-q", PYSHEDS_PIN], capture_output=True, text=True)
+        p = subprocess.run([str(py), "-m", "pip", "install", "-q", *PYSHEDS_VENV_PINS], capture_output=True, text=True)
     if p.returncode != 0:
         print(f"pysheds comparison skipped: could not install {PYSHEDS_PIN}: {p.stderr.strip()[-300:]}")
         return None
@@ -175,13 +179,13 @@ PYSHEDS_CHILD = """
 import sys, time, json, numpy as np
 from pysheds.grid import Grid
 from pysheds.sview import Raster, ViewFinder
+def fill(a):
+    vf = ViewFinder(shape=a.shape, nodata=np.nan)
+    return Grid(viewfinder=vf).fill_depressions(Raster(np.ascontiguousarray(a), viewfinder=vf))
 z = np.load(sys.argv[1])
-vf = ViewFinder(shape=z.shape, nodata=np.nan)
-dem = Raster(z, viewfinder=vf)
-grid = Grid(viewfinder=vf)
-grid.fill_depressions(dem[:50, :50])  # compile numba kernels before timing
+fill(z[:50, :50])  # warm up before timing
 t0 = time.perf_counter()
-filled = grid.fill_depressions(dem)
+filled = fill(z)
 t1 = time.perf_counter()
 np.save(sys.argv[2], np.asarray(filled))
 print(json.dumps({"fill_s": t1 - t0}))

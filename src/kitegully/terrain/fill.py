@@ -22,46 +22,52 @@ _DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
 
 
 @njit(cache=True)
-def _heap_push(heap, n, item, key):
-    if n == heap.size:
-        bigger = np.empty(heap.size * 2, dtype=heap.dtype)
-        bigger[:n] = heap[:n]
-        heap = bigger
+def _heap_push(hidx, hkey, n, item, key):
+    if n == hidx.size:
+        bi = np.empty(hidx.size * 2, dtype=hidx.dtype)
+        bk = np.empty(hidx.size * 2, dtype=hkey.dtype)
+        bi[:n] = hidx[:n]
+        bk[:n] = hkey[:n]
+        hidx = bi
+        hkey = bk
+    # sift up with a hole: keys live next to the indices (no indirection, cache friendly)
     i = n
-    heap[i] = item
     while i > 0:
         p = (i - 1) >> 1
-        if key[heap[p]] > key[heap[i]]:
-            t = heap[p]
-            heap[p] = heap[i]
-            heap[i] = t
+        if hkey[p] > key:
+            hidx[i] = hidx[p]
+            hkey[i] = hkey[p]
             i = p
         else:
             break
-    return heap, n + 1
+    hidx[i] = item
+    hkey[i] = key
+    return hidx, hkey, n + 1
 
 
 @njit(cache=True)
-def _heap_pop(heap, n, key):
-    top = heap[0]
+def _heap_pop(hidx, hkey, n):
+    top = hidx[0]
     n -= 1
-    heap[0] = heap[n]
+    item = hidx[n]
+    key = hkey[n]
     i = 0
     while True:
         l = 2 * i + 1
         if l >= n:
             break
-        r = l + 1
         m = l
-        if r < n and key[heap[r]] < key[heap[l]]:
-            m = r
-        if key[heap[m]] < key[heap[i]]:
-            t = heap[m]
-            heap[m] = heap[i]
-            heap[i] = t
+        if l + 1 < n and hkey[l + 1] < hkey[l]:
+            m = l + 1
+        if hkey[m] < key:
+            hidx[i] = hidx[m]
+            hkey[i] = hkey[m]
             i = m
         else:
             break
+    if n > 0:
+        hidx[i] = item
+        hkey[i] = key
     return top, n
 
 
@@ -83,7 +89,8 @@ def _priority_flood(w, valid, eps, dr, dc):
     flat = w.ravel()
     vflat = valid.ravel()
     closed = np.zeros(h * wd, dtype=np.uint8)
-    heap = np.empty(max(1024, 2 * (h + wd)), dtype=np.int64)
+    hidx = np.empty(max(1024, 2 * (h + wd)), dtype=np.int64)
+    hkey = np.empty(hidx.size, dtype=np.float64)
     nheap = 0
     pit = np.empty(1024, dtype=np.int64)
     phead = 0
@@ -104,14 +111,14 @@ def _priority_flood(w, valid, eps, dr, dc):
                         break
             if seed:
                 closed[i] = 1
-                heap, nheap = _heap_push(heap, nheap, i, flat)
+                hidx, hkey, nheap = _heap_push(hidx, hkey, nheap, i, flat[i])
     while nheap > 0 or psize > 0:
-        if psize > 0 and (nheap == 0 or flat[pit[phead]] <= flat[heap[0]]):
+        if psize > 0 and (nheap == 0 or flat[pit[phead]] <= hkey[0]):
             i = pit[phead]
             phead = (phead + 1) % pit.size
             psize -= 1
         else:
-            i, nheap = _heap_pop(heap, nheap, flat)
+            i, nheap = _heap_pop(hidx, hkey, nheap)
         r = i // wd
         c = i - r * wd
         zc = flat[i]
@@ -131,7 +138,7 @@ def _priority_flood(w, valid, eps, dr, dc):
                 flat[j] = target
                 pit, phead, psize = _fifo_push(pit, phead, psize, j)
             else:
-                heap, nheap = _heap_push(heap, nheap, j, flat)
+                hidx, hkey, nheap = _heap_push(hidx, hkey, nheap, j, flat[j])
     return nraised
 
 
