@@ -49,6 +49,7 @@ ax.annotate("", xy=(xmin + 0.12 * (xmax - xmin) * np.sin(wind) + 0.1 * (xmax - x
 ax.text(xmin + 0.1 * (xmax - xmin), ymax - 0.06 * (ymax - ymin), f"wind {cfg['wind_speed_m_s']:g} m/s", color="tab:blue",
         fontsize=7)
 ax.set_aspect("equal")
+ax.ticklabel_format(useOffset=False, style="plain")
 ax.set_xlabel("easting (m)")
 ax.set_ylabel("northing (m)")
 ax.set_title(f"Simulated kite flight: {len(poses)} images, line {', '.join(f'{v:g}' for v in cfg['line_lengths_m'])} m")
@@ -74,4 +75,5 @@ for ax, name in zip(axes.ravel(), pick):
     ax.grid(False)
 for ax in axes.ravel()[n:]:
     ax.axis("off")
+fig.subplots_adjust(hspace=0.4, wspace=0.3)
 save_figure(fig, snakemake.output.samples)

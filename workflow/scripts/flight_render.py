@@ -36,10 +36,12 @@ log.info("scene: DSM %s, texture %d bands, %d mip levels (%.1f s)", scene.dsm.sh
 bg = list(rcfg["background_reflectance"])[: len(channels)]
 bg += [bg[-1]] * (len(channels) - len(bg))
 t1 = time.perf_counter()
+c1 = time.process_time()
 stats = render_flight(scene, camera, poses, snakemake.output.images, Photographic.from_config(rcfg),
                       int(zlib.crc32(b"flight.render") ^ seed), channels, rcfg["supersampling"], bg,
                       rcfg["jpeg_quality"])
 render_s = time.perf_counter() - t1
+render_cpu_s = time.process_time() - c1  # CPU seconds of all threads: independent of other load
 
 targets = pd.read_csv(snakemake.input.targets)
 survey = pd.read_csv(snakemake.input.survey)
@@ -85,6 +87,7 @@ summary = pd.DataFrame(
         ("gcp_targets_min_images", int(per_target.min()) if len(per_target) else 0, "count"),
         ("render_time_total", render_s, "s"),
         ("render_time_per_image", render_s / len(poses), "s"),
+        ("render_cpu_time_total", render_cpu_s, "s"),
         ("threads", snakemake.threads, "count"),
     ],
     columns=["quantity", "value", "unit"],

@@ -45,6 +45,7 @@ class FlightSettings:
     forward_overlap: float
     side_overlap: float
     along_extension: float
+    min_site_fraction: float
     operator_hand_height_m: float
     rig_below_kite_m: float
     pendulum_length_m: float
@@ -202,6 +203,22 @@ def plan_strips(
     return strips
 
 
+def footprint_site_fraction(
+    camera: Camera, xy: np.ndarray, height_m: float, heading_deg: float, extent: tuple[float, float, float, float]
+) -> float:
+    """Share of a nadir footprint (planned height, given heading) that lies inside the extent."""
+    fw, fh = camera.footprint(height_m)
+    k = np.radians(heading_deg)
+    up = np.array([np.sin(k), np.cos(k)])
+    right = np.array([np.cos(k), -np.sin(k)])
+    g = (np.arange(12) + 0.5) / 12 - 0.5
+    a, b = np.meshgrid(g * fw, g * fh)
+    pts = xy + a.ravel()[:, None] * right + b.ravel()[:, None] * up
+    xmin, ymin, xmax, ymax = extent
+    inside = (pts[:, 0] >= xmin) & (pts[:, 0] <= xmax) & (pts[:, 1] >= ymin) & (pts[:, 1] <= ymax)
+    return float(inside.mean())
+
+
 def _walk(strips: list[Strip], speed: float, dt: float):
     """Operator positions along strips and transits at constant speed, with per-sample info."""
     pts, lengths, strip_id = [], [], []
@@ -285,6 +302,13 @@ def simulate_flight(
     for s in strips:
         idx = np.flatnonzero(trig_strip == s.index)
         keep[idx[:: s.keep_every]] = True
+    # drop shots at the strip ends whose planned footprint barely touches the site
+    heights = {s.index: s.height_m for s in strips}
+    for j in np.flatnonzero(keep):
+        k = k_trig[j]
+        frac = footprint_site_fraction(camera, cam[k, :2], heights[int(sid[k])], yaw[k], extent)
+        if frac < settings.min_site_fraction:
+            keep[j] = False
     kept = k_trig[keep]
 
     rows = []
