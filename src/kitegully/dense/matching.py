@@ -105,10 +105,11 @@ def _fill_nearest(z: np.ndarray) -> np.ndarray:
 
 
 def view_levels(views: ViewSet, idx: list[int], z_ground: float, cell: float) -> np.ndarray:
-    """Image pyramid level per view whose pixels are closest to (not coarser than) ``cell``."""
+    """Image pyramid level per view whose pixel size is closest to ``cell`` (in log scale), so
+    the 2×2-mean pyramid acts as the anti-aliasing filter of the ground resampling."""
     gsd = np.array([views.images[i].gsd_at(z_ground) for i in idx])
     ratio = np.maximum(cell / np.maximum(gsd, 1e-9), 1.0)
-    return np.floor(np.log2(ratio) + 1e-6).astype(int)
+    return np.floor(np.log2(ratio) + 0.5).astype(int)
 
 
 def visible_views(views: ViewSet, x: tuple[float, float], y: tuple[float, float], z: tuple[float, float]) -> list[int]:
@@ -224,9 +225,10 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
             z_prev = ndimage.median_filter(zf, size=3, mode="nearest")
         else:
             keep = (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
-            # a winner on the first or last label has no cost minimum inside the searched
-            # interval (surface outside the tile's elevation bounds or a lost prior)
-            keep &= (d > 0) & (d < K - 1)
+            # a winner on the tile's lowest or highest searchable elevation has no cost
+            # minimum inside the bounds: the surface is not there (or not seen)
+            at_bound = ((d == 0) & (base <= zlo + 1e-6)) | ((d == K - 1) & (base + (K - 1) * dz >= zhi - 1e-6))
+            keep &= ~at_bound
             z = np.where(keep, z, np.nan).astype(np.float32)
             log.debug("tile level %d: %d labels, %d views, %.0f%% kept", lev, K, len(idx), 100 * keep.mean())
             return TileResult(z, np.where(np.isfinite(ncc), ncc, np.nan).astype(np.float32), nv.astype(np.int16))

@@ -306,8 +306,10 @@ def run_truth_validation(dsm_path, truth_dsm_path, truth_dtm_path, landcover_pat
     names = read_class_names(classes_path)
     lc_on = lc if lgrid == grid else resample_to(lc, lgrid, grid, nearest=True)
     tab = stats_by_class(err, lc_on, names)
-    tab.insert(1, "area_pct", [100.0 * float(np.isfinite(err).mean())] +
-               [100.0 * float(np.mean(lc_on == c)) for c in sorted(names) if (lc_on == c).any()])
+    present = [c for c in sorted(names) if (lc_on == c).any()]
+    tab.insert(1, "area_pct", [100.0] + [100.0 * float(np.mean(lc_on == c)) for c in present])
+    tab.insert(2, "valid_pct", [100.0 * float(np.isfinite(err).mean())] +
+               [100.0 * float(np.isfinite(err[lc_on == c]).mean()) for c in present])
     write_table(tab, out["by_landcover"])
     lim = cfg["error_limit_m"]
     fig, ax = new_figure(figsize=(7, 5.5))
