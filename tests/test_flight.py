@@ -241,3 +241,28 @@ def test_flight_workflow_on_fabricated_twin(tmp_path):
     assert summary["core_images_per_point_min"] >= 3
     # observed and truth kept apart: nothing under observed/ names truth
     assert not any("truth" in p.name for p in (fl / "observed").rglob("*"))
+
+
+def test_same_seed_same_flight_and_bad_inputs(tmp_path):
+    cfg = tiny_flight_cfg()
+    s = FlightSettings.from_config(cfg, cfg["line_lengths_m"])
+    cam = camera_from_config(cfg["camera"])
+    runs = [simulate_flight(EXTENT, cam, s, const_offset(), lambda x, y: np.full_like(x, 100.0),
+                            np.random.default_rng(9)) for _ in range(2)]
+    pd.testing.assert_frame_equal(runs[0].poses, runs[1].poses)
+    pd.testing.assert_frame_equal(runs[0].camera_gps, runs[1].camera_gps)
+    with pytest.raises(InputError, match="start_time"):
+        FlightSettings.from_config({**cfg, "start_time": "yesterday"}, cfg["line_lengths_m"])
+    with pytest.raises(InputError, match="line_lengths_m"):
+        simulate_flight(EXTENT, cam, s, lambda L: (10.0, -5.0), lambda x, y: np.full_like(x, 100.0),
+                        np.random.default_rng(0))
+    from kitegully.twin.render_flight import load_scene
+
+    twin = tmp_path / "twin"
+    fabricate_twin(twin)
+    with pytest.raises(InputError, match="texture.tif: no band named 'SWIR'"):
+        load_scene(twin / "truth" / "dsm.tif", twin / "truth" / "texture.tif", ["R", "SWIR"], 16)
+    grid = GridSpec(X0, Y0 + 200, 1.0, 200, 200, "EPSG:32632")
+    write_raster(tmp_path / "nan.tif", np.full((200, 200), np.nan, np.float32), grid)
+    with pytest.raises(InputError, match="nan.tif: DSM is all nodata"):
+        load_scene(tmp_path / "nan.tif", twin / "truth" / "texture.tif", ["R"], 16)
