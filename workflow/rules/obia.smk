@@ -120,8 +120,10 @@ if "obia" in config:
             bare_soil=result("obia", "kite/bare_soil.tif"),
             polygons=result("obia", "kite/bare_soil.gpkg"),
             info=result("obia", "kite/threshold.json"),
+            figure=report(result("obia", "kite/bare_soil_map.png"), caption=caption("obia_kite_map"), category="Bare soil (OBIA)", subcategory="Kite scale"),
         params:
             obia=OBIA,
+            attribution=config["site"].get("attribution"),
         log:
             logfile("obia", "kite_scale"),
         benchmark:
@@ -139,9 +141,11 @@ if "obia" in config:
             landcover_classes=result("twin", "truth/landcover_classes.csv"),
         output:
             accuracy=report(result("obia", "kite/accuracy.csv"), caption=caption("obia_kite_accuracy"), category="Bare soil (OBIA)", subcategory="Kite scale"),
-            areas=result("obia", "kite/eroded_areas.csv"),
+            areas=result("obia", "kite/bare_areas.csv"),
+            per_class=report(result("obia", "kite/landcover_agreement.csv"), caption=caption("obia_kite_landcover"), category="Bare soil (OBIA)", subcategory="Kite scale"),
         params:
-            bare_classes=OBIA["kite_scale"]["eroded_landcover_classes"],
+            bare_classes=OBIA["kite_scale"]["bare_landcover_classes"],
+            excluded_classes=OBIA["kite_scale"]["excluded_landcover_classes"],
             site=SITE,
         log:
             logfile("obia", "kite_accuracy"),
@@ -157,7 +161,9 @@ if "obia" in config:
             result("obia", "accuracy_summary.png"),
             *expand(_obia_scene("scene_figure.png"), scene=OBIA_SCENES),
         )
+    if OBIA["kite_scale"]["enabled"] and "dense" not in config:
+        raise WorkflowError("Invalid configuration: obia.kite_scale.enabled needs the dense stage (section 'dense') for orthophoto.tif and dsm.tif")
     if OBIA["kite_scale"]["enabled"]:
-        add_targets(result("obia", "kite/bare_soil.tif"), result("obia", "kite/bare_soil.gpkg"))
+        add_targets(result("obia", "kite/bare_soil.tif"), result("obia", "kite/bare_soil.gpkg"), result("obia", "kite/bare_soil_map.png"))
         if IS_TWIN:
             add_targets(result("obia", "kite/accuracy.csv"))
