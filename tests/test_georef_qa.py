@@ -19,6 +19,7 @@ PARAMS = {
     "method": "gcp_bundle",
     "gcp_pixel_frame": "stored",
     "gcp_pixel_scale": 1.0,
+    "gcp_pixel_offset_px": 0.0,
     "sigma_gcp_xy_m": 0.01,
     "sigma_gcp_z_m": 0.01,
     "qa": {"max_triangulation_px": 3.0, "max_residual_m": 0.25, "coords_tolerance_m": 0.05,

@@ -63,7 +63,7 @@ def test_gcp_file_pixels_are_stored_frame_at_2400px(small_run, boruszyn_dir):
     gcps = read_gcps(boruszyn_dir / "gcp_list.txt", "EPSG:2180")
     errs = {}
     for frame, scale in (("stored", 2400 / 4608), ("stored", 1.0), ("display", 2400 / 4608), ("display", 1.0)):
-        obs = collect_observations(gcps, infos, rows, frame, "stored", scale, 0.1)
+        obs = collect_observations(gcps, infos, rows, frame, "stored", scale, 0.1, 0.0)
         two = [o for o in obs if len(o.rows) >= 2]
         _, rp = triangulate_gcps(block, two)
         errs[(frame, scale)] = rp

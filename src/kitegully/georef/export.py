@@ -86,8 +86,13 @@ def calibration_table(start: Block, adjusted: Block, index: ModelIndex, rec: pyc
     return pd.DataFrame(rows)
 
 
-def camera_positions(block: Block, index: ModelIndex, offset: np.ndarray, crs: str) -> gpd.GeoDataFrame:
-    """Projection centres (3-D points, site CRS) with omega/phi/kappa (deg) and image names."""
+def camera_positions(block: Block, index: ModelIndex, offset: np.ndarray, crs: str,
+                     original_names: dict[str, str] | None = None) -> gpd.GeoDataFrame:
+    """Projection centres (3-D points, site CRS) with omega/phi/kappa (deg) and image names.
+
+    ``original_names`` maps the prepared SfM file names to the input file names.
+    """
+    original_names = original_names or {}
     C = camera_centres(block.rv, block.t) + offset
     R = rotvec_to_matrix(block.rv)  # camera from world
     # photogrammetric angles of the world-from-camera rotation, [I] omega-phi-kappa convention
@@ -98,7 +103,8 @@ def camera_positions(block: Block, index: ModelIndex, offset: np.ndarray, crs: s
     view = M[:, :, 2]
     tilt = np.degrees(np.arccos(np.clip(-view[:, 2], -1, 1)))
     df = pd.DataFrame({
-        "image": [n.split("/")[-1] for n in index.image_names],
+        "image": [original_names.get(n.split("/")[-1], n.split("/")[-1]) for n in index.image_names],
+        "sfm_image": [n.split("/")[-1] for n in index.image_names],
         "x_m": C[:, 0], "y_m": C[:, 1], "z_m": C[:, 2],
         "omega_deg": omega, "phi_deg": phi, "kappa_deg": kappa, "tilt_from_nadir_deg": tilt,
     })

@@ -15,7 +15,8 @@ Flags (``flag`` column, ``;``-separated):
   ``qa.max_triangulation_px``): not used;
 * ``outlier`` – disagrees with the others after the transform (residual above
   ``qa.max_residual_m`` while the others agree within it without it): not used;
-* ``poor_fit`` – used, but its residual exceeds 3 σ of its survey (σ from config).
+* ``poor_fit`` – used, but its residual exceeds 3 σ, σ combining the survey sd and the
+  image measurement sd projected to the ground.
 """
 
 from __future__ import annotations
@@ -61,11 +62,13 @@ class GeorefResult:
 
 def collect_observations(
     gcps: list[GCP], infos: list[ImageInfo], image_rows: dict[str, int], pixel_frame: str, sfm_frame: str, pixel_scale: float,
-    coords_tolerance_m: float,
+    coords_tolerance_m: float, pixel_offset_px: float = 0.0,
 ) -> list[GcpObs]:
     """Map each GCP's observations into the SfM frame, keeping those in registered images.
 
     ``image_rows`` maps the prepared image name (``ImageInfo.sfm_name``) to the block row.
+    ``pixel_offset_px`` is added to the file's coordinates first: 0.5 when the file puts
+    pixel centres at integer coordinates (COLMAP puts the image corner at 0).
     """
     by_name = {i.name: i for i in infos}
     out = []
@@ -80,7 +83,7 @@ def collect_observations(
                 unreg += 1
                 continue
             rows.append(image_rows[info.sfm_name])
-            xy.append(to_sfm_pixels(px[None], info, pixel_frame, sfm_frame, pixel_scale)[0])
+            xy.append(to_sfm_pixels(px[None] + pixel_offset_px, info, pixel_frame, sfm_frame, pixel_scale)[0])
         flags = []
         if missing:
             flags.append(f"missing_images:{missing}")
@@ -179,7 +182,8 @@ def georeference(
         max_iterations=bp["max_iterations"],
     )
     obs = collect_observations(
-        gcps, infos, image_rows, params["gcp_pixel_frame"], sfm_frame, params["gcp_pixel_scale"], qa["coords_tolerance_m"]
+        gcps, infos, image_rows, params["gcp_pixel_frame"], sfm_frame, params["gcp_pixel_scale"], qa["coords_tolerance_m"],
+        params["gcp_pixel_offset_px"],
     )
     survey = np.array([o.gcp.xyz for o in obs])
     offset = np.round(np.median(survey, axis=0) / 100.0) * 100.0
@@ -205,12 +209,16 @@ def georeference(
     log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
     local, sim, report = solve(block_model, obs, survey_local, X_model, use, params["method"], settings, tape_edges)
 
+    # expected misfit: survey sd and the image measurement sd projected to the ground
+    # (sigma_gcp_px x GSD / sqrt(n_obs) per axis; heights ~ twice as weak [I])
+    gsd = ground_sampling_distance(local)
     sig = np.array([params["sigma_gcp_xy_m"]] * 2 + [params["sigma_gcp_z_m"]])
     X_final, _ = triangulate_gcps(local, obs)
     rows = []
     for k, o in enumerate(obs):
         d = X_final[k] - survey_local[k]
-        if use[k] and np.any(np.abs(d) > 3 * sig):
+        img_sd = bp["sigma_gcp_px"] * gsd / np.sqrt(max(len(o.rows), 1)) * np.array([1.0, 1.0, 2.0])
+        if use[k] and np.any(np.abs(d) > 3 * np.hypot(sig, img_sd)):
             o.flags.append("poor_fit")
         rows.append(_row(o, d, reprojection_of(local, o, survey_local[k]), bool(use[k])))
     residuals = pd.DataFrame(rows, columns=RESIDUAL_COLUMNS)
@@ -233,7 +241,7 @@ def georeference(
     report.update(_stats(residuals, loo, qa, obs, use))
     report["offset_m"] = offset.tolist()
     report["method"] = params["method"]
-    report["gsd_m"] = ground_sampling_distance(local)
+    report["gsd_m"] = gsd
     return GeorefResult(local, offset, sim, residuals, loo, report)
 
 

@@ -49,7 +49,7 @@ def run_georef_stage(
     export.write_transform(out["transform"], crs, res.offset, res.transform.as_dict(), res.report)
     export.write_residual_tables(res.residuals, res.loo, out["residuals"], out["loo"])
     write_table(export.calibration_table(block, res.block, index, rec), out["calibration"])
-    cams = export.camera_positions(res.block, index, res.offset, crs)
+    cams = export.camera_positions(res.block, index, res.offset, crs, {i.sfm_name: i.name for i in infos})
     write_vector(cams, out["cameras"])
     n_pts = export.write_las(rec, res.offset, crs, out["cloud"])
     survey = {g.gcp_id: g.xyz for g in gcps}
