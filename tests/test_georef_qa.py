@@ -92,3 +92,21 @@ def test_single_observation_and_too_few_gcps():
     model, gcps, infos, rows = _setup(drop=(0,))
     r = georeference(model, gcps, infos, rows, {**PARAMS, "method": "similarity"}, "stored")
     assert "single_obs" in r.residuals.loc[0, "flag"] and not r.residuals.loc[0, "used"]
+
+
+def test_tape_horn_method_takes_scale_from_the_tape_not_the_gps():
+    """Paper 004's variant: GPS positions with ±2 m noise, taped distances exact."""
+    model, gcps, infos, rows = _setup()
+    truth = [g.xyz.copy() for g in gcps]
+    rng = np.random.default_rng(9)
+    for g in gcps:
+        g.xyz = g.xyz + rng.normal(0, 2.0, 3)
+    edges = [(gcps[i].gcp_id, gcps[j].gcp_id, float(np.linalg.norm(truth[i] - truth[j]))) for i, j in ((0, 1), (1, 2), (2, 0), (3, 4), (4, 6))]
+    r = georeference(model, gcps, infos, rows, {**PARAMS, "method": "tape_horn"}, "stored", tape_edges=edges)
+    # distances between GCPs in the result equal the taped ones to the image precision (~1 GSD)
+    X = np.array([r.residuals.loc[k, ["dx_m", "dy_m", "dz_m"]].to_numpy(float) for k in range(len(gcps))])
+    est = X + np.array([g.xyz for g in gcps])  # triangulated positions in the site CRS
+    for a, b, d in edges:
+        ia, ib = int(a[1:]), int(b[1:])
+        assert np.linalg.norm(est[ia] - est[ib]) == pytest.approx(d, abs=2 * GSD)
+    assert r.report["method"] == "tape_horn"
