@@ -5,8 +5,9 @@ al. (2016) used with a band width of 15 cells:
 
 1. block-average each feature to ``bandwidth`` x the cell size, then interpolate it back
    to the full grid with a cubic B-spline (a smooth version of the feature);
-2. in every 3x3 window compute the variance of the smoothed feature vectors, i.e. the
-   mean squared feature-space distance to the window centroid;
+2. in every 3x3 window compute the variance of the nine feature-space (Euclidean)
+   distances of the smoothed feature vectors to the window centroid (METHODS.md 2.2.5;
+   SAGA's variance grid is the variance of such distances too);
 3. a seed is a cell whose variance is <= that of all 8 neighbours; a connected plateau of
    such cells gives one seed (its first cell in row-major order).
 
@@ -39,14 +40,23 @@ def _bandwidth_smooth(layer: np.ndarray, bandwidth: int) -> np.ndarray:
 
 
 def local_feature_variance(features: np.ndarray, bandwidth: int) -> np.ndarray:
-    """Variance of the band-width-smoothed feature vectors in each 3x3 window."""
-    var = np.zeros(features.shape[:2], dtype=np.float64)
-    for k in range(features.shape[-1]):
-        s = _bandwidth_smooth(features[..., k], bandwidth).astype(np.float64)
-        m1 = ndimage.uniform_filter(s, size=3, mode="nearest")
-        m2 = ndimage.uniform_filter(s * s, size=3, mode="nearest")
-        var += np.maximum(m2 - m1 * m1, 0.0)
-    return var
+    """Variance of the distances of the band-width-smoothed feature vectors to their 3x3 centroid.
+
+    The grid border is extended by replication.  Memory: the smoothed stack plus a few
+    N-sized arrays (the nine distances are accumulated, not stored).  O(9 N k).
+    """
+    rows, cols, k = features.shape
+    smooth = np.stack([_bandwidth_smooth(features[..., j], bandwidth) for j in range(k)], axis=-1).astype(np.float64)
+    centroid = np.stack([ndimage.uniform_filter(smooth[..., j], size=3, mode="nearest") for j in range(k)], axis=-1)
+    padded = np.pad(smooth, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    s1 = np.zeros((rows, cols))
+    s2 = np.zeros((rows, cols))
+    for dr in (0, 1, 2):
+        for dc in (0, 1, 2):
+            d = np.sqrt(np.sum((padded[dr:dr + rows, dc:dc + cols] - centroid) ** 2, axis=-1))
+            s1 += d
+            s2 += d * d
+    return np.maximum(s2 / 9.0 - (s1 / 9.0) ** 2, 0.0)
 
 
 def generate_seeds(features: np.ndarray, valid: np.ndarray, bandwidth: int) -> np.ndarray:
