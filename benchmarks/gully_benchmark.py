@@ -109,12 +109,29 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     write_raster(out / "gully_map.tif", res.gully.astype(np.uint8), grid, nodata=255)
     write_vector(res.lines, out / "gully_network.gpkg")
     write_vector(res.polygons, out / "gully_polygons.gpkg")
+    res.network.save(out / "network.npz")
     t_write = time.perf_counter() - t1
     print(json.dumps({
         "read_s": t_read, "write_s": t_write, **res.timings_s,
         "network_length_m": float(res.lines["length_m"].sum()), "n_gullies": len(res.polygons),
         "paths_in_pit": res.network.n_paths_not_at_outlet(),
     }))
+
+
+def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
+    """The gully_sensitivity rule's work (3 sigmas x 3 thresholds), in a child process."""
+    sys.path.insert(0, str(REPO / "src"))
+    from kitegully.gully.network import GullyNetwork
+    from kitegully.gully.sensitivity import sensitivity_table
+    from kitegully.io.raster import read_raster
+
+    t0 = time.perf_counter()
+    dem, grid = read_raster(dem_path)
+    depth, _ = read_raster(Path(out_dir) / "depth.tif")
+    net = GullyNetwork.load(Path(out_dir) / "network.npz")
+    sensitivity_table(dem, grid, net, [5.0, 10.0, 20.0], [0.15, 0.25, 0.5], 1.0, 15.0, 8, 4.0,
+                      workers=threads, known_depths={10.0: depth})
+    print(json.dumps({"sensitivity_s": time.perf_counter() - t0}))
 
 
 # --------------------------------------------------------------------------- GRASS and pysheds
@@ -207,9 +224,13 @@ def main() -> None:
     ap.add_argument("--skip-scipy", action="store_true", help="skip the scipy.ndimage.gaussian_filter timing")
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "gully_benchmark.md"))
     ap.add_argument("--stage-child", nargs=3, metavar=("DEM", "HEADS", "OUTDIR"), help=argparse.SUPPRESS)
+    ap.add_argument("--sens-child", nargs=2, metavar=("DEM", "OUTDIR"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.stage_child:
         run_stage(*args.stage_child, threads=args.threads)
+        return
+    if args.sens_child:
+        run_sensitivity(*args.sens_child, threads=args.threads)
         return
 
     sys.path.insert(0, str(REPO / "src"))
@@ -255,6 +276,15 @@ def main() -> None:
         say(f"- wall time {wall:.1f} s (target < 180 s), peak memory {peak_rss_children_gb():.2f} GB (target < 8 GB)")
         say("- steps (s): " + ", ".join(f"{k[:-2]} {v:.1f}" for k, v in info.items() if k.endswith("_s")))
         say(f"- {info['n_gullies']} gullies, traced network {info['network_length_m']:.0f} m, paths ending in a pit: {info['paths_in_pit']}")
+        t0 = time.perf_counter()
+        p = subprocess.run([sys.executable, __file__, "--threads", str(args.threads), "--sens-child", str(dem_tif), str(tmp / "out")],
+                           capture_output=True, text=True)
+        if p.returncode != 0:
+            raise SystemExit(f"sensitivity run failed:\n{p.stderr[-3000:]}")
+        wall_s = time.perf_counter() - t0
+        say(f"- sensitivity table (3 sigmas x 3 thresholds, depth at 10 m reused): wall time {wall_s:.1f} s, "
+            f"peak memory of any child so far {peak_rss_children_gb():.2f} GB")
+        say(f"- mapping + sensitivity: {wall + wall_s:.1f} s")
         say("")
 
         # 2. smoothing: ours vs scipy.ndimage.gaussian_filter

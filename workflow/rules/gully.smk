@@ -141,6 +141,7 @@ if "gully" in config:
         input:
             unpack(lambda wc: {**({"reference": GULLY_REFERENCE} if GULLY_REFERENCE else {}), **GULLY_TRUTH}),
             dem=mapping_dem(),
+            depth=rules.gully_map.output.depth,
             network_cells=rules.gully_map.output.network_cells,
         output:
             table=report(result("gully", "gully_sensitivity.csv"), caption=caption("gully_sensitivity"), category=GULLY_CAT),

@@ -15,6 +15,7 @@ cfg = snakemake.params.cfg
 crs = snakemake.params.crs
 dem, grid = read_raster(snakemake.input.dem)
 net = GullyNetwork.load(snakemake.input.network_cells)
+depth, _ = read_raster(snakemake.input.depth)  # the stage's own depth map at sigma_m
 reference = read_vector(snakemake.input.reference, crs=crs) if getattr(snakemake.input, "reference", None) else None
 truth = None
 if getattr(snakemake.input, "truth", None):
@@ -24,6 +25,6 @@ table = sensitivity_table(
     cfg["min_patch_volume_m3"], cfg["buffer_m"], cfg["connectivity"], cfg["truncate_sigmas"],
     reference=reference, tolerance_m=cfg["validation"]["tolerance_m"],
     domain=footprint(np.isfinite(dem), grid) if reference is not None else None,
-    truth_mask=truth, workers=snakemake.threads,
+    truth_mask=truth, workers=snakemake.threads, known_depths={float(cfg["sigma_m"]): depth},
 )
 write_table(table, snakemake.output.table, floatfmt=".3g")

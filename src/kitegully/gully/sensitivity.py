@@ -33,6 +33,7 @@ def sensitivity_table(
     domain=None,
     truth_mask: np.ndarray | None = None,
     workers: int = 1,
+    known_depths: dict[float, np.ndarray] | None = None,
 ) -> pd.DataFrame:
     """Gully area, volume and (optionally) network and area scores for every (σ, threshold).
 
@@ -48,12 +49,16 @@ def sensitivity_table(
 
     Notes
     -----
-    One FFT smoothing per σ (O(n log n)) and O(n) per threshold.
+    One FFT smoothing per σ (O(n log n)) and O(n) per threshold; depth maps given in
+    ``known_depths`` (σ in m → depth map, e.g. the stage's own depth.tif) are reused.
     """
     buf = buffer_mask(network.mask(), grid.cell, buffer_m)
     rows = []
     for sigma in sigmas_m:
-        _, depth = depth_map(dem, grid.cell, sigma, truncate, workers)
+        if known_depths and float(sigma) in known_depths:
+            depth = known_depths[float(sigma)]
+        else:
+            _, depth = depth_map(dem, grid.cell, sigma, truncate, workers)
         for thr in thresholds_m:
             labels, _ = depth_patches(depth, grid.cell, thr, min_volume_m3, connectivity)
             gully = final_map(labels, buf)

@@ -55,18 +55,18 @@ def _convolve_axis(a: np.ndarray, kernel: np.ndarray, axis: int, out: np.ndarray
     n = a.shape[axis]
     radius = kernel.size // 2
     nfft = sfft.next_fast_len(n + 2 * radius, real=True)
-    h = _transfer(kernel, nfft)
+    h = _transfer(kernel, nfft).astype(np.complex64 if out.dtype == np.float32 else np.complex128)
     other = a.shape[1 - axis]
-    step = max(1, int(_BLOCK_BYTES // (16 * (nfft // 2 + 1))))
+    step = max(1, int(_BLOCK_BYTES // (2 * out.itemsize * (nfft // 2 + 1))))
     for s in range(0, other, step):
         e = min(other, s + step)
         if axis == 1:
-            block = np.asarray(a[s:e, :], dtype=np.float64)
+            block = np.asarray(a[s:e, :], dtype=out.dtype)
             spec = sfft.rfft(block, n=nfft, axis=1, workers=workers)
             spec *= h[None, :]
             out[s:e, :] = sfft.irfft(spec, n=nfft, axis=1, workers=workers)[:, :n]
         else:
-            block = np.ascontiguousarray(a[:, s:e], dtype=np.float64)
+            block = np.ascontiguousarray(a[:, s:e], dtype=out.dtype)
             spec = sfft.rfft(block, n=nfft, axis=0, workers=workers)
             spec *= h[:, None]
             out[:, s:e] = sfft.irfft(spec, n=nfft, axis=0, workers=workers)[:n, :]
@@ -106,6 +106,7 @@ def gaussian_smooth_fft(
     workers: int = 1,
     min_weight: float = 1e-3,
     linear_edges: bool = True,
+    dtype: type = np.float32,
 ) -> np.ndarray:
     """Smooth a DEM with a Gaussian by FFT convolution; NaN cells are ignored.
 
@@ -129,6 +130,11 @@ def gaussian_smooth_fft(
         at the edge of a 2 % slope with σ = 10 m, enough for a false gully). The
         correction subtracts ``ĝ·(x̄ − x)`` with ``ĝ`` the smoothed gradient of the DEM;
         it is exact on planes and zero where the window is full.
+    dtype : numpy float type
+        Precision of the FFT work arrays. float32 (default) halves time and memory; on
+        valid cells it differs from float64 by < 2e-5 m (the float32 resolution of
+        elevations of a few hundred metres), since elevations are taken relative to
+        their mean.
 
     Returns
     -------
@@ -137,7 +143,7 @@ def gaussian_smooth_fft(
 
     Notes
     -----
-    Complexity O(n log n) for n = H·W cells. Memory: three float64 work arrays of the
+    Complexity O(n log n) for n = H·W cells. Memory: three work arrays of the
     grid size plus one block spectrum (64 MB). With no nodata the weight image and the
     centroids are separable and come from 1-D convolutions; the edge correction costs
     two more 2-D convolutions (gradient), or four with nodata.
@@ -154,17 +160,17 @@ def gaussian_smooth_fft(
     kernel = gaussian_kernel_1d(sigma_cells, truncate)
     # Work relative to the mean elevation: better precision of the FFT sums.
     offset = float(np.mean(z[valid], dtype=np.float64))
-    work = np.empty((h, w), dtype=np.float64)
-    a = np.where(valid, z - offset, 0.0).astype(np.float64)
+    work = np.empty((h, w), dtype=dtype)
+    a = np.where(valid, z - offset, 0.0).astype(dtype)
     _conv2(a, kernel, work, workers)
     if full:
         wr = np.empty((1, w))
         wc = np.empty((h, 1))
         _convolve_axis(np.ones((1, w)), kernel, 1, wr, workers)
         _convolve_axis(np.ones((h, 1)), kernel, 0, wc, workers)
-        den = wc * wr  # separable weight image
+        den = (wc * wr).astype(dtype)  # separable weight image
     else:
-        den = _conv2(valid.astype(np.float64), kernel, work, workers)
+        den = _conv2(valid.astype(dtype), kernel, work, workers)
     with np.errstate(invalid="ignore", divide="ignore"):
         zs = (a / den).astype(np.float32)
     if linear_edges:
@@ -190,7 +196,7 @@ def gaussian_smooth_fft(
             else:
                 idx = np.arange(h if axis == 0 else w, dtype=np.float64)
                 coord = np.broadcast_to(idx[:, None] if axis == 0 else idx[None, :], (h, w))
-                c = np.where(valid, coord, 0.0)
+                c = np.where(valid, coord, 0.0).astype(dtype)
                 _conv2(c, kernel, work, workers)
                 with np.errstate(invalid="ignore", divide="ignore"):
                     c /= den
