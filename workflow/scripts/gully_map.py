@@ -18,7 +18,7 @@ check_dem(dem, snakemake.input.dem, grid.crs, snakemake.params.crs)
 if snakemake.params.dem_source == "truth_plus_noise":
     log.warning("mapping on the truth-plus-noise stand-in DEM: NOT the photogrammetric DSM (gully.dem)")
 hx, hy = read_heads(snakemake.input.heads, snakemake.params.crs)
-res = map_gullies(dem.astype(np.float32), grid, hx, hy, GullyParams.from_config(cfg), workers=snakemake.threads)
+res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, GullyParams.from_config(cfg), workers=snakemake.threads)
 check_heads_on_dem(res.heads_inside, snakemake.input.heads)
 if (~res.heads_inside).any():
     log.warning("%d of %d gully heads are off the DEM and were skipped", int((~res.heads_inside).sum()), hx.size)
