@@ -25,7 +25,6 @@ from kitegully.georef.geometry import camera_centres, rotvec_to_matrix
 from kitegully.georef.model import ModelIndex, write_block_to_reconstruction
 from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.tables import write_table
-from kitegully.io.vectors import write_vector
 
 
 def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, offset: np.ndarray, out_dir: str | Path) -> pycolmap.Reconstruction:
@@ -60,16 +59,6 @@ def clean_json(o):
     if isinstance(o, (float, np.floating)):
         return float(o) if np.isfinite(o) else None
     return o
-
-
-def _json_default(o):
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return None if not np.isfinite(o) else float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o))
 
 
 def calibration_table(start: Block, adjusted: Block, index: ModelIndex, rec: pycolmap.Reconstruction) -> pd.DataFrame:
