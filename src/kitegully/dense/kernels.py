@@ -232,43 +232,63 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
     n = m * m
     min_ss = n * min_std * min_std
     for i in prange(H):
-        buf = np.empty(n, dtype=np.float64)
+        col1 = np.empty(W, dtype=np.float64)
+        col2 = np.empty(W, dtype=np.float64)
+        colc = np.empty(W, dtype=np.int64)
+        mean = np.empty((V, W), dtype=np.float64)
+        inv = np.empty((V, W), dtype=np.float64)
         acc = np.empty(n, dtype=np.float64)
         for k in range(K):
             for j in range(W):
                 score[k, i, j] = np.nan
                 nviews[k, i, j] = 0
-                if i < half or j < half or i >= H - half or j >= W - half:
-                    continue
+            if i < half or i >= H - half:
+                continue
+            # window mean and 1/norm of every view by column sums and a sliding window: O(W·m)
+            for v in range(V):
+                for j in range(W):
+                    s1 = 0.0
+                    s2 = 0.0
+                    c = 0
+                    for a in range(i - half, i + half + 1):
+                        x = stack[k, v, a, j]
+                        if np.isfinite(x):
+                            s1 += x
+                            s2 += x * x
+                            c += 1
+                    col1[j] = s1
+                    col2[j] = s2
+                    colc[j] = c
+                s1 = 0.0
+                s2 = 0.0
+                c = 0
+                for j in range(W):
+                    s1 += col1[j]
+                    s2 += col2[j]
+                    c += colc[j]
+                    if j >= m:
+                        s1 -= col1[j - m]
+                        s2 -= col2[j - m]
+                        c -= colc[j - m]
+                    if j >= m - 1:
+                        jc = j - half
+                        mu = s1 / n
+                        ss = s2 - n * mu * mu
+                        mean[v, jc] = mu
+                        inv[v, jc] = 1.0 / np.sqrt(ss) if (c == n and ss >= min_ss and ss > 0.0) else 0.0
+            for j in range(half, W - half):
                 acc[:] = 0.0
                 nv = 0
                 for v in range(V):
+                    iv = inv[v, j]
+                    if iv == 0.0:
+                        continue
+                    mu = mean[v, j]
                     q = 0
-                    s = 0.0
-                    ok = True
                     for a in range(i - half, i + half + 1):
                         for b in range(j - half, j + half + 1):
-                            x = stack[k, v, a, b]
-                            if not np.isfinite(x):
-                                ok = False
-                                break
-                            buf[q] = x
-                            s += x
+                            acc[q] += (stack[k, v, a, b] - mu) * iv
                             q += 1
-                        if not ok:
-                            break
-                    if not ok:
-                        continue
-                    mean = s / n
-                    ss = 0.0
-                    for q in range(n):
-                        buf[q] -= mean
-                        ss += buf[q] * buf[q]
-                    if ss < min_ss or ss <= 0.0:
-                        continue
-                    inv = 1.0 / np.sqrt(ss)
-                    for q in range(n):
-                        acc[q] += buf[q] * inv
                     nv += 1
                 nviews[k, i, j] = nv
                 if nv >= 2:
