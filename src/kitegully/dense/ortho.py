@@ -59,8 +59,9 @@ def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 
     if not np.isfinite(filled).any():
         raise ValueError("orthophoto: the DSM has no valid cell")
     zloc = filled - views.offset[2]
-    cache = PyramidCache(views, max_cached_images, arrays)
-    nb = cache.level(0, 0, colour=True).shape[2]
+    finest = int(view_levels(views, list(range(len(views.images))), float(np.median(zloc)), ocell).min())
+    cache = PyramidCache(views, max_cached_images, arrays, min_level=finest)
+    nb = cache.level(0, finest, colour=True).shape[2]
     out = np.zeros((nb, og.height, og.width), np.uint8)
     source = np.full((og.height, og.width), -1, np.int16)
     x0l, y0l = grid.x0 - views.offset[0], grid.y0 - views.offset[1]

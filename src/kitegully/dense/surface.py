@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kitegully import InputError
-from kitegully.dense.matching import MatchParams, match_tile, visible_views
+from kitegully.dense.matching import MatchParams, match_tile, view_levels, visible_views
 from kitegully.dense.views import PyramidCache, ViewSet
 from kitegully.io.raster import GridSpec
 
@@ -76,7 +76,9 @@ def dense_surface(views: ViewSet, grid: GridSpec, params: MatchParams, tile_cell
     f = 2 ** (params.levels - 1)
     T = max(f, int(np.ceil(tile_cells / f)) * f)
     O = int(np.ceil(overlap_cells / f)) * f
-    cache = PyramidCache(views, max_cached_images, arrays)
+    zmed = float(np.median(views.sparse_points[:, 2])) if len(views.sparse_points) else 0.0
+    finest = int(view_levels(views, list(range(len(views.images))), zmed, grid.cell).min())
+    cache = PyramidCache(views, max_cached_images, arrays, min_level=finest)
     dsm = np.full((grid.height, grid.width), np.nan, np.float32)
     ncc = np.full_like(dsm, np.nan)
     nviews = np.zeros(dsm.shape, np.int16)

@@ -219,16 +219,19 @@ def grey(img: np.ndarray) -> np.ndarray:
 class PyramidCache:
     """Least-recently-used cache of image pyramids (greyscale, optionally colour).
 
-    ``levels(i, s, colour)`` returns the pyramid level ``s`` of image ``i``. At most
-    ``max_images`` images are kept, which bounds memory whatever the number of photos.
+    ``level(i, s, colour)`` returns the pyramid level ``s`` of image ``i``. At most
+    ``max_images`` images are kept, which bounds memory whatever the number of photos;
+    levels finer than ``min_level`` (the finest the caller needs) are not kept.
     Images may also be given in memory (``arrays``), e.g. by tests.
     """
 
-    def __init__(self, views: ViewSet, max_images: int = 32, arrays: list[np.ndarray] | None = None):
+    def __init__(self, views: ViewSet, max_images: int = 32, arrays: list[np.ndarray] | None = None,
+                 min_level: int = 0):
         self.views = views
+        self.min_level = max(0, int(min_level))
         self.max_images = max(1, int(max_images))
         self.arrays = arrays
-        self._cache: OrderedDict[tuple[int, bool], list[np.ndarray]] = OrderedDict()
+        self._cache: OrderedDict[tuple[int, bool], list[np.ndarray | None]] = OrderedDict()
 
     def _base(self, i: int) -> np.ndarray:
         if self.arrays is not None:
@@ -241,9 +244,15 @@ class PyramidCache:
         return img
 
     def level(self, i: int, s: int, colour: bool = False) -> np.ndarray:
+        """Pyramid level ``s`` of image ``i`` (grey, or all bands with ``colour``).
+
+        Levels finer than ``min_level`` are dropped after the pyramid is built (an image
+        is re-read in the rare case such a level is asked for), so a cached image costs
+        little more than the levels in use.
+        """
         key = (i, colour)
         pyr = self._cache.get(key)
-        if pyr is None:
+        if pyr is None or pyr[min(s, len(pyr) - 1)] is None:
             base = self._base(i)
             pyr = [np.ascontiguousarray(base if colour else grey(base), dtype=np.float32)]
             self._cache[key] = pyr
@@ -253,4 +262,6 @@ class PyramidCache:
             self._cache.move_to_end(key)
         while len(pyr) <= s:
             pyr.append(np.ascontiguousarray(downsample2(pyr[-1])))
+        for j in range(min(self.min_level, len(pyr) - 1)):
+            pyr[j] = None
         return pyr[s]
