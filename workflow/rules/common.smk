@@ -34,8 +34,15 @@ def benchfile(stage, name):
 
 
 def add_targets(*paths):
-    """Register final outputs of a stage for rule `all`."""
-    TARGETS.extend(str(p) for p in paths)
+    """Register final outputs of a stage for rule `all`.
+
+    Accepts paths and (nested) lists of paths such as a rule's ``output`` Namedlist.
+    """
+    for p in paths:
+        if isinstance(p, (str, Path)):
+            TARGETS.append(str(p))
+        else:
+            add_targets(*p)
 
 
 def all_targets():
