@@ -1,7 +1,7 @@
 """Rule gully_standin_dem: the twin's truth DTM plus seeded correlated noise (NOT a photogrammetric DSM)."""
 
 from kitegully.gully.inputs import check_dem
-from kitegully.gully.standin import noisy_dem, standin_seed
+from kitegully.gully.standin import noisy_dem
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.logs import setup_script_logging
 
@@ -9,7 +9,7 @@ log = setup_script_logging(snakemake.log[0])
 noise = snakemake.params.noise
 dtm, grid = read_raster(snakemake.input.dtm)
 check_dem(dtm, snakemake.input.dtm)
-dem = noisy_dem(dtm, grid.cell, noise["noise_sd_m"], noise["noise_correlation_m"], standin_seed(snakemake.params.seed))
+dem = noisy_dem(dtm, grid.cell, noise["noise_sd_m"], noise["noise_correlation_m"], snakemake.params.seed)
 write_raster(
     snakemake.output.dem, dem, grid,
     tags={"SOURCE": "truth DTM + noise: evaluation stand-in, NOT the photogrammetric DSM"},

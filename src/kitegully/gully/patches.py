@@ -59,13 +59,14 @@ def depth_patches(
     with np.errstate(invalid="ignore"):
         mask = depth > threshold_m
     labels, n = label_mask(mask, connectivity)
-    flat = labels.ravel()
-    d = np.nan_to_num(depth.ravel(), nan=0.0).astype(np.float64)
-    counts = np.bincount(flat, minlength=n + 1)
-    volume = np.bincount(flat, weights=d, minlength=n + 1) * cell_m**2
+    # Only the labelled cells (a few % of the grid) enter the per-patch sums.
+    inside = np.flatnonzero(labels.ravel())
+    lab = labels.ravel()[inside]
+    d = depth.ravel()[inside].astype(np.float64)  # > threshold, hence finite
+    counts = np.bincount(lab, minlength=n + 1)
+    volume = np.bincount(lab, weights=d, minlength=n + 1) * cell_m**2
     maxd = np.zeros(n + 1)
-    inside = flat > 0
-    np.maximum.at(maxd, flat[inside], d[inside])
+    np.maximum.at(maxd, lab, d)
     keep = volume >= min_volume_m3
     keep[0] = False
     new_id = np.zeros(n + 1, dtype=np.int32)

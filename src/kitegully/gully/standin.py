@@ -7,26 +7,19 @@ rescaled to the requested standard deviation.
 
 from __future__ import annotations
 
-import zlib
-
 import numpy as np
 import scipy.ndimage as ndi
 
-#: Tag mixed into the master seed so this stage's draws differ from other stages'.
-SEED_TAG = zlib.crc32(b"gully.standin_dem")
+from kitegully.seeds import rng_for
 
 
-def standin_seed(master_seed: int) -> np.random.SeedSequence:
-    """Seed sequence of the stand-in noise derived from the master seed."""
-    return np.random.SeedSequence([int(master_seed), SEED_TAG])
-
-
-def noisy_dem(dtm: np.ndarray, cell_m: float, sd_m: float, correlation_m: float, seed: np.random.SeedSequence) -> np.ndarray:
+def noisy_dem(dtm: np.ndarray, cell_m: float, sd_m: float, correlation_m: float, seed: int) -> np.ndarray:
     """``dtm`` plus spatially correlated Gaussian noise of standard deviation ``sd_m``.
 
+    The generator is ``rng_for(seed, "gully", "standin_dem")`` (master seed of the config).
     Complexity O(n) (separable Gaussian filter); NaN cells stay NaN.
     """
-    rng = np.random.default_rng(seed)
+    rng = rng_for(seed, "gully", "standin_dem")
     noise = rng.standard_normal(dtm.shape, dtype=np.float32)
     if correlation_m > 0:
         ndi.gaussian_filter(noise, correlation_m / cell_m, output=noise, mode="reflect")
