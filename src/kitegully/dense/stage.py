@@ -57,10 +57,22 @@ def site_grid(views: ViewSet, cfg: Mapping[str, Any], crs: str) -> GridSpec:
     return GridSpec(float(x0), float(y0), cell, w, h, crs)
 
 
-def _show(ax, img, grid: GridSpec, max_px: int, **kw):
+NODATA_COLOUR = "#e8b4b4"
+
+
+def _show(ax, img, grid: GridSpec, max_px: int, cmap: str = "gray", **kw):
+    """Decimated raster in map coordinates; nodata cells in a pale red with a legend entry."""
+    import matplotlib
+    from matplotlib.patches import Patch
+
     step = max(1, int(np.ceil(max(img.shape[-2:]) / max_px)))
     xmin, ymin, xmax, ymax = grid.bounds
-    return ax.imshow(img[..., ::step, ::step], extent=(xmin, xmax, ymin, ymax), interpolation="nearest", **kw)
+    cm = matplotlib.colormaps[cmap].copy()
+    cm.set_bad(NODATA_COLOUR)
+    im = ax.imshow(img[..., ::step, ::step], extent=(xmin, xmax, ymin, ymax), interpolation="nearest", cmap=cm, **kw)
+    if np.isnan(img).any():
+        ax.legend(handles=[Patch(color=NODATA_COLOUR, label="no elevation (masked)")], loc="lower left", fontsize=7)
+    return im
 
 
 def shading_figures(dsm: np.ndarray, grid: GridSpec, cfg: Mapping[str, Any], hill_png: str | Path,
@@ -69,7 +81,7 @@ def shading_figures(dsm: np.ndarray, grid: GridSpec, cfg: Mapping[str, Any], hil
     sh = cfg["shading"]
     hs = hillshade(dsm, grid.cell, sh["azimuth_deg"], sh["altitude_deg"])
     fig, ax = new_figure(figsize=(7, 6))
-    im = _show(ax, hs, grid, cfg["figure_max_px"], cmap="gray", vmin=0, vmax=1)
+    im = _show(ax, np.where(np.isfinite(dsm), hs, np.nan), grid, cfg["figure_max_px"], vmin=0, vmax=1)
     ax.set(xlabel="Easting (m)", ylabel="Northing (m)",
            title=f"DSM hillshade (sun az {sh['azimuth_deg']:g}°, alt {sh['altitude_deg']:g}°), cell {grid.cell:g} m")
     ax.ticklabel_format(useOffset=False, style="plain")
@@ -78,7 +90,7 @@ def shading_figures(dsm: np.ndarray, grid: GridSpec, cfg: Mapping[str, Any], hil
     op = openness(dsm, grid.cell, sh["openness_radius_m"])
     fig, ax = new_figure(figsize=(7, 6))
     lo, hi = np.nanpercentile(op, [2, 98]) if np.isfinite(op).any() else (60, 90)
-    im = _show(ax, op, grid, cfg["figure_max_px"], cmap="gray", vmin=lo, vmax=hi)
+    im = _show(ax, op, grid, cfg["figure_max_px"], vmin=lo, vmax=hi)
     ax.set(xlabel="Easting (m)", ylabel="Northing (m)",
            title=f"Positive openness within {sh['openness_radius_m']:g} m (sky-view-like shading)")
     ax.ticklabel_format(useOffset=False, style="plain")
