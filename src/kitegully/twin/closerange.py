@@ -35,7 +35,6 @@ Cost: O(N * K) for N cells, K shadow-ray steps (about depth / tan(sun elevation)
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +42,7 @@ import pandas as pd
 from scipy import ndimage
 
 from kitegully.io.raster import GridSpec
+from kitegully.seeds import rng_for
 
 
 @dataclass
@@ -78,8 +78,8 @@ class CloseRangeScene:
 
 
 def scene_rng(seed: int, name: str) -> np.random.Generator:
-    """Independent random stream per scene, from the master seed."""
-    return np.random.default_rng([int(seed), zlib.crc32(b"obia-closerange"), zlib.crc32(name.encode())])
+    """Independent random stream per scene, from the master seed (``kitegully.seeds.rng_for``)."""
+    return rng_for(seed, "obia-closerange", name)
 
 
 def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], sigma_cells: float) -> np.ndarray:
