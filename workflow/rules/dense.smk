@@ -8,6 +8,7 @@ if "dense" in config and "georef" in config and "sfm" in config:
             model=result("georef", "model"),
             transform=result("georef", "transform.json"),
             sfm_work=result("sfm", "work"),  # images/ holds the prepared copies the model names
+            **({"site": result("twin", "site.json")} if config["dense"]["extent"] == "site" else {}),
         output:
             dsm=result("dense", "dsm.tif"),
             correlation=result("dense", "correlation.tif"),

@@ -34,11 +34,28 @@ def peak_memory_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def site_grid(views: ViewSet, cfg: Mapping[str, Any], crs: str) -> GridSpec:
-    """DSM grid: the configured extent, or the trimmed tie-point extent; origin snapped to
+def read_site_extent(site_json: str | Path) -> dict[str, float]:
+    """``extent`` (xmin, ymin, xmax, ymax) of a twin's ``site.json`` (what a planner knows)."""
+    import json
+
+    path = Path(site_json)
+    try:
+        ext = json.loads(path.read_text(encoding="utf-8"))["extent"]
+        return {k: float(ext[k]) for k in ("xmin", "ymin", "xmax", "ymax")}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{path}: cannot read extent xmin, ymin, xmax, ymax ({exc})") from None
+
+
+def site_grid(views: ViewSet, cfg: Mapping[str, Any], crs: str, site_json: str | Path | None = None) -> GridSpec:
+    """DSM grid: the configured extent, the site's extent (``extent: site``, from
+    ``site_json``) or the trimmed tie-point extent (``extent: null``); origin snapped to
     whole multiples of the cell (so it aligns with any grid of the same cell)."""
     cell = float(cfg["cell_m"])
     ext = cfg["extent"]
+    if ext == "site":
+        if site_json is None:
+            raise InputError("dense.extent is 'site' but the site has no site.json (use null or an explicit extent)")
+        ext = read_site_extent(site_json)
     if ext is None:
         P = views.sparse_points
         if len(P) < 10:
@@ -99,7 +116,8 @@ def shading_figures(dsm: np.ndarray, grid: GridSpec, cfg: Mapping[str, Any], hil
 
 
 def run_dense_stage(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path, crs: str,
-                    cfg: Mapping[str, Any], threads: int, out: Mapping[str, str | Path]) -> dict:
+                    cfg: Mapping[str, Any], threads: int, out: Mapping[str, str | Path],
+                    site_json: str | Path | None = None) -> dict:
     """Run matching, orthophoto and shading; write the products named in ``out``
     (keys ``dsm, correlation, orthophoto, hillshade, openness, summary``). Returns the summary."""
     import numba
@@ -111,7 +129,7 @@ def run_dense_stage(model_dir: str | Path, transform_json: str | Path | None, im
         raise InputError(f"{model_dir}: not a COLMAP model folder (no images.bin or images.txt)")
     rec = pycolmap.Reconstruction(str(model_dir))
     views = views_from_reconstruction(rec, image_dir, read_offset(transform_json), where=str(model_dir))
-    grid = site_grid(views, cfg, crs)
+    grid = site_grid(views, cfg, crs, site_json)
     params = MatchParams.from_config(cfg["matching"])
     log.info("dense: %d images, grid %d x %d cells of %.3f m (%.2f ha), %d levels",
              len(views.images), grid.width, grid.height, grid.cell, grid.width * grid.height * grid.cell ** 2 / 1e4,
