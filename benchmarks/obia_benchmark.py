@@ -225,9 +225,9 @@ def main() -> None:
     seeds = generate_seeds(feats, valid, params.seed_bandwidth_cells)
     t_seeds = time.perf_counter() - t0
     t0 = time.perf_counter()
-    labels, _ = seeded_region_growing(feats, seeds, valid, params.position_weight)
+    labels, _ = seeded_region_growing(feats, seeds, valid, params.position_weight, params.growing_reference)
     t_grow = time.perf_counter() - t0
-    add("kitegully SRG (seeds + numba growing)", labels, t_seeds + t_grow, int(seeds.max()),
+    add(f"kitegully SRG (seeds + numba growing, reference={params.growing_reference})", labels, t_seeds + t_grow, int(seeds.max()),
         f"features+seeds {t_seeds:.2f} s, growing {t_grow:.2f} s")
 
     exe = ensure_saga(not args.no_install)

@@ -118,7 +118,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
                 if valid.any():
                     feats = normalise_features([rgb[0], rgb[1], rgb[2], slope], valid)
                     seeds = generate_seeds(feats, valid, params.seed_bandwidth_cells)
-                    segments, nseg = seeded_region_growing(feats, seeds, valid, params.position_weight)
+                    segments, nseg = seeded_region_growing(feats, seeds, valid, params.position_weight, params.growing_reference)
                     exg = excess_green(*rgb)
                     exg[~valid] = np.nan
                     feature = gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells) if params.segment_feature == "blurred" else exg

@@ -32,6 +32,7 @@ class ObiaParams:
     slope_window_cells: int = 5
     seed_bandwidth_cells: int = 15
     position_weight: float = 0.0
+    growing_reference: str = "mean"
     blur_sigma_cells: float = 1.0
     blur_radius_cells: int = 2
     hist_bins: int = 256
@@ -47,6 +48,7 @@ class ObiaParams:
             slope_window_cells=int(obia["features"]["slope_window_cells"]),
             seed_bandwidth_cells=int(obia["seeds"]["bandwidth_cells"]),
             position_weight=float(obia["growing"]["position_weight"]),
+            growing_reference=str(obia["growing"]["reference"]),
             blur_sigma_cells=float(obia["exg_blur"]["sigma_cells"]),
             blur_radius_cells=int(obia["exg_blur"]["radius_cells"]),
             hist_bins=int(obia["threshold"]["bins"]),
@@ -132,7 +134,7 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
     seeds = generate_seeds(feats, ok, params.seed_bandwidth_cells)
     t["seeds"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    segments, nseg = seeded_region_growing(feats, seeds, ok, params.position_weight)
+    segments, nseg = seeded_region_growing(feats, seeds, ok, params.position_weight, params.growing_reference)
     t["growing"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     exg = excess_green(red, green, blue)
