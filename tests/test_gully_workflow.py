@@ -118,3 +118,22 @@ def test_standin_log_says_not_photogrammetric(gully_run):
     log = (root / "logs" / "gully" / "standin_dem.log").read_text()
     assert "NOT the photogrammetric DSM" in log
     assert "NOT the photogrammetric DSM" in (root / "logs" / "gully" / "map.log").read_text()
+
+
+@pytest.mark.slow
+def test_gully_stage_on_the_real_tiny_twin(tmp_path):
+    """Twin rules + gully rules end to end on tiny_twin (the twin contract of issue 3)."""
+    out = tmp_path / "tiny_twin" / "gully"
+    targets = [str(out / n) for n in ("gully_summary.csv", "network_validation.csv", "gully_area_scores.csv")]
+    run_snakemake(SITE, tmp_path, targets, cores=2)
+    summary = dict(pd.read_csv(out / "gully_summary.csv").values)
+    assert summary["paths ending in a pit"] == "0"
+    assert int(summary["heads on the DEM"]) > 0
+    val = pd.read_csv(out / "network_validation.csv")
+    pct = dict(zip(val["category"], val["percent"]))
+    assert pct["good_fit"] + pct["false_negative"] == pytest.approx(100)
+    # the traced network must find a substantial part of the field network; the
+    # paper's target (>= 85 %) applies to the default site on the dense DSM
+    assert pct["good_fit"] > 50
+    area = pd.read_csv(out / "gully_area_scores.csv").set_index("map_variant")
+    assert area.loc["buffer_and_patches", "recall"] > 0.5
