@@ -40,26 +40,6 @@ def _bilinear(img, u, v):
             + a * ((1 - b) * img[i0 + 1, j0] + b * img[i0 + 1, j0 + 1]))
 
 
-@njit(cache=True, parallel=True)
-def sample_view_bands(img, R, C, p, level, xs, ys, Z, out):
-    """Resample an (h, w, B) image (pyramid ``level``) at ground points ``(xs[j], ys[i], Z[i, j])``
-    into ``out`` (B, H, W); NaN outside the image or behind the camera. O(H·W·B)."""
-    sc = 1.0 / (2.0 ** level)
-    nb = img.shape[2]
-    for i in prange(Z.shape[0]):
-        for j in range(Z.shape[1]):
-            z = Z[i, j]
-            ok = np.isfinite(z)
-            u = v = -1.0
-            if ok:
-                u, v, d = _project(R, C, p, xs[j], ys[i], z)
-                u = (u + 0.5) * sc - 0.5
-                v = (v + 0.5) * sc - 0.5
-                ok = d > 0 and u >= 0.0 and v >= 0.0 and u <= img.shape[1] - 1.0 and v <= img.shape[0] - 1.0
-            for b in range(nb):
-                out[b, i, j] = _bilinear(img[:, :, b], u, v) if ok else np.nan
-
-
 @njit(cache=True)
 def _sgm_direction(cost, dr, dc, p1, p2, total):
     H, W, K = cost.shape
@@ -296,3 +276,67 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
                     for q in range(n):
                         t += acc[q] * acc[q]
                     score[k, i, j] = (t - nv) / (nv * (nv - 1.0))
+
+
+@njit(cache=True, parallel=True)
+def best_view_ortho(imgs, Rs, Cs, Ps, levels, widths, heights, xs, ys, Z, dsm, x0, y0, cell, zmax, step,
+                    tolerance, out, source):
+    """True-orthophoto colours: for each ground point take the most nadir image that sees it.
+
+    For each cell the views are tried from the smallest off-nadir angle of the line of
+    sight up; the first one whose frame contains the point and whose line of sight is not
+    blocked by ``dsm`` (as :func:`occlusion_mask`) gives the colour (bilinear, pyramid
+    ``levels``). ``out`` (B, H, W) gets NaN and ``source`` −1 where no view qualifies.
+    Only the winning view's ray is usually marched: O(H·W·(V log V + L/step)).
+    """
+    V = len(imgs)
+    nb = out.shape[0]
+    for i in prange(Z.shape[0]):
+        cosang = np.empty(V, dtype=np.float64)
+        for j in range(Z.shape[1]):
+            source[i, j] = -1
+            for b in range(nb):
+                out[b, i, j] = np.nan
+            z = Z[i, j]
+            if not np.isfinite(z):
+                continue
+            for v in range(V):
+                dx = Cs[v, 0] - xs[j]
+                dy = Cs[v, 1] - ys[i]
+                dz = Cs[v, 2] - z
+                cosang[v] = dz / np.sqrt(dx * dx + dy * dy + dz * dz)
+            order = np.argsort(-cosang)
+            for t in range(V):
+                v = order[t]
+                if cosang[v] <= 0.0:
+                    break
+                u, w, d = _project(Rs[v], Cs[v], Ps[v], xs[j], ys[i], z)
+                if d <= 0.0 or u < 0.0 or w < 0.0 or u > widths[v] - 1.0 or w > heights[v] - 1.0:
+                    continue
+                # occlusion: march towards the camera until the ray is above zmax
+                dx = Cs[v, 0] - xs[j]
+                dy = Cs[v, 1] - ys[i]
+                hd = np.sqrt(dx * dx + dy * dy)
+                blocked = False
+                if hd > 1e-9:
+                    slope = (Cs[v, 2] - z) / hd
+                    s = step
+                    while s <= hd:
+                        zr = z + slope * s
+                        if zr > zmax:
+                            break
+                        zs = _height_nearest(dsm, x0, y0, cell, xs[j] + dx * s / hd, ys[i] + dy * s / hd)
+                        if np.isfinite(zs) and zs > zr + tolerance:
+                            blocked = True
+                            break
+                        s += step
+                if blocked:
+                    continue
+                sc = 1.0 / (2.0 ** levels[v])
+                img = imgs[v]
+                uu = (u + 0.5) * sc - 0.5
+                ww = (w + 0.5) * sc - 0.5
+                for b in range(nb):
+                    out[b, i, j] = _bilinear(img[:, :, b], uu, ww)
+                source[i, j] = v
+                break

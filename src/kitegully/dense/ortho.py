@@ -4,6 +4,7 @@ For each orthophoto cell the surface point comes from the DSM (holes filled with
 nearest valid elevation); among the images whose frame contains it and whose line of
 sight is not blocked by the DSM, the one with the smallest off-nadir angle wins, and its
 colour is resampled bilinearly from the pyramid level closest to the orthophoto cell.
+Views are tried in order of that angle, so usually only one line of sight is marched.
 """
 
 from __future__ import annotations
@@ -14,7 +15,9 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from kitegully.dense.kernels import occlusion_mask, sample_view_bands
+from numba.typed import List
+
+from kitegully.dense.kernels import best_view_ortho
 from kitegully.dense.matching import view_levels, visible_views
 from kitegully.dense.views import PyramidCache, ViewSet
 from kitegully.io.raster import GridSpec
@@ -81,24 +84,23 @@ def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 
             ys = y0l - (r0 * upsample + np.arange(h * upsample) + 0.5) * ocell
             zr = (float(zwin.min()), float(zwin.max()))
             idx = visible_views(views, (xs[0], xs[-1]), (ys[-1], ys[0]), zr)
-            best = np.full(zo.shape, -np.inf)
-            tile_out = np.zeros((nb,) + zo.shape, np.float32)
-            tile_src = np.full(zo.shape, -1, np.int16)
             levels = view_levels(views, idx, float(np.median(zo)), ocell)
-            buf = np.empty((nb,) + zo.shape, np.float32)
-            occ = np.empty(zo.shape, np.bool_)
+            imgs = List()
             for i, s in zip(idx, levels):
-                v = views.images[i]
-                img = cache.level(i, int(s), colour=True)
-                sample_view_bands(img, v.R, v.C, v.params(), int(s), xs, ys, zo, buf)
-                occlusion_mask(zwin, x0l + ca * grid.cell, y0l - ra * grid.cell, grid.cell, zr[1], xs, ys, zo,
-                               v.C, grid.cell / 2, occlusion_tolerance_m, occ)
-                dist = np.sqrt((v.C[0] - xs[None, :]) ** 2 + (v.C[1] - ys[:, None]) ** 2 + (v.C[2] - zo) ** 2)
-                score = (v.C[2] - zo) / dist
-                take = np.isfinite(buf[0]) & ~occ & (score > best)
-                best[take] = score[take]
-                tile_out[:, take] = buf[:, take]
-                tile_src[take] = i
+                imgs.append(cache.level(i, int(s), colour=True))
+            vv = [views.images[i] for i in idx]
+            tile_out = np.empty((nb,) + zo.shape, np.float32)
+            tile_k = np.empty(zo.shape, np.int64)
+            if idx:
+                best_view_ortho(
+                    imgs, np.ascontiguousarray([v.R for v in vv]), np.ascontiguousarray([v.C for v in vv]),
+                    np.ascontiguousarray([v.params() for v in vv]), levels.astype(np.int64),
+                    np.array([v.width for v in vv], np.int64), np.array([v.height for v in vv], np.int64),
+                    xs, ys, zo, zwin, x0l + ca * grid.cell, y0l - ra * grid.cell, grid.cell, zr[1], grid.cell,
+                    occlusion_tolerance_m, tile_out, tile_k)
+            else:
+                tile_k[:] = -1
+            tile_src = np.where(tile_k >= 0, np.asarray(idx + [-1], np.int64)[tile_k], -1).astype(np.int16)
             sl = (slice(r0 * upsample, (r0 + h) * upsample), slice(c0 * upsample, (c0 + w) * upsample))
             valid = tile_src >= 0
             out[(slice(None),) + sl] = np.where(valid, np.clip(np.rint(tile_out), 1, 255), 0).astype(np.uint8)
