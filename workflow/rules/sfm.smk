@@ -10,9 +10,21 @@ if "sfm" in config:
             return result("flight", "observed/images")
         return config["inputs"]["images_dir"]
 
+    def sfm_camera_log():
+        """Camera GPS log for spatial matching: [] (none), the twin flight's logger, or a path."""
+        log = config["sfm"]["matching"]["camera_log"]
+        if log is None:
+            return []
+        if log == "flight":
+            if not IS_TWIN:
+                raise WorkflowError("sfm.matching.camera_log: 'flight' is only valid on twin sites")
+            return [result("flight", "observed/camera_gps.gpx")]
+        return [log]
+
     rule sfm_reconstruct:
         input:
             images=sfm_images_dir(),
+            camera_log=sfm_camera_log(),
         output:
             work=directory(result("sfm", "work")),
             model=directory(result("sfm", "model")),
@@ -22,6 +34,7 @@ if "sfm" in config:
         params:
             sfm=config["sfm"],
             seed=config["seed"],
+            crs=config["site"]["crs"],
         threads: config["sfm"]["threads"]
         log:
             logfile("sfm", "sfm_reconstruct"),

@@ -16,4 +16,6 @@ run_sfm_stage(
     params=snakemake.params.sfm,
     seed=seed,
     threads=snakemake.threads,
+    camera_log=snakemake.input.camera_log[0] if snakemake.input.camera_log else None,
+    crs=snakemake.params.crs,
 )

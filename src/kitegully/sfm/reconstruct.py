@@ -18,6 +18,7 @@ import pycolmap
 
 from kitegully import InputError
 from kitegully.sfm.images import ImageInfo
+from kitegully.sfm.priors import write_position_priors
 
 log = logging.getLogger(__name__)
 
@@ -42,8 +43,12 @@ def extract_features(
     default_focal_factor: float,
     max_num_features: int,
     num_threads: int,
+    first_octave: int = -1,
 ) -> None:
     """SIFT features for every prepared image; one shared camera per image shape.
+
+    ``first_octave`` -1 doubles the image first (COLMAP's default, most features, about 4x
+    the cost); 0 starts at full resolution.
 
     The focal-length prior is the median EXIF focal length of the group (in SfM pixels),
     or ``default_focal_factor`` × the larger image side when EXIF lacks it.
@@ -55,6 +60,7 @@ def extract_features(
     ext.num_threads = num_threads
     ext.max_image_size = -1  # images are already downscaled by prepare_images
     ext.sift.max_num_features = max_num_features
+    ext.sift.first_octave = first_octave
     for (w, h), members in sorted(groups.items()):
         focals = np.array([m.focal_px for m in members], dtype=float)
         focals = focals[np.isfinite(focals)]
@@ -74,16 +80,40 @@ def extract_features(
         )
 
 
-def match_features(database: Path, n_images: int, method: str, overlap: int, exhaustive_max_images: int, num_threads: int) -> str:
-    """Match features: sequential by capture order, or exhaustive.
+def choose_matching_method(method: str, n_images: int, exhaustive_max_images: int, n_priors: int) -> str:
+    """Resolve ``auto``: exhaustive for small sets, spatial with GPS priors, else sequential."""
+    if method == "auto":
+        if n_images <= exhaustive_max_images:
+            return "exhaustive"
+        return "spatial" if n_priors >= 2 else "sequential"
+    if method == "spatial" and n_priors < 2:
+        raise InputError("sfm.matching.method is 'spatial' but fewer than two images have a GPS position (set sfm.matching.camera_log)")
+    if method not in ("exhaustive", "sequential", "spatial"):
+        raise InputError(f"sfm.matching.method: '{method}' is not one of auto, sequential, exhaustive, spatial")
+    return method
+
+
+def match_features(
+    database: Path,
+    n_images: int,
+    method: str,
+    overlap: int,
+    exhaustive_max_images: int,
+    num_threads: int,
+    n_priors: int = 0,
+    spatial_max_distance_m: float = 250.0,
+    spatial_max_neighbors: int = 20,
+) -> str:
+    """Match features: exhaustive, sequential by capture order, or spatial by GPS position.
 
     ``method="auto"`` matches exhaustively up to ``exhaustive_max_images`` images (cheap
-    and robust for small kite sets, where the flight path crosses itself) and
-    sequentially with ``overlap`` neighbours (quadratic overlap) above. Returns the
-    method used.
+    and robust for small kite sets, where the flight path crosses itself); above that,
+    spatially when position priors were written (each image with its
+    ``spatial_max_neighbors`` nearest images within ``spatial_max_distance_m``, in 3-D),
+    else sequentially with ``overlap`` neighbours (quadratic overlap). Exhaustive matching
+    costs O(n²) image pairs; spatial and sequential O(n·k). Returns the method used.
     """
-    if method == "auto":
-        method = "exhaustive" if n_images <= exhaustive_max_images else "sequential"
+    method = choose_matching_method(method, n_images, exhaustive_max_images, n_priors)
     mopt = pycolmap.FeatureMatchingOptions()
     mopt.num_threads = num_threads
     if method == "exhaustive":
@@ -94,8 +124,13 @@ def match_features(database: Path, n_images: int, method: str, overlap: int, exh
         popt.quadratic_overlap = True
         popt.num_threads = num_threads
         pycolmap.match_sequential(database, matching_options=mopt, pairing_options=popt, device=pycolmap.Device.cpu)
-    else:
-        raise InputError(f"sfm.matching.method: '{method}' is not one of auto, sequential, exhaustive")
+    else:  # spatial
+        popt = pycolmap.SpatialPairingOptions()
+        popt.ignore_z = False
+        popt.max_distance = spatial_max_distance_m
+        popt.max_num_neighbors = spatial_max_neighbors
+        popt.num_threads = num_threads
+        pycolmap.match_spatial(database, matching_options=mopt, pairing_options=popt, device=pycolmap.Device.cpu)
     return method
 
 
@@ -150,8 +185,12 @@ def run_sfm(
     params: dict,
     seed: int,
     num_threads: int,
+    positions: dict[str, np.ndarray] | None = None,
 ) -> tuple[pycolmap.Reconstruction, dict]:
-    """Features, matching and mapping; returns the largest model and timings (s)."""
+    """Features, matching and mapping; returns the largest model and timings (s).
+
+    ``positions`` (SfM file name → approximate camera position, m) enables spatial matching.
+    """
     image_dir, work_dir, model_dir = Path(image_dir), Path(work_dir), Path(model_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
     database = work_dir / "database.db"
@@ -161,16 +200,23 @@ def run_sfm(
     t0 = time.perf_counter()
     extract_features(
         database, image_dir, infos, params["camera_model"], params["default_focal_factor"],
-        params["max_num_features"], num_threads,
+        params["max_num_features"], num_threads, params["first_octave"],
     )
     t1 = time.perf_counter()
     m = params["matching"]
-    used = match_features(database, len(infos), m["method"], m["overlap"], m["exhaustive_max_images"], num_threads)
+    n_priors = write_position_priors(database, positions, m["gps_sigma_m"]) if positions else 0
+    used = match_features(
+        database, len(infos), m["method"], m["overlap"], m["exhaustive_max_images"], num_threads,
+        n_priors, m["spatial_max_distance_m"], m["spatial_max_neighbors"],
+    )
     t2 = time.perf_counter()
     rec = incremental_map(
         database, image_dir, model_dir, params["refine_principal_point"], params["min_num_matches"], seed, num_threads
     )
     t3 = time.perf_counter()
-    timings = {"features_s": t1 - t0, "matching_s": t2 - t1, "mapping_s": t3 - t2, "matching_method": used}
+    timings = {
+        "features_s": t1 - t0, "matching_s": t2 - t1, "mapping_s": t3 - t2, "matching_method": used,
+        "n_position_priors": n_priors,
+    }
     log.info("features %.1f s, matching (%s) %.1f s, mapping %.1f s", t1 - t0, used, t2 - t1, t3 - t2)
     return rec, timings

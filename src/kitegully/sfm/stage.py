@@ -11,6 +11,7 @@ from pathlib import Path
 from kitegully import InputError
 from kitegully.io.tables import write_table
 from kitegully.sfm.images import ImageInfo, list_images, prepare_images
+from kitegully.sfm.priors import positions_from_log
 from kitegully.sfm.reconstruct import run_sfm
 from kitegully.sfm.summary import image_table, model_summary
 
@@ -20,10 +21,13 @@ log = logging.getLogger(__name__)
 def run_sfm_stage(
     images_dir: str | Path, work_dir: str | Path, model_dir: str | Path, summary_json: str | Path,
     images_csv: str | Path, image_info_json: str | Path, params: dict, seed: int, threads: int,
+    camera_log: str | Path | None = None, crs: str | None = None,
 ) -> dict:
     """Prepare the images, run pycolmap and write ``summary.json`` and the image table.
 
-    ``params`` is the ``sfm`` config section. Returns the summary.
+    ``params`` is the ``sfm`` config section. ``camera_log`` (GPX/CSV of the camera's GPS
+    logger, positions in ``crs``) gives approximate positions for spatial matching.
+    Returns the summary.
     """
     t0 = time.perf_counter()
     work_dir = Path(work_dir)
@@ -33,7 +37,11 @@ def run_sfm_stage(
         params["jpeg_quality"],
     )
     t1 = time.perf_counter()
-    rec, timings = run_sfm(infos, work_dir / "images", work_dir, model_dir, params, seed, threads)
+    positions = None
+    if camera_log is not None:
+        m = params["matching"]
+        positions = positions_from_log(infos, camera_log, crs, m["log_time_offset_s"], m["log_max_gap_s"])
+    rec, timings = run_sfm(infos, work_dir / "images", work_dir, model_dir, params, seed, threads, positions)
     total = time.perf_counter() - t0
     summary = model_summary(rec, infos)
     if summary["images_left_out"]:
