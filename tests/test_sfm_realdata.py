@@ -19,8 +19,12 @@ from kitegully.sfm.stage import load_image_infos, run_sfm_stage
 PARAMS = {
     "image_frame": "stored", "max_image_size": 800, "skip_unreadable": False, "jpeg_quality": 95,
     "camera_model": "RADIAL", "default_focal_factor": 1.2, "max_num_features": 4096,
-    "refine_principal_point": False, "min_num_matches": 15,
-    "matching": {"method": "exhaustive", "overlap": 10, "exhaustive_max_images": 60}, "threads": 2,
+    "first_octave": -1, "refine_principal_point": False, "min_num_matches": 15,
+    "matching": {
+        "method": "exhaustive", "overlap": 10, "exhaustive_max_images": 60, "camera_log": None,
+        "log_time_offset_s": 0.0, "log_max_gap_s": 5.0, "gps_sigma_m": 3.0,
+        "spatial_max_distance_m": 250.0, "spatial_max_neighbors": 20,
+    }, "threads": 2,
 }
 
 
