@@ -76,3 +76,55 @@ def test_rasterize_polygons_cell_centres():
     m = rasterize_polygons([box(2, 2, 5, 4)], grid)
     assert m.sum() == 6
     assert m[6:8, 2:5].all()  # rows 6-7 are y 2..4
+
+
+# --- reference filter: heads within the DEM, catchment (paper Fig. 9b, METHODS.md 1.6) ---
+def test_scored_reference_head_outside_dem_only_drops_the_reach_above_the_first_tributary():
+    from kitegully.evaluate.network import scored_reference
+
+    main = LineString([(0, 0), (100, 0)])  # head at x = 0, outside the DEM below
+    trib = LineString([(50, 40), (50, 1.5)])  # stops 1.5 m short of the main channel
+    dem = box(10, -50, 200, 50)
+    sc, ns, counts = scored_reference([main, trib], dem, join_m=3.0)
+    assert counts["heads"] == 2 and counts["heads_on_dem"] == 1
+    assert sc.length == pytest.approx(50 + 38.5)  # main below the junction + tributary
+    assert ns.length == pytest.approx(50)  # main above the junction
+    assert sc.length + ns.length == pytest.approx(main.length + trib.length)
+    # a join distance below the gap: the tributary does not reach the channel
+    sc, ns, _ = scored_reference([main, trib], dem, join_m=1.0)
+    assert sc.length == pytest.approx(38.5) and ns.length == pytest.approx(100)
+
+
+def test_scored_reference_sections_and_catchment():
+    from kitegully.evaluate.network import scored_reference
+
+    # three sections of one gully sharing end vertices, and a tributary ending at a section node
+    a = LineString([(0, 0), (40, 0)])
+    b = LineString([(40, 0), (80, 0)])
+    c = LineString([(80, 0), (120, 0)])
+    t = LineString([(40, 30), (40, 0)])
+    dem = box(-5, -50, 200, 50)
+    sc, ns, counts = scored_reference([a, b, c, t], dem, join_m=0.5)
+    assert counts["heads"] == 2 and counts["heads_on_dem"] == 2
+    assert sc.length == pytest.approx(150) and ns.length == 0
+    # head of the main gully off the DEM: a is left out, b and c stay (fed by the tributary)
+    sc, ns, _ = scored_reference([a, b, c, t], box(20, -50, 200, 50), join_m=0.5)
+    assert sc.length == pytest.approx(110) and ns.length == pytest.approx(40)
+    # catchment: only x < 100 is scored
+    sc, ns, _ = scored_reference([a, b, c, t], dem, join_m=0.5, catchment=box(-10, -60, 100, 60))
+    assert sc.length == pytest.approx(130) and ns.length == pytest.approx(20)
+
+
+def test_unscored_reference_is_no_false_positive():
+    from kitegully.evaluate.network import scored_reference
+
+    main = LineString([(0, 0), (100, 0)])
+    ext = [LineString([(0, 1), (100, 1)])]  # the whole channel extracted
+    sc, ns, _ = scored_reference([main], box(10, -50, 200, 50), join_m=3.0)
+    assert sc.is_empty and ns.length == pytest.approx(100)
+    length, pct = table(network_validation([sc], ext, 5.0, reference_all=[main]))
+    assert length["reference"] == 0 and length["false_positive"] == pytest.approx(0)
+    length, _ = table(network_validation([sc], ext, 5.0))
+    assert length["false_positive"] == pytest.approx(100)
+    g = validation_geometries([sc], ext, 5.0, reference_all=[main])
+    assert g["not_scored"].length == pytest.approx(100) and g["false_positive"].length == pytest.approx(0)

@@ -22,6 +22,7 @@ if "gully" in config:
     GULLY_REFERENCE = GULLY["reference_network_file"] or (
         result("twin", "observed/field_network.gpkg") if IS_TWIN else None
     )
+    GULLY_CATCHMENT = GULLY["validation"]["catchment_file"]
     GULLY_TRUTH = {"truth": result("twin", "truth/gully_polygons.gpkg")} if IS_TWIN else {}
 
     if GULLY["dem"] == "truth_plus_noise":
@@ -91,6 +92,7 @@ if "gully" in config:
 
         rule gully_validate:
             input:
+                unpack(lambda wc: {"catchment": GULLY_CATCHMENT} if GULLY_CATCHMENT else {}),
                 dem=mapping_dem(),
                 gully_map=rules.gully_map.output.gully_map,
                 mapped_network=rules.gully_map.output.mapped_network,

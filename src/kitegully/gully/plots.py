@@ -116,7 +116,12 @@ def validation_map(
     tolerance_m: float,
     max_pixels: int = 1500,
 ):
-    """Fig. 9b style map: hillshade, mapped gullies, good fit / false negative / false positive lines."""
+    """Fig. 9b style map: hillshade, mapped gullies, good fit / false negative / false positive lines.
+
+    Colours as in the paper's Fig. 9b: yellow good fit, thick black false positives, blue
+    false negatives, green reference lines left out of the score (``pieces["not_scored"]``,
+    outside the catchment or fed only by heads off the DEM).
+    """
     step = max(1, int(np.ceil(max(grid.height, grid.width) / max_pixels)))
     z = dem[::step, ::step]
     hs = hillshade(z, grid.cell * step)
@@ -128,23 +133,26 @@ def validation_map(
     gm[gm == 0] = np.nan
     ax.imshow(gm, cmap=ListedColormap(["tab:orange"]), alpha=0.45, extent=ext, interpolation="nearest")
     styles = {
-        "good_fit": ("tab:green", "good fit (reference)"),
-        "false_negative": ("tab:red", "false negative (reference missed)"),
-        "false_positive": ("tab:blue", "false positive (extracted only)"),
+        "not_scored": ("tab:green", 1.2, "reference not scored (head off the DEM / outside catchment)"),
+        "good_fit": ("gold", 1.4, "good fit (reference)"),
+        "false_negative": ("tab:blue", 1.4, "false negative (reference missed)"),
+        "false_positive": ("black", 2.2, "false positive (extracted only)"),
     }
-    for key, (color, label) in styles.items():
-        geom = pieces[key]
+    for key, (color, lw, label) in styles.items():
+        geom = pieces.get(key)
+        if geom is None:
+            continue
         first = True
         for part in getattr(geom, "geoms", [geom]):
             if part.is_empty or part.geom_type not in ("LineString", "LinearRing"):
                 for sub in getattr(part, "geoms", []):
                     if sub.geom_type == "LineString":
                         xs, ys = sub.xy
-                        ax.plot(xs, ys, color=color, lw=1.2, label=label if first else None)
+                        ax.plot(xs, ys, color=color, lw=lw, label=label if first else None)
                         first = False
                 continue
             xs, ys = part.xy
-            ax.plot(xs, ys, color=color, lw=1.2, label=label if first else None)
+            ax.plot(xs, ys, color=color, lw=lw, label=label if first else None)
             first = False
     ax.plot([], [], color="tab:orange", lw=6, alpha=0.45, label="mapped gully area")
     ax.set_xlabel("easting (m)")
