@@ -41,6 +41,16 @@ def _lines(geoms: gpd.GeoDataFrame | gpd.GeoSeries | Iterable[BaseGeometry]) -> 
     return shapely.union_all(arr) if arr else shapely.GeometryCollection()
 
 
+def _scored_lines(reference, extracted, domain, reference_all):
+    """Scored reference, extracted and full reference lines, clipped to ``domain`` if given."""
+    ref = _lines(reference)
+    ext = _lines(extracted)
+    ref_all = ref if reference_all is None else _lines(reference_all)
+    if domain is not None:
+        ref, ext, ref_all = (g.intersection(domain) for g in (ref, ext, ref_all))
+    return ref, ext, ref_all
+
+
 def network_validation(
     reference: gpd.GeoDataFrame | gpd.GeoSeries | Iterable[BaseGeometry],
     extracted: gpd.GeoDataFrame | gpd.GeoSeries | Iterable[BaseGeometry],
@@ -77,13 +87,7 @@ def network_validation(
     """
     if tolerance_m < 0:
         raise ValueError(f"tolerance must be >= 0, got {tolerance_m}")
-    ref = _lines(reference)
-    ext = _lines(extracted)
-    ref_all = ref if reference_all is None else _lines(reference_all)
-    if domain is not None:
-        ref = ref.intersection(domain)
-        ext = ext.intersection(domain)
-        ref_all = ref_all.intersection(domain)
+    ref, ext, ref_all = _scored_lines(reference, extracted, domain, reference_all)
     l_ref = ref.length
     if ext.is_empty:
         good = 0.0
@@ -106,13 +110,7 @@ def validation_geometries(
     """The pieces behind :func:`network_validation`, for maps: ``good_fit``,
     ``false_negative`` (parts of the scored reference), ``false_positive`` (part of the
     extracted network) and ``not_scored`` (reference outside the scored part)."""
-    ref = _lines(reference)
-    ext = _lines(extracted)
-    ref_all = ref if reference_all is None else _lines(reference_all)
-    if domain is not None:
-        ref = ref.intersection(domain)
-        ext = ext.intersection(domain)
-        ref_all = ref_all.intersection(domain)
+    ref, ext, ref_all = _scored_lines(reference, extracted, domain, reference_all)
     ext_dom = ext.buffer(tolerance_m) if not ext.is_empty else shapely.GeometryCollection()
     ref_dom = ref_all.buffer(tolerance_m) if not ref_all.is_empty else shapely.GeometryCollection()
     not_scored = ref_all.difference(ref.buffer(1e-6)) if not ref.is_empty else ref_all
