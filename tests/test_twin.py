@@ -161,6 +161,25 @@ def test_centreline_vertices_below_surrounding_terrain(twin):
     assert margins.min() >= -1e-3, f"{(margins < -1e-3).sum()} of {len(margins)} sides, worst {margins.min():.3f} m"
 
 
+def test_tributaries_end_on_the_receiving_channel(twin):
+    """A gully that joins another ends on that channel's centreline (a shared confluence
+    node, within one trace step), unless it runs into the reservoir, where it ends at the water."""
+    site = twin["site"]
+    by_id = {g.gully_id: g for g in site.network}
+    step = TW["gullies"]["trace_step_m"]
+    joined = [g for g in site.network if g.joins >= 0 and g.kind != "wadi"]
+    assert joined
+    n_on = 0
+    for g in joined:
+        tgt = by_id[g.joins]
+        gap = np.hypot(tgt.x - g.x[-1], tgt.y - g.y[-1]).min()
+        u, _ = site.valley.uv(g.x[-1], g.y[-1])
+        in_lake = bool(site.valley.lake_zone(np.array([u]))[0])
+        assert gap <= step or (g.joins == 0 and in_lake), f"gully {g.gully_id} ends {gap:.1f} m from gully {g.joins}"
+        n_on += gap <= step
+    assert n_on >= 1
+
+
 def test_truth_centrelines_attributes(twin):
     cl = gpd.read_file(twin["root"] / "a/truth/gully_centrelines.gpkg")
     assert {"gully_id", "width_m", "depth_m"} <= set(cl.columns)

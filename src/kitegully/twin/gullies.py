@@ -186,7 +186,8 @@ def trace_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: n
     w = gcfg["wadi"]
     wx, wy = wadi_centreline(valley, bounds, step)
     wadi = Gully(0, "wadi", "valley", "U", wx, wy, headcut=False, end_reason="reservoir")
-    _mark(occ, tgrid.x0, tgrid.y0, cell, wx, wy, 0.5 * max(w["width_upstream_m"], w["width_outlet_m"]) + gcfg["join_radius_m"], 0)
+    wadi_radius = 0.5 * max(w["width_upstream_m"], w["width_outlet_m"]) + gcfg["join_radius_m"]
+    _mark(occ, tgrid.x0, tgrid.y0, cell, wx, wy, wadi_radius, 0)
     xs, ys = tgrid.cell_centres()
     u, _ = valley.uv(xs[None, :], ys[:, None])
     occ[(z_trace < valley.water_level) & valley.lake_zone(u)] = 0
@@ -208,15 +209,34 @@ def trace_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: n
         xs_g, ys_g = xs_t[:n].copy(), ys_t[:n].copy()
         if reason == 3:
             xs_g, ys_g, joined, reason = _extend_to_wadi(valley, fields, gcfg, occ, tgrid, xs_g, ys_g, step)
+        join_index = -1
+        if joined >= 0:
+            # the trace stops where it enters the receiving channel's occupancy zone; run
+            # the centreline on to that channel's centreline so the confluence is a shared node
+            tgt = gullies[joined]
+            join_index = int(np.argmin(np.hypot(tgt.x - xs_g[-1], tgt.y - ys_g[-1])))
+            reach = wadi_radius if joined == 0 else gcfg["join_radius_m"]
+            xs_g, ys_g = _bridge(xs_g, ys_g, tgt.x[join_index], tgt.y[join_index], step, reach + 2 * step)
         g = Gully(gid, "gully", bank, "V", xs_g, ys_g, joins=int(joined), end_reason=_REASONS[int(reason)])
         if g.length < gcfg["min_length_m"]:
             continue
         if joined >= 0:
-            tgt = gullies[joined]
-            g.join_index = int(np.argmin(np.hypot(tgt.x - g.x[-1], tgt.y - g.y[-1])))
+            g.join_index = join_index
         _mark(occ, tgrid.x0, tgrid.y0, cell, g.x, g.y, gcfg["join_radius_m"], gid)
         gullies.append(g)
     return gullies
+
+
+def _bridge(xs, ys, tx, ty, step, max_dist):
+    """Append a straight run from the last vertex to (tx, ty) when it is within ``max_dist``.
+
+    A trace that stopped at the edge of the reservoir (far from the wadi axis) is left as is.
+    """
+    d = float(np.hypot(tx - xs[-1], ty - ys[-1]))
+    if d < 1e-9 or d > max_dist:
+        return xs, ys
+    k = np.arange(1, int(np.ceil(d / step)) + 1) / np.ceil(d / step)
+    return np.concatenate([xs, xs[-1] + k * (tx - xs[-1])]), np.concatenate([ys, ys[-1] + k * (ty - ys[-1])])
 
 
 def _extend_to_wadi(valley, fields, gcfg, occ, tgrid, xs, ys, step):
