@@ -39,7 +39,7 @@ img = np.clip((rgb - lo) / max(hi - lo, 1e-9), 0, 1).transpose(1, 2, 0)
 cls_small = classes[::step, ::step][: shape[0], : shape[1]]
 x0, y0, x1, y1 = grid.bounds
 ext = (0.0, x1 - x0, 0.0, y1 - y0)
-fig, axes = new_figure(1, 3, figsize=(15, 5.2), gridspec_kw={"width_ratios": [1, 1, 0.8]})
+fig, axes = new_figure(1, 3, figsize=(15, 5.2), gridspec_kw={"width_ratios": [1, 1, 0.8]}, layout="constrained")
 axes[0].imshow(img, extent=ext)
 axes[0].set_title("orthophoto")
 axes[1].imshow(img, extent=ext)
