@@ -57,7 +57,7 @@ def hillshade_gullies(dtm: Path, centrelines: Path, out: Path, max_px: int = 150
         cl.plot(ax=ax, column="depth_m", cmap="autumn_r", linewidth=0.6 + 2.0 * cl["width_m"] / cl["width_m"].max(),
                 legend=True, legend_kwds={"label": "Gully depth (m)", "shrink": 0.7})
     _axes(ax, extent)
-    ax.set_title("Twin DTM (hillshade, sun from east) and true gully network")
+    ax.set_title("Twin DTM (hillshade, sun from east)\nand true gully network")
     save_figure(fig, out, attribution)
 
 
