@@ -35,7 +35,9 @@ def save_figure(fig, path: str | Path, attribution: str | None = None) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if attribution:
-        fig.text(0.99, 0.005, attribution, ha="right", va="bottom", fontsize=6, color="0.35")
+        # hung below the figure edge; the tight bounding box grows to include it, so it never
+        # overlaps axis labels
+        fig.text(0.99, 0.0, attribution, ha="right", va="top", fontsize=6, color="0.35")
     with plt.rc_context(STYLE):
         fig.savefig(path, dpi=PRINT_DPI)
     plt.close(fig)
