@@ -54,7 +54,10 @@ rows = [
     ("gully volume (m3)", round(float(res.polygons["volume_m3"].sum()), 1)),
     ("gully area, whole-patch variant (m2)", round(float(res.gully_whole_patches.sum()) * grid.cell**2, 1)),
     ("interpolated hole cells", res.n_hole_cells),
+    ("holes kept as open water from (m2)", cfg["water_min_area_m2"]),
     ("cells raised by filling", res.n_raised),
+    ("flow routing across flats", cfg["flat_routing"]),
+    ("flat cells routed by the flat mask", res.n_flat_routed),
 ] + [(f"time {k[:-2]} (s)", round(v, 2)) for k, v in res.timings_s.items()]
 write_table(pd.DataFrame(rows, columns=["quantity", "value"]).astype({"value": str}), out.summary)
 log.info("gully map done: %s", "; ".join(f"{k} = {v}" for k, v in rows))

@@ -1,7 +1,7 @@
 """Gully network (Fig. 3 g-j): snap heads, trace steepest descent, stream order, lines.
 
 Heads are snapped to the lowest valid cell within a radius ([I] 1 m) and traced on a
-depression-free DEM, head after head; a path stops at the DEM edge or nodata (outlet) or
+depression-free DEM (flats resolved or ε gradient), head after head; a path stops at the DEM edge or nodata (outlet) or
 merges into a path traced before. The traced cells form a forest of trees that drain
 to outlets; stream order is Strahler's, and the lines are split at heads and
 confluences into segments that carry their order and length.
@@ -169,7 +169,7 @@ class GullyNetwork:
         return m.reshape(self.shape)
 
     def n_paths_not_at_outlet(self) -> int:
-        """Paths that ended in a pit (never happens on an ε-filled DEM)."""
+        """Paths that ended in a pit (never happens on a filled DEM with ε > 0 or flats resolved)."""
         return int(np.sum(self.ends == END_PIT))
 
     def n_paths_to_outlet(self) -> int:
@@ -193,14 +193,16 @@ class GullyNetwork:
             )
 
 
-def trace_network(filled: np.ndarray, head_cells: np.ndarray) -> GullyNetwork:
+def trace_network(filled: np.ndarray, head_cells: np.ndarray, directions: np.ndarray | None = None) -> GullyNetwork:
     """Trace the network from the (snapped) heads on a depression-free DEM.
 
-    Heads with index -1 are skipped. Complexity O(L log L) in the number of traced cells.
+    Heads with index -1 are skipped. With ``directions`` (D8 codes, e.g. flats resolved by
+    :func:`kitegully.terrain.flats.flow_directions`) the paths follow them instead of the
+    steepest descent on ``filled``. Complexity O(L log L) in the number of traced cells.
     """
     head_cells = np.asarray(head_cells, dtype=np.int64)
     use = head_cells[head_cells >= 0]
-    cells, down, _starts, ends = trace_paths(filled, use)
+    cells, down, _starts, ends = trace_paths(filled, use, directions)
     all_ends = np.full(head_cells.size, -1, dtype=np.int64)
     all_ends[head_cells >= 0] = ends
     srt = np.argsort(cells, kind="stable")

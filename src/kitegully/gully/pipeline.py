@@ -17,9 +17,13 @@ from kitegully.gully.network import GullyNetwork, network_lines, snap_heads, tra
 from kitegully.gully.patches import depth_patches
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.fill import priority_flood_fill
+from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.holes import interpolate_holes
 
 log = logging.getLogger(__name__)
+
+#: Ways of routing flow across filled depressions and flats (``gully.flat_routing``).
+FLAT_ROUTINGS = ("resolve", "epsilon")
 
 
 @dataclass(frozen=True)
@@ -38,8 +42,18 @@ class GullyParams:
         Minimum patch volume (m³); 1 m³.
     connectivity : int
         Patch connectivity, 4 or 8 ([I] 8).
+    flat_routing : str
+        How flow crosses filled depressions and flats ([I] ``resolve``): ``resolve`` =
+        priority-flood fill without gradient (ε = 0), then flat resolution (Barnes et al.
+        2014: towards lower and away from higher terrain, paths converge); ``epsilon`` =
+        priority-flood+ε fill, steepest descent on it (paths cross flats on parallel lines).
     fill_epsilon_m : float
-        Priority-flood ε (m per cell) ([I] 1e-4).
+        Priority-flood ε (m per cell) of ``flat_routing: epsilon`` ([I] 1e-4).
+    water_min_area_m2 : float or None
+        Interior nodata holes of the DEM at least this large are open water (no
+        photogrammetric match on water): they are not interpolated, so the traced network
+        ends at their shore like at the DEM edge ([I] 2500 m² = 0.25 ha); ``None``
+        interpolates every interior hole.
     head_snap_radius_m : float
         Heads snap to the lowest cell within this radius (m) ([I] 1 m).
     buffer_m : float
@@ -51,7 +65,9 @@ class GullyParams:
     depth_threshold_m: float = 0.25
     min_patch_volume_m3: float = 1.0
     connectivity: int = 8
+    flat_routing: str = "resolve"
     fill_epsilon_m: float = 1e-4
+    water_min_area_m2: float | None = 2500.0
     head_snap_radius_m: float = 1.0
     buffer_m: float = 15.0
 
@@ -59,6 +75,10 @@ class GullyParams:
     def from_config(cls, cfg: Mapping[str, Any]) -> "GullyParams":
         """Build from the ``gully:`` config section (keys of the same names)."""
         return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
+
+    def __post_init__(self) -> None:
+        if self.flat_routing not in FLAT_ROUTINGS:
+            raise ValueError(f"flat_routing must be one of {FLAT_ROUTINGS}, got {self.flat_routing!r}")
 
 
 @dataclass
@@ -78,6 +98,7 @@ class GullyResult:
     heads_inside: np.ndarray
     n_hole_cells: int
     n_raised: int
+    n_flat_routed: int
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
@@ -126,16 +147,25 @@ def map_gullies(
     log.info("patches: %d of %d kept (volume >= %.3g m3)", int(table["kept"].sum()), len(table), params.min_patch_volume_m3)
 
     t0 = time.perf_counter()
-    zi, n_holes = interpolate_holes(dem)
+    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
+    zi, n_holes = interpolate_holes(dem, water_cells)
     inside_idx, inside = snap_heads(zi, grid, heads_x, heads_y, params.head_snap_radius_m)
-    filled, n_raised = priority_flood_fill(zi, params.fill_epsilon_m)
+    resolve = params.flat_routing == "resolve"
+    filled, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
     del zi
+    dirs, n_flat, n_left = (None, 0, 0)
+    if resolve:
+        dirs, n_flat, n_left = flow_directions(filled)
     t["fill_s"] = time.perf_counter() - t0
-    log.info("filled DEM: %d hole cells interpolated, %d cells raised, %.1f s", n_holes, n_raised, t["fill_s"])
+    log.info(
+        "filled DEM (%s): %d hole cells interpolated (holes >= %s m2 kept as open water), %d cells raised, %d flat cells routed by the flat mask, "
+        "%d cells left undrained, %.1f s",
+        params.flat_routing, n_holes, params.water_min_area_m2, n_raised, n_flat, n_left, t["fill_s"],
+    )
 
     t0 = time.perf_counter()
-    network = trace_network(filled, inside_idx)
-    del filled
+    network = trace_network(filled, inside_idx, dirs)
+    del filled, dirs
     t["trace_s"] = time.perf_counter() - t0
     log.info(
         "network: %d of %d heads on the DEM, %d cells, %d segments, %d paths to an outlet, %d in a pit",
@@ -158,5 +188,6 @@ def map_gullies(
         lines["length_m"].sum(), extracted["length_m"].sum(),
     )
     return GullyResult(
-        smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised, t
+        smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised,
+        n_flat, t,
     )

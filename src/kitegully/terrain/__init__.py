@@ -10,11 +10,15 @@ Modules, one job each:
 ``fill``
     Priority-flood depression filling with an epsilon gradient (Barnes et al. 2014),
     compiled with numba, O(n log n).
+``flats``
+    Drainage over flats of a filled DEM (Barnes et al. 2014 flat resolution): every
+    cell drains, paths converge instead of running in parallel.
 ``flow``
     D8 flow directions and steepest-descent tracing on a depression-free DEM.
 """
 
 from kitegully.terrain.fill import priority_flood_fill
+from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.flow import D8_OFFSETS, d8_directions, trace_paths
 from kitegully.terrain.holes import interior_holes, interpolate_holes
 from kitegully.terrain.smoothing import gaussian_kernel_1d, gaussian_smooth_fft
@@ -22,6 +26,7 @@ from kitegully.terrain.smoothing import gaussian_kernel_1d, gaussian_smooth_fft
 __all__ = [
     "D8_OFFSETS",
     "d8_directions",
+    "flow_directions",
     "gaussian_kernel_1d",
     "gaussian_smooth_fft",
     "interior_holes",

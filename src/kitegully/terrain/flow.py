@@ -17,7 +17,8 @@ NO_FLOW = 255
 END_OUTLET = 0
 #: End of a traced path: joined a path traced before (confluence).
 END_MERGE = 1
-#: End of a traced path: no strictly lower neighbour (only with ε = 0 or NaN input).
+#: End of a traced path: no strictly lower neighbour (only with ε = 0 and flats left
+#: unresolved, or NaN input).
 END_PIT = 2
 #: The head lies on a path traced before: empty path.
 END_ON_NETWORK = 3
@@ -81,9 +82,10 @@ def d8_directions(filled: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _trace(z, heads, offs, inv):
+def _trace(z, heads, offs, inv, dirs, use_dirs):
     h, w = z.shape
     flat = z.ravel()
+    dflat = dirs.ravel()
     onnet = np.zeros(h * w, dtype=np.uint8)
     cap = 1024
     cells = np.empty(cap, dtype=np.int64)
@@ -115,7 +117,12 @@ def _trace(z, heads, offs, inv):
                 n += 1
                 ends[p] = 0
                 break
-            k = _steepest(flat, h, w, r, c, offs, inv)
+            if use_dirs:
+                k = np.int64(dflat[i])
+                if k == 255:
+                    k = -1
+            else:
+                k = _steepest(flat, h, w, r, c, offs, inv)
             if k < 0:
                 down[n] = -1
                 n += 1
@@ -132,7 +139,9 @@ def _trace(z, heads, offs, inv):
     return cells[:n], down[:n], starts, ends
 
 
-def trace_paths(filled: np.ndarray, heads: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def trace_paths(
+    filled: np.ndarray, heads: np.ndarray, directions: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Follow D8 steepest descent from each head down to an outlet or an earlier path.
 
     Heads are traced in the given order. A path stops at an outlet (grid edge or a cell
@@ -145,6 +154,10 @@ def trace_paths(filled: np.ndarray, heads: np.ndarray) -> tuple[np.ndarray, np.n
         Depression-free DEM (NaN nodata).
     heads : ndarray of int
         Flat (row-major) indices of the start cells.
+    directions : ndarray (H, W) uint8, optional
+        D8 direction codes to follow instead of the steepest descent on ``filled``
+        (e.g. :func:`kitegully.terrain.flats.flow_directions`, flats resolved); 255 ends
+        the path (a pit, :data:`END_PIT`, unless the cell is an outlet).
 
     Returns
     -------
@@ -166,4 +179,9 @@ def trace_paths(filled: np.ndarray, heads: np.ndarray) -> tuple[np.ndarray, np.n
     heads = np.asarray(heads, dtype=np.int64).ravel()
     if heads.size and (heads.min() < 0 or heads.max() >= z.size):
         raise ValueError("head index outside the grid")
-    return _trace(z, heads, D8_OFFSETS, _INV_DIST)
+    if directions is None:
+        return _trace(z, heads, D8_OFFSETS, _INV_DIST, np.zeros((1, 1), dtype=np.uint8), False)
+    directions = np.ascontiguousarray(directions, dtype=np.uint8)
+    if directions.shape != z.shape:
+        raise ValueError(f"directions shape {directions.shape} differs from the DEM's {z.shape}")
+    return _trace(z, heads, D8_OFFSETS, _INV_DIST, directions, True)

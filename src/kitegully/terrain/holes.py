@@ -31,7 +31,22 @@ def interior_holes(valid: np.ndarray) -> np.ndarray:
     return ~outer[labels]
 
 
-def interpolate_holes(z: np.ndarray) -> tuple[np.ndarray, int]:
+def interior_holes_below(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
+    """Interior holes (see :func:`interior_holes`) of fewer than ``max_cells`` cells.
+
+    ``max_cells=None`` keeps every interior hole. Complexity O(n).
+    """
+    holes = interior_holes(valid)
+    if max_cells is None or not holes.any():
+        return holes
+    labels, _ = ndi.label(holes, structure=_FOUR)
+    sizes = np.bincount(labels.ravel())
+    small = sizes < max_cells
+    small[0] = False
+    return small[labels]
+
+
+def interpolate_holes(z: np.ndarray, max_cells: int | None = None) -> tuple[np.ndarray, int]:
     """Fill interior NaN holes with the harmonic (Laplace) interpolation of their rim.
 
     Each hole cell takes the mean of its four neighbours; valid neighbours are fixed
@@ -41,6 +56,10 @@ def interpolate_holes(z: np.ndarray) -> tuple[np.ndarray, int]:
     ----------
     z : ndarray (H, W)
         Elevations with NaN nodata.
+    max_cells : int, optional
+        Only holes of fewer cells are interpolated; larger ones stay NaN (e.g. open water,
+        where photogrammetry finds no match: their rim then drains the DEM like its edge).
+        ``None`` interpolates every interior hole.
 
     Returns
     -------
@@ -55,7 +74,7 @@ def interpolate_holes(z: np.ndarray) -> tuple[np.ndarray, int]:
     (about O(m^1.5) for compact holes).
     """
     z = np.asarray(z)
-    holes = interior_holes(np.isfinite(z))
+    holes = interior_holes_below(np.isfinite(z), max_cells)
     m = int(holes.sum())
     out = z.copy()
     if m == 0:
