@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from shapely import LineString, box
 
-from kitegully.evaluate.network import area_scores, network_validation, rasterize_polygons, validation_geometries
+from kitegully.evaluate.network import (
+    area_scores,
+    footprint,
+    network_validation,
+    rasterize_polygons,
+    validation_geometries,
+)
 from kitegully.io.raster import GridSpec
 
 
@@ -128,3 +134,24 @@ def test_unscored_reference_is_no_false_positive():
     assert length["false_positive"] == pytest.approx(100)
     g = validation_geometries([sc], ext, 5.0, reference_all=[main])
     assert g["not_scored"].length == pytest.approx(100) and g["false_positive"].length == pytest.approx(0)
+
+
+def test_footprint_near_lines_clips_like_the_whole_footprint_and_scorer_matches():
+    from kitegully.evaluate.network import NetworkScorer
+
+    grid = GridSpec(0.0, 100.0, 0.5, 200, 200, "EPSG:32632")
+    yy, xx = np.mgrid[0:200, 0:200]
+    valid = ~(((yy - 80) ** 2 + (xx - 90) ** 2 < 400) | ((yy > 150) & (xx < 60)))  # a lake and a missing corner
+    ref = [LineString([(5, 95), (45, 60), (60, 20), (95, 3)]), LineString([(80, 90), (47, 58)])]
+    ext = [LineString([(6, 93), (44, 62), (58, 22)]), LineString([(20, 20), (30, 40)])]
+    whole = footprint(valid, grid)
+    near = footprint(valid, grid, near=[*ref, *ext])
+    assert near.area < 0.5 * whole.area
+    for lines in (ref, ext):
+        for ln in lines:
+            assert ln.intersection(near).length == pytest.approx(ln.intersection(whole).length, abs=1e-9)
+    scorer = NetworkScorer(ref, near)
+    for tol in (1.0, 5.0):
+        a = network_validation(ref, ext, tol, whole)
+        b = scorer.score(ext, tol)
+        assert np.allclose(a["length_m"], b["length_m"], atol=1e-9)

@@ -7,7 +7,7 @@ fall within the DEM are scored; the unfiltered numbers are reported beside them.
 import pandas as pd
 
 from kitegully import InputError
-from kitegully.evaluate.network import footprint, network_validation, scored_reference, validation_geometries
+from kitegully.evaluate.network import NetworkScorer, footprint, scored_reference, validation_geometries
 from kitegully.gully.plots import validation_map
 from kitegully.io.figures import save_figure
 from kitegully.io.raster import read_raster
@@ -29,7 +29,8 @@ if getattr(snakemake.input, "catchment", None):
     catchment = cat.geometry.union_all()
 extracted = read_vector(snakemake.input.mapped_network, crs=crs)
 gully, grid = read_raster(snakemake.input.gully_map)
-domain = footprint(gully != 255, grid)
+# DEM footprint near the lines only: clips them exactly as the whole footprint would, far cheaper
+domain = footprint(gully != 255, grid, near=[*reference.geometry, *extracted.geometry])
 scored, not_scored, counts = scored_reference(reference, domain, float(cfg["reference_join_m"]), catchment)
 log.info(
     "reference: %.0f m scored, %.0f m not scored (outside the catchment or fed only by heads off the DEM); "
@@ -41,12 +42,18 @@ if scored.is_empty:
 if catchment is not None:
     extracted = extracted.clip(catchment)
 tol = float(cfg["tolerance_m"])
-table = network_validation([scored], extracted, tol, domain, reference_all=reference)
+scorers = {
+    "scored (paper protocol)": NetworkScorer([scored], domain, reference_all=reference),
+    "all (unfiltered)": NetworkScorer(reference, domain),
+}
+clipped = scorers["all (unfiltered)"].clip(extracted)
+table = scorers["scored (paper protocol)"].score(extracted, tol, clipped)
 write_table(table, snakemake.output.table, floatfmt=".1f")
 rows = []
 for t in sorted({tol, *map(float, cfg["extra_tolerances_m"])}):
-    for name, ref, ref_all in (("scored (paper protocol)", [scored], reference), ("all (unfiltered)", reference, None)):
-        v = network_validation(ref, extracted, t, domain, reference_all=ref_all)
+    ebuf = clipped.buffer(t)
+    for name, scorer in scorers.items():
+        v = scorer.score(extracted, t, clipped, ebuf)
         v.insert(0, "reference_lines", name)
         v.insert(0, "tolerance_m", t)
         rows.append(v)

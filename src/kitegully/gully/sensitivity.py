@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from kitegully.evaluate.network import area_scores, network_validation
+from kitegully.evaluate.network import NetworkScorer, area_scores
 from kitegully.gully.depth import depth_map
 from kitegully.gully.mapping import buffer_mask, final_map
 from kitegully.gully.network import GullyNetwork, network_lines
@@ -38,7 +38,8 @@ def sensitivity_table(
     """Gully area, volume and (optionally) network and area scores for every (σ, threshold).
 
     The traced network does not depend on σ or the threshold (it comes from the filled
-    DEM), so it is reused; the buffer is computed once.
+    DEM), so it is reused; the buffer is computed once, the reference is clipped and
+    buffered once (:class:`kitegully.evaluate.network.NetworkScorer`).
 
     Returns
     -------
@@ -53,6 +54,7 @@ def sensitivity_table(
     ``known_depths`` (σ in m → depth map, e.g. the stage's own depth.tif) are reused.
     """
     buf = buffer_mask(network.mask(), grid.cell, buffer_m)
+    scorer = NetworkScorer(reference, domain) if reference is not None else None
     rows = []
     for sigma in sigmas_m:
         if known_depths and float(sigma) in known_depths:
@@ -70,7 +72,7 @@ def sensitivity_table(
             }
             if reference is not None:
                 ext = network_lines(network, grid, keep=gully)
-                v = network_validation(reference, ext, tolerance_m, domain).set_index("category")["percent"]
+                v = scorer.score(ext, tolerance_m).set_index("category")["percent"]
                 row["good_fit_percent"] = float(v["good_fit"])
                 row["false_positive_percent"] = float(v["false_positive"])
             if truth_mask is not None:
