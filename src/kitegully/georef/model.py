@@ -40,8 +40,49 @@ def intrinsics_of(cam: pycolmap.Camera) -> np.ndarray:
     raise InputError(f"camera model {name} is not supported by the GCP bundle adjustment (use SIMPLE_RADIAL or RADIAL)")
 
 
-def block_from_reconstruction(rec: pycolmap.Reconstruction, max_tie_points: int, seed: int) -> tuple[Block, ModelIndex]:
-    """Arrays of a model; at most ``max_tie_points`` tie points (longest tracks first, ties by seeded shuffle). O(observations)."""
+def select_tie_points(
+    obs_image: np.ndarray, obs_point: np.ndarray, obs_xy: np.ndarray, n_points: int, max_tie_points: int,
+    image_size: np.ndarray, grid: tuple[int, int] | None, rng: np.random.Generator,
+) -> np.ndarray:
+    """Indices (sorted) of the tie points kept for the GCP bundle adjustment.
+
+    ``grid = None`` keeps the ``max_tie_points`` longest tracks. With ``grid = (nx, ny)``
+    the selection is balanced over the images: each image is cut into ``nx × ny`` cells,
+    the points observed in one cell are ranked by track length (longest first, ties by
+    the seeded shuffle), and points are taken in order of their best rank in any cell of
+    any image, so every cell of every image first gets its best point, then its second,
+    and so on (the homogeneous tie-point reduction of photogrammetric practice [I]). Images
+    at the strip ends, whose points have short tracks, keep their share. ``image_size`` is
+    (n_images, 2) width and height (px). ``max_tie_points = 0`` keeps all.
+    O(observations · log observations).
+    """
+    if max_tie_points <= 0 or max_tie_points >= n_points:
+        return np.arange(n_points)
+    track_len = np.bincount(obs_point, minlength=n_points)
+    shuffle = rng.random(n_points)
+    if grid is None:
+        order = np.lexsort((shuffle, -track_len))
+        return np.sort(order[:max_tie_points])
+    nx, ny = grid
+    wh = image_size[obs_image]
+    gx = np.clip((obs_xy[:, 0] / wh[:, 0] * nx).astype(int), 0, nx - 1)
+    gy = np.clip((obs_xy[:, 1] / wh[:, 1] * ny).astype(int), 0, ny - 1)
+    cell = (obs_image * ny + gy) * nx + gx
+    o = np.lexsort((shuffle[obs_point], -track_len[obs_point], cell))
+    cs = cell[o]
+    start = np.r_[0, np.flatnonzero(np.diff(cs)) + 1]
+    rank = np.empty(len(o), int)
+    rank[o] = np.arange(len(o)) - np.repeat(start, np.diff(np.r_[start, len(o)]))
+    best = np.full(n_points, np.iinfo(np.int64).max)
+    np.minimum.at(best, obs_point, rank)
+    order = np.lexsort((shuffle, -track_len, best))
+    return np.sort(order[:max_tie_points])
+
+
+def block_from_reconstruction(
+    rec: pycolmap.Reconstruction, max_tie_points: int, seed: int, tie_grid: tuple[int, int] | None = None,
+) -> tuple[Block, ModelIndex]:
+    """Arrays of a model with at most ``max_tie_points`` tie points chosen by :func:`select_tie_points`. O(observations)."""
     image_ids = np.array(sorted(rec.reg_image_ids()), dtype=int)
     img_row = {int(i): k for k, i in enumerate(image_ids)}
     camera_ids = np.array(sorted(rec.cameras.keys()), dtype=int)
@@ -66,10 +107,9 @@ def block_from_reconstruction(rec: pycolmap.Reconstruction, max_tie_points: int,
     xyz = np.array(xyz, float).reshape(-1, 3)
     o_img, o_pt = np.array(o_img, int), np.array(o_pt, int)
     o_xy = np.array(o_xy, float).reshape(-1, 2)
-    track_len = np.bincount(o_pt, minlength=len(pids))
-    rng = np.random.default_rng(seed)
-    order = np.lexsort((rng.random(len(pids)), -track_len))
-    keep = np.sort(order[: max_tie_points]) if max_tie_points > 0 else np.arange(len(pids))
+    size = np.array([[rec.cameras[int(rec.images[int(i)].camera_id)].width, rec.cameras[int(rec.images[int(i)].camera_id)].height]
+                     for i in image_ids], float).reshape(-1, 2)
+    keep = select_tie_points(o_img, o_pt, o_xy, len(pids), max_tie_points, size, tie_grid, np.random.default_rng(seed))
     new_idx = np.full(len(pids), -1)
     new_idx[keep] = np.arange(len(keep))
     sel = new_idx[o_pt] >= 0

@@ -41,7 +41,9 @@ def run_georef_stage(
             raise InputError("georef.tape_file: the tape_horn method needs a file of taped distances")
         df = read_tape_distances(params["tape_file"])
         tape = list(zip(df["gcp_a"], df["gcp_b"], df["distance_m"]))
-    block, index = block_from_reconstruction(rec, params["max_tie_points"], seed)
+    block, index = block_from_reconstruction(
+        rec, params["max_tie_points"], seed, tuple(params["tie_grid"]) if params["tie_grid"] else None,
+    )
     rows = {name.split("/")[-1]: k for k, name in enumerate(index.image_names)}
     res = georeference(block, gcps, infos, rows, params, sfm_frame, tape)
 
