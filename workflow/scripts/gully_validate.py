@@ -51,7 +51,7 @@ table = scorers["scored (paper protocol)"].score(extracted, tol, clipped)
 write_table(table, snakemake.output.table, floatfmt=".1f")
 rows = []
 for t in sorted({tol, *map(float, cfg["extra_tolerances_m"])}):
-    ebuf = clipped.buffer(t)
+    ebuf = NetworkScorer.buffer(clipped, t)
     for name, scorer in scorers.items():
         v = scorer.score(extracted, t, clipped, ebuf)
         v.insert(0, "reference_lines", name)

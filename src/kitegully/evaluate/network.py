@@ -42,6 +42,19 @@ def _lines(geoms: gpd.GeoDataFrame | gpd.GeoSeries | Iterable[BaseGeometry]) -> 
     return shapely.union_all(arr) if arr else shapely.GeometryCollection()
 
 
+def _buffer(lines: BaseGeometry, distance: float) -> BaseGeometry:
+    """Buffer of a line network: each line buffered on its own, then one cascaded union.
+
+    Same set as ``lines.buffer(distance)`` up to GEOS's polygonal approximation of the
+    round joins (areas differ by slivers of < 0.01 m² at metre tolerances), and several
+    times faster on long traced networks with many vertices.
+    """
+    parts = shapely.get_parts(lines)
+    if parts.size == 0:
+        return shapely.GeometryCollection()
+    return shapely.union_all(shapely.buffer(parts, distance))
+
+
 def _scored_lines(reference, extracted, domain, reference_all):
     """Scored reference, extracted and full reference lines, clipped to ``domain`` if given."""
     ref = _lines(reference)
@@ -74,6 +87,11 @@ class NetworkScorer:
             self.ref_all = self.ref_all.intersection(domain)
         self._ref_buffers: dict[float, BaseGeometry] = {}
 
+    @staticmethod
+    def buffer(lines: BaseGeometry, tolerance_m: float) -> BaseGeometry:
+        """The domain (buffer) of a line network, as used by :meth:`score`."""
+        return _buffer(lines, tolerance_m)
+
     def clip(self, extracted) -> BaseGeometry:
         """The extracted lines as one geometry, clipped to the domain."""
         ext = _lines(extracted)
@@ -85,7 +103,7 @@ class NetworkScorer:
         """Rows ``reference, good_fit, false_positive, false_negative`` (see :func:`network_validation`).
 
         ``clipped`` (from :meth:`clip`) skips clipping ``extracted`` again, and
-        ``clipped_buffer`` (``clipped.buffer(tolerance_m)``) skips buffering it again.
+        ``clipped_buffer`` (:meth:`buffer` of ``clipped``) skips buffering it again.
         """
         if tolerance_m < 0:
             raise ValueError(f"tolerance must be >= 0, got {tolerance_m}")
@@ -94,14 +112,14 @@ class NetworkScorer:
         if ext.is_empty:
             good = 0.0
         else:
-            ebuf = ext.buffer(tolerance_m) if clipped_buffer is None else clipped_buffer
+            ebuf = _buffer(ext, tolerance_m) if clipped_buffer is None else clipped_buffer
             good = self.ref.intersection(ebuf).length
         if self.ref_all.is_empty:
             fp = ext.length
         else:
             key = float(tolerance_m)
             if key not in self._ref_buffers:
-                self._ref_buffers[key] = self.ref_all.buffer(tolerance_m)
+                self._ref_buffers[key] = _buffer(self.ref_all, tolerance_m)
             fp = ext.difference(self._ref_buffers[key]).length
         fn = l_ref - good
         lengths = np.array([l_ref, good, fp, fn], dtype=float)
@@ -160,8 +178,8 @@ def validation_geometries(
     ``false_negative`` (parts of the scored reference), ``false_positive`` (part of the
     extracted network) and ``not_scored`` (reference outside the scored part)."""
     ref, ext, ref_all = _scored_lines(reference, extracted, domain, reference_all)
-    ext_dom = ext.buffer(tolerance_m) if not ext.is_empty else shapely.GeometryCollection()
-    ref_dom = ref_all.buffer(tolerance_m) if not ref_all.is_empty else shapely.GeometryCollection()
+    ext_dom = _buffer(ext, tolerance_m)
+    ref_dom = _buffer(ref_all, tolerance_m)
     not_scored = ref_all.difference(ref.buffer(1e-6)) if not ref.is_empty else ref_all
     return {
         "good_fit": ref.intersection(ext_dom),
