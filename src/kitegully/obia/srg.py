@@ -78,6 +78,24 @@ def _distance(feat, cell, lab, sums, counts, seed_feat, use_seed, seed_r, seed_c
 
 
 @njit(cache=True)
+def _push_neighbours(cell, lab, labels, feat, sums, counts, seed_feat, use_seed, seed_r, seed_c,
+                     nrows, ncols, pos_w, keys, cells, labs, size):
+    """Queue the unlabelled 4-neighbours of ``cell`` for region ``lab``; returns the heap size."""
+    r = cell // ncols
+    c = cell % ncols
+    for q in range(4):
+        rr = r + (-1, 1, 0, 0)[q]
+        cc = c + (0, 0, -1, 1)[q]
+        if rr < 0 or rr >= nrows or cc < 0 or cc >= ncols:
+            continue
+        nb = rr * ncols + cc
+        if labels[nb] == 0:
+            key = _distance(feat, nb, lab, sums, counts, seed_feat, use_seed, seed_r, seed_c, ncols, pos_w)
+            size = _heap_push(keys, cells, labs, size, key, nb, lab)
+    return size
+
+
+@njit(cache=True)
 def _grow(feat, labels, nrows, ncols, nseeds, pos_w, use_seed):
     n = nrows * ncols
     k = feat.shape[1]
@@ -103,22 +121,11 @@ def _grow(feat, labels, nrows, ncols, nseeds, pos_w, use_seed):
     cells = np.empty(cap, dtype=np.int64)
     labs = np.empty(cap, dtype=np.int32)
     size = 0
-    dr = (-1, 1, 0, 0)
-    dc = (0, 0, -1, 1)
     for cell in range(n):
         lab = labels[cell]
         if lab > 0:
-            r = cell // ncols
-            c = cell % ncols
-            for q in range(4):
-                rr = r + dr[q]
-                cc = c + dc[q]
-                if rr < 0 or rr >= nrows or cc < 0 or cc >= ncols:
-                    continue
-                nb = rr * ncols + cc
-                if labels[nb] == 0:
-                    key = _distance(feat, nb, lab, sums, counts, seed_feat, use_seed, seed_r, seed_c, ncols, pos_w)
-                    size = _heap_push(keys, cells, labs, size, key, nb, lab)
+            size = _push_neighbours(cell, lab, labels, feat, sums, counts, seed_feat, use_seed, seed_r, seed_c,
+                                    nrows, ncols, pos_w, keys, cells, labs, size)
     while size > 0:
         cell, lab, size = _heap_pop(keys, cells, labs, size)
         if labels[cell] != 0:
@@ -127,17 +134,8 @@ def _grow(feat, labels, nrows, ncols, nseeds, pos_w, use_seed):
         for j in range(k):
             sums[lab, j] += feat[cell, j]
         counts[lab] += 1.0
-        r = cell // ncols
-        c = cell % ncols
-        for q in range(4):
-            rr = r + dr[q]
-            cc = c + dc[q]
-            if rr < 0 or rr >= nrows or cc < 0 or cc >= ncols:
-                continue
-            nb = rr * ncols + cc
-            if labels[nb] == 0:
-                key = _distance(feat, nb, lab, sums, counts, seed_feat, use_seed, seed_r, seed_c, ncols, pos_w)
-                size = _heap_push(keys, cells, labs, size, key, nb, lab)
+        size = _push_neighbours(cell, lab, labels, feat, sums, counts, seed_feat, use_seed, seed_r, seed_c,
+                                nrows, ncols, pos_w, keys, cells, labs, size)
     return labels
 
 
