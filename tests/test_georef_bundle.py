@@ -106,3 +106,23 @@ def test_similarity_alone_leaves_the_dome_and_gcp_bundle_straightens_it():
     assert np.ptp(dz) <= 4 * GSD  # no dome left in the camera heights (it was 2 m)
     assert adjusted.intr[0, 3] == pytest.approx(-0.05, abs=0.01)
     assert rep["tie_rms_px"] < 0.5
+
+
+def test_intrinsics_sd_is_consistent_with_the_focal_length_error():
+    """The reported sd of f comes from the normal equations with the true noise sigmas, so
+    the adjusted f lies within 4 sd of the truth (1200 px), and the camera height error of
+    the block mean follows f (the focal length / flying height correlation): mean dz ≈
+    H·Δf/f within the scatter of the heights."""
+    model, survey, G, C, _ = synthetic_block()
+    Xm = gcp_errors(model, np.zeros_like(survey))
+    sim = umeyama(Xm, survey)
+    bent = transform_block(model, sim)
+    bent.gcp_xyz = sim.apply(Xm)
+    adjusted, rep = adjust(bent, survey, BundleSettings(sigma_tie_px=0.3, sigma_gcp_px=0.5, sigma_gcp_xy_m=0.01, sigma_gcp_z_m=0.01, max_iterations=60))
+    sd = rep["intrinsics_sd"][0]
+    assert set(sd) == {"f", "cx", "cy", "k1", "k2"}
+    assert 0 < sd["f"] < 50 and np.isfinite(sd["f"])
+    df = adjusted.intr[0, 0] - 1200.0
+    assert abs(df) <= 4 * sd["f"]
+    dz = camera_centres(adjusted.rv, adjusted.t)[:, 2] - C[:, 2]
+    assert np.mean(dz) == pytest.approx(60.0 * df / 1200.0, abs=2 * np.std(dz) + GSD)

@@ -201,12 +201,9 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
             cost += 0.5 * float(np.sum((pts[npt:] - gcp_prior) ** 2 * prior_w))
         return cost, r, w
 
-    cost, r, w = residual_state(intr, rv, t, pts)
-    cost0 = cost
-    lam = 1e-3
-    it = 0
-    for it in range(1, s.max_iterations + 1):
-        p, Ji, Jp, JX = projection_jacobian(intr[cam], rv[o_img], t[o_img], pts[o_pt])
+    def normal_equations(intr, rv, t, pts, w, r):
+        """Gauss-Newton normal equations: U (P×P), W (P×3N), V (N,3,3), gradients gc (P,), gp (N,3)."""
+        _, Ji, Jp, JX = projection_jacobian(intr[cam], rv[o_img], t[o_img], pts[o_pt])
         sw = (np.sqrt(w) / o_sig)[:, None, None]
         Jc = np.concatenate([Ji, Jp], axis=2) * sw  # (n, 2, 11)
         Jx = JX * sw
@@ -225,6 +222,14 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
         if ng:
             V[npt:] += np.diag(prior_w)[None]
             gp[npt:] += (pts[npt:] - gcp_prior) * prior_w
+        return U, W, V, gc, gp
+
+    cost, r, w = residual_state(intr, rv, t, pts)
+    cost0 = cost
+    lam = 1e-3
+    it = 0
+    for it in range(1, s.max_iterations + 1):
+        U, W, V, gc, gp = normal_equations(intr, rv, t, pts, w, r)
         improved = False
         for _ in range(10):
             Ud = U + lam * np.diag(np.diag(U) + 1e-9)
@@ -257,6 +262,15 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
             lam *= 10
         if not improved or rel < s.rel_tolerance:
             break
+    # precision of the refined intrinsics: (J^T J)^-1 of the final state, reduced to the camera block
+    U, W, V, _, _ = normal_equations(intr, rv, t, pts, w, r)
+    Vinv_sp = _blockdiag(np.linalg.inv(V + 1e-12 * np.eye(3)[None]))
+    S = U - (W @ Vinv_sp @ W.T).toarray()
+    try:
+        cov_c = np.linalg.inv(S[: nc * nri, : nc * nri] - S[: nc * nri, nc * nri:] @ np.linalg.solve(S[nc * nri:, nc * nri:], S[nc * nri:, : nc * nri]))
+        intr_sd = np.sqrt(np.clip(np.diag(cov_c), 0, None)).reshape(nc, nri) if nri else np.zeros((nc, 0))
+    except np.linalg.LinAlgError:
+        intr_sd = np.full((nc, nri), np.nan)
     out = block.copy()
     out.intr, out.rv, out.t = intr, rv, t
     out.points, out.gcp_xyz = pts[:npt], pts[npt:]
@@ -270,6 +284,8 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
         "final_cost": float(cost),
         "n_iterations": int(it),
         "tie_rms_px": float(np.sqrt(np.mean(np.sum(tie_res**2, axis=1)))) if n_tie else float("nan"),
+        # a-priori standard deviations (from the configured sigmas) of the refined intrinsics, camera by camera
+        "intrinsics_sd": [{INTRINSIC_NAMES[k]: float(intr_sd[c, j]) for j, k in enumerate(ref)} for c in range(nc)],
     }
     log.info("GCP bundle adjustment: %d parameters, cost %.4g -> %.4g in %d iterations, tie RMS %.3f px",
              report["n_parameters"], cost0, cost, it, report["tie_rms_px"])
