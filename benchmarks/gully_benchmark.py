@@ -4,9 +4,12 @@
 Makes a synthetic catchment DEM (default 80 M cells at 0.2 m, about 3.2 km², with carved
 V gullies, pits and rough noise), then
 
-1. runs the whole gully mapping chain (read DEM, depth map, patches, filling, tracing,
-   buffer, polygons, write rasters and vectors) in a child process and reports its wall
-   time and peak memory (target: < 3 min, < 8 GB on 2 cores);
+1. runs the whole gully stage as its three rules do, each in a child process: mapping
+   (read DEM, depth map, patches, filling with flat resolution, tracing, buffer, polygons,
+   write rasters and vectors), the sensitivity table (3 σ x 3 thresholds, scored against
+   the constructed gully centrelines as reference) and the network validation (footprint,
+   paper-protocol reference filter, 3 tolerances x 2 reference sets, Fig. 9b map), and
+   reports wall times and peak memory (target: whole stage < 3 min, < 8 GB on 2 cores);
 2. times our FFT smoothing against ``scipy.ndimage.gaussian_filter`` (same σ, same
    truncation) on the full DEM and prints the ratio and the largest difference;
 3. times our priority-flood filling against GRASS GIS ``r.fill.dir`` (Debian
@@ -87,7 +90,20 @@ def synthetic_catchment(side: int, cell: float, seed: int = 2018) -> tuple[np.nd
     pc = rng.integers(5, side - 5, npits)
     z[pr, pc] -= rng.uniform(0.3, 1.0, npits).astype(np.float32)
     hx = x0 + amp * np.sin(start / wave)
-    return z, hx, start
+    return z, hx, start, (x0, amp, wave, start)
+
+
+def centrelines(params, side: int, cell: float, x_origin: float, y_origin: float):
+    """The synthetic gullies' centrelines (head to the bottom edge) as LineStrings in map coordinates."""
+    from shapely import LineString
+
+    x0, amp, wave, start = params
+    lines = []
+    for k in range(x0.size):
+        y = np.arange(start[k], side * cell, 1.0)
+        x = x0[k] + amp[k] * np.sin(y / wave[k])
+        lines.append(LineString(np.column_stack([x_origin + x, y_origin - y])))
+    return lines
 
 
 # --------------------------------------------------------------------------- child: whole stage
@@ -106,8 +122,11 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     t1 = time.perf_counter()
     out = Path(out_dir)
     write_raster(out / "depth.tif", res.depth, grid)
-    write_raster(out / "gully_map.tif", res.gully.astype(np.uint8), grid, nodata=255)
+    gm = res.gully.astype(np.uint8)
+    gm[~np.isfinite(dem)] = 255
+    write_raster(out / "gully_map.tif", gm, grid, nodata=255)
     write_vector(res.lines, out / "gully_network.gpkg")
+    write_vector(res.extracted_lines, out / "gully_network_mapped.gpkg")
     write_vector(res.polygons, out / "gully_polygons.gpkg")
     res.network.save(out / "network.npz")
     t_write = time.perf_counter() - t1
@@ -119,19 +138,61 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
 
 
 def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
-    """The gully_sensitivity rule's work (3 sigmas x 3 thresholds), in a child process."""
+    """The gully_sensitivity rule's work (3 sigmas x 3 thresholds, network scores), in a child process."""
     sys.path.insert(0, str(REPO / "src"))
-    from kitegully.gully.network import GullyNetwork
+    from kitegully.evaluate.network import footprint
+    from kitegully.gully.network import GullyNetwork, network_lines
     from kitegully.gully.sensitivity import sensitivity_table
     from kitegully.io.raster import read_raster
+    from kitegully.io.vectors import read_vector
 
     t0 = time.perf_counter()
     dem, grid = read_raster(dem_path)
     depth, _ = read_raster(Path(out_dir) / "depth.tif")
     net = GullyNetwork.load(Path(out_dir) / "network.npz")
+    reference = read_vector(Path(out_dir) / "reference.gpkg")
+    domain = footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(net, grid).geometry])
     sensitivity_table(dem, grid, net, [5.0, 10.0, 20.0], [0.15, 0.25, 0.5], 1.0, 15.0, 8, 4.0,
+                      reference=reference, tolerance_m=5.0, domain=domain,
                       workers=threads, known_depths={10.0: depth})
     print(json.dumps({"sensitivity_s": time.perf_counter() - t0}))
+
+
+def run_validation(dem_path: str, out_dir: str) -> None:
+    """The gully_validate rule's work (as workflow/scripts/gully_validate.py), in a child process."""
+    sys.path.insert(0, str(REPO / "src"))
+    from kitegully.evaluate.network import NetworkScorer, footprint, scored_reference, validation_geometries
+    from kitegully.gully.plots import validation_map
+    from kitegully.io.figures import save_figure
+    from kitegully.io.raster import read_raster
+    from kitegully.io.vectors import read_vector
+
+    t = {}
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    reference = read_vector(out / "reference.gpkg")
+    extracted = read_vector(out / "gully_network_mapped.gpkg")
+    gully, grid = read_raster(out / "gully_map.tif")
+    domain = footprint(gully != 255, grid, near=[*reference.geometry, *extracted.geometry])
+    scored, _ns, _c = scored_reference(reference, domain, 3.0)
+    t["footprint_and_filter_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    scorers = [NetworkScorer([scored], domain, reference_all=reference), NetworkScorer(reference, domain)]
+    clipped = scorers[1].clip(extracted)
+    good = {}
+    for tol in (2.0, 5.0, 15.0):
+        ebuf = NetworkScorer.buffer(clipped, tol)
+        for sc in scorers:
+            v = sc.score(extracted, tol, clipped, ebuf)
+        good[tol] = float(v["percent"].iloc[1])
+    t["scores_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    dem, _ = read_raster(dem_path)
+    pieces = validation_geometries([scored], extracted, 5.0, domain, reference_all=reference)
+    fig = validation_map(dem, gully == 1, grid, pieces, 5.0)
+    save_figure(fig, out / "validation_map.png")
+    t["figure_s"] = time.perf_counter() - t0
+    print(json.dumps({**t, "good_fit_percent": good}))
 
 
 # --------------------------------------------------------------------------- GRASS and pysheds
@@ -225,12 +286,16 @@ def main() -> None:
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "gully_benchmark.md"))
     ap.add_argument("--stage-child", nargs=3, metavar=("DEM", "HEADS", "OUTDIR"), help=argparse.SUPPRESS)
     ap.add_argument("--sens-child", nargs=2, metavar=("DEM", "OUTDIR"), help=argparse.SUPPRESS)
+    ap.add_argument("--val-child", nargs=2, metavar=("DEM", "OUTDIR"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.stage_child:
         run_stage(*args.stage_child, threads=args.threads)
         return
     if args.sens_child:
         run_sensitivity(*args.sens_child, threads=args.threads)
+        return
+    if args.val_child:
+        run_validation(*args.val_child)
         return
 
     sys.path.insert(0, str(REPO / "src"))
@@ -250,7 +315,7 @@ def main() -> None:
         lines.append(msg)
 
     t0 = time.perf_counter()
-    z, hx, hy = synthetic_catchment(side, cell)
+    z, hx, hy, gparams = synthetic_catchment(side, cell)
     grid = GridSpec(500000.0, 4100000.0, cell, side, side, CRS)
     print(f"synthetic DEM made in {time.perf_counter() - t0:.1f} s", flush=True)
 
@@ -262,6 +327,12 @@ def main() -> None:
         heads = tmp / "heads.npy"
         np.save(heads, np.vstack([grid.x0 + hx, grid.y0 - hy]))
         (tmp / "out").mkdir()
+        import geopandas as gpd
+
+        from kitegully.io.vectors import write_vector
+
+        write_vector(gpd.GeoDataFrame(geometry=centrelines(gparams, side, cell, grid.x0, grid.y0), crs=CRS),
+                     tmp / "out" / "reference.gpkg")
         t0 = time.perf_counter()
         p = subprocess.run(
             [sys.executable, __file__, "--threads", str(args.threads), "--stage-child", str(dem_tif), str(heads), str(tmp / "out")],
@@ -271,9 +342,10 @@ def main() -> None:
         if p.returncode != 0:
             raise SystemExit(f"whole-stage run failed:\n{p.stderr[-3000:]}")
         info = json.loads(p.stdout.strip().splitlines()[-1])
-        say("## Whole gully mapping chain (read DEM -> gully map, network, polygons written)")
+        say("## Whole gully stage (rules gully_map, gully_sensitivity, gully_validate, one after the other)")
         say("")
-        say(f"- wall time {wall:.1f} s (target < 180 s), peak memory {peak_rss_children_gb():.2f} GB (target < 8 GB)")
+        say(f"- mapping (read DEM -> gully map, network, polygons written): wall time {wall:.1f} s, "
+            f"peak memory {peak_rss_children_gb():.2f} GB")
         say("- steps (s): " + ", ".join(f"{k[:-2]} {v:.1f}" for k, v in info.items() if k.endswith("_s")))
         say(f"- {info['n_gullies']} gullies, traced network {info['network_length_m']:.0f} m, paths ending in a pit: {info['paths_in_pit']}")
         t0 = time.perf_counter()
@@ -282,9 +354,22 @@ def main() -> None:
         if p.returncode != 0:
             raise SystemExit(f"sensitivity run failed:\n{p.stderr[-3000:]}")
         wall_s = time.perf_counter() - t0
-        say(f"- sensitivity table (3 sigmas x 3 thresholds, depth at 10 m reused): wall time {wall_s:.1f} s, "
-            f"peak memory of any child so far {peak_rss_children_gb():.2f} GB")
-        say(f"- mapping + sensitivity: {wall + wall_s:.1f} s")
+        say(f"- sensitivity table (3 sigmas x 3 thresholds, depth at 10 m reused, network scored at 5 m): "
+            f"wall time {wall_s:.1f} s, peak memory of any child so far {peak_rss_children_gb():.2f} GB")
+        t0 = time.perf_counter()
+        p = subprocess.run([sys.executable, __file__, "--val-child", str(dem_tif), str(tmp / "out")],
+                           capture_output=True, text=True)
+        if p.returncode != 0:
+            raise SystemExit(f"validation run failed:\n{p.stderr[-3000:]}")
+        wall_v = time.perf_counter() - t0
+        vinfo = json.loads(p.stdout.strip().splitlines()[-1])
+        say(f"- network validation (footprint, reference filter, 3 tolerances x 2 reference sets, Fig. 9b map): "
+            f"wall time {wall_v:.1f} s (" + ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in vinfo.items() if k.endswith("_s"))
+            + f"); good fit against the constructed centrelines at 2/5/15 m: "
+            + " / ".join(f"{v:.1f} %" for v in vinfo["good_fit_percent"].values()))
+        total = wall + wall_s + wall_v
+        say(f"- **whole stage: {total:.1f} s** (target < 180 s), peak memory of any rule {peak_rss_children_gb():.2f} GB "
+            "(target < 8 GB)")
         say("")
 
         # 2. smoothing: ours vs scipy.ndimage.gaussian_filter
