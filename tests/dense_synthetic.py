@@ -26,6 +26,16 @@ def step(z0=100.0, height=1.5, x_step=0.0):
     return lambda x, y: z0 + np.where(np.asarray(x) > x_step, height, 0.0) + 0.0 * np.asarray(y)
 
 
+def pillars(z0=100.0, height=3.0, radius=1.0, centres=((-3.0, -3.0), (3.0, -2.5), (-2.5, 3.0), (2.5, 3.0), (0.0, 0.0))):
+    """Vertical-walled cylinders (tree-crown-like objects) standing on a plane."""
+    def f(x, y):
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        d = np.min([np.hypot(x - cx, y - cy) for cx, cy in centres], axis=0)
+        return np.where(d < radius, z0 + height, z0) + 0.0 * x + 0.0 * y
+    f.centres, f.radius, f.height = centres, radius, height
+    return f
+
+
 class Texture:
     """Random multi-scale pattern: noise fields at 0.025, 0.2 and 1.6 m, Gaussian-smoothed."""
 

@@ -4,7 +4,8 @@ For each ground cell the matcher searches the elevation that maximises the multi
 normalised cross-correlation of small ground windows resampled from every image that sees
 the cell. The search runs over an image pyramid: at the coarsest level every elevation
 between the tile's bounds is tried; each finer level searches a few steps around the
-upsampled surface of the level above. Costs are aggregated semi-globally (SGM) along 4 or
+upsampled surface of the level above, and optional extra passes at the finest level search
+around the finest surface itself. Costs are aggregated semi-globally (SGM) along 4 or
 8 directions, the winner is refined to sub-step precision with a parabola, and cells seen
 by fewer than two usable images or with a low correlation are masked.
 """
@@ -61,6 +62,13 @@ class MatchParams:
         Windows with a grey-level SD below this (DN, 0–255) are textureless and unused.
     nan_cost : float
         Cost of a candidate no two images can judge.
+    final_passes : int
+        Passes at the finest level. Pass 1 searches around the surface of the coarser
+        level, whose cells (and windows) are wider than tree crowns and gully walls, so
+        next to them that prior is off by up to the objects' height and the narrow
+        refine window misses the ground. Each further pass searches again around the
+        level-0 surface of the previous pass (masked cells take the nearest valid cell's
+        elevation); the masking rules are the same in every pass.
     """
 
     levels: int = 4
@@ -76,6 +84,7 @@ class MatchParams:
     min_views: int = 2
     min_std_dn: float = 1.0
     nan_cost: float = 1.0
+    final_passes: int = 1
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "MatchParams":
@@ -84,6 +93,8 @@ class MatchParams:
             raise InputError(f"dense.matching.sgm_directions: must be 4 or 8, got {p.sgm_directions}")
         if p.min_views < 2:
             raise InputError("dense.matching.min_views: must be at least 2")
+        if p.final_passes < 1:
+            raise InputError("dense.matching.final_passes: must be at least 1")
         return p
 
 
@@ -169,7 +180,10 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     Cs = np.ascontiguousarray([views.images[i].C for i in idx], dtype=np.float64)
     Ps = np.ascontiguousarray([views.images[i].params() for i in idx], dtype=np.float64)
     z_prev = None
-    for lev in range(L - 1, -1, -1):
+    # coarse to fine, then ``final_passes − 1`` more passes at level 0 around the level-0 surface
+    schedule = list(range(L - 1, -1, -1)) + [0] * (params.final_passes - 1)
+    for n_pass, lev in enumerate(schedule):
+        last = n_pass == len(schedule) - 1
         cl = cell * 2 ** lev
         hl, wl = H // 2 ** lev, W // 2 ** lev
         xl = x0 + (np.arange(wl) + 0.5) * cl
@@ -214,8 +228,8 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         ncc = score[d, r, c]
         nv = nvw[d, r, c]
         seen = nvw.max(axis=0) >= params.min_views
-        if lev > 0:
-            # keep only confident cells as the prior of the next level; the others take
+        if not last:
+            # keep only confident cells as the prior of the next level (or pass); the others take
             # the value of the nearest confident cell (ambiguous low-texture/low-base areas)
             good = seen & (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
             zf = np.where(good, z, np.nan)
