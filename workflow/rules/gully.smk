@@ -115,6 +115,8 @@ if "gully" in config:
                 attribution=GULLY_ATTRIBUTION,
             log:
                 logfile("gully", "validate"),
+            benchmark:
+                benchfile("gully", "validate")
             script:
                 "../scripts/gully_validate.py"
 
