@@ -24,18 +24,52 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from kitegully.terrain.flow import D8_OFFSETS, NO_FLOW, _INV_DIST
+from kitegully.terrain.flow import D8_OFFSETS, NO_FLOW, _INV_DIST, _is_outlet
 
 
 @njit(cache=True)
-def _is_outlet_cell(flat, h, w, r, c, offs):
-    if r == 0 or c == 0 or r == h - 1 or c == w - 1:
-        return True
-    for k in range(8):
-        z = flat[(r + offs[k, 0]) * w + c + offs[k, 1]]
-        if not (z == z):
-            return True
-    return False
+def _append(buf, size, value):
+    """Append ``value`` at ``buf[size]``, doubling the buffer when full; returns (buf, size + 1)."""
+    if size == buf.size:
+        bigger = np.empty(buf.size * 2, dtype=buf.dtype)
+        bigger[:size] = buf[:size]
+        buf = bigger
+    buf[size] = value
+    return buf, size + 1
+
+
+@njit(cache=True)
+def _flat_bfs(queue, qt, labels, dirs, outlet, seen, h, w, offs):
+    """Breadth-first search from the ``qt`` seeds in ``queue`` over undrained cells of the
+    seed's flat. Returns the queue (visit order), the BFS level of each visit (seeds = 1)
+    and the number of visits; ``seen`` marks visited cells (seeds must be marked)."""
+    level = np.empty(queue.size, dtype=np.int32)
+    level[:qt] = 1
+    qh = 0
+    while qh < qt:
+        i = queue[qh]
+        lev = level[qh]
+        qh += 1
+        lab = labels[i]
+        r = i // w
+        c = i - r * w
+        for k in range(8):
+            rr = r + offs[k, 0]
+            cc = c + offs[k, 1]
+            if rr < 0 or cc < 0 or rr >= h or cc >= w:
+                continue
+            j = rr * w + cc
+            if labels[j] != lab or dirs[j] != 255 or outlet[j] == 1 or seen[j]:
+                continue
+            seen[j] = 1
+            queue, qt2 = _append(queue, qt, j)
+            if qt2 > level.size:
+                bigger = np.empty(queue.size, dtype=np.int32)
+                bigger[:qt] = level[:qt]
+                level = bigger
+            level[qt] = lev + 1
+            qt = qt2
+    return queue, level, qt
 
 
 @njit(cache=True)
@@ -53,7 +87,7 @@ def _directions_with_flats(z, offs, inv):
             zc = flat[i]
             if not (zc == zc):
                 continue
-            if _is_outlet_cell(flat, h, w, r, c, offs):
+            if _is_outlet(flat, h, w, r, c, offs):
                 outlet[i] = 1
                 continue
             best = -1
@@ -95,20 +129,10 @@ def _directions_with_flats(z, offs, inv):
                     continue
                 if drained:
                     if zn == zc and dirs[j] == 255 and outlet[j] == 0:
-                        if nlow == low.size:
-                            bigger = np.empty(low.size * 2, dtype=np.int64)
-                            bigger[:nlow] = low[:nlow]
-                            low = bigger
-                        low[nlow] = i
-                        nlow += 1
+                        low, nlow = _append(low, nlow, i)
                         break
                 elif zn > zc:
-                    if nhigh == high.size:
-                        bigger = np.empty(high.size * 2, dtype=np.int64)
-                        bigger[:nhigh] = high[:nhigh]
-                        high = bigger
-                    high[nhigh] = i
-                    nhigh += 1
+                    high, nhigh = _append(high, nhigh, i)
                     break
     # 3. label each flat (equal-elevation cells connected to a low edge)
     labels = np.zeros(n, dtype=np.int32)
@@ -121,9 +145,8 @@ def _directions_with_flats(z, offs, inv):
         nlab += 1
         target = flat[s]
         qh = 0
-        qt = 0
-        queue[qt] = s
-        qt += 1
+        queue[0] = s
+        qt = 1
         labels[s] = nlab
         while qh < qt:
             i = queue[qh]
@@ -139,101 +162,38 @@ def _directions_with_flats(z, offs, inv):
                 if labels[j] != 0 or flat[j] != target:
                     continue
                 labels[j] = nlab
-                if qt == queue.size:
-                    bigger = np.empty(queue.size * 2, dtype=np.int64)
-                    bigger[:qt] = queue[:qt]
-                    queue = bigger
-                queue[qt] = j
-                qt += 1
+                queue, qt = _append(queue, qt, j)
     # 4. away from higher terrain: BFS from the labelled high edges over undrained cells
     mask = np.zeros(n, dtype=np.int32)
     height = np.zeros(nlab + 1, dtype=np.int32)
+    seen = np.zeros(n, dtype=np.uint8)
     qt = 0
     for t in range(nhigh):
         i = high[t]
-        if labels[i] == 0:
-            continue
-        if qt == queue.size:
-            bigger = np.empty(queue.size * 2, dtype=np.int64)
-            bigger[:qt] = queue[:qt]
-            queue = bigger
-        queue[qt] = i
-        qt += 1
-        mask[i] = 1
-    qh = 0
-    level_end = qt
-    loops = 1
-    while qh < qt:
-        if qh == level_end:
-            loops += 1
-            level_end = qt
-        i = queue[qh]
-        qh += 1
-        lab = labels[i]
-        if height[lab] < loops:
-            height[lab] = loops
-        r = i // w
-        c = i - r * w
-        for k in range(8):
-            rr = r + offs[k, 0]
-            cc = c + offs[k, 1]
-            if rr < 0 or cc < 0 or rr >= h or cc >= w:
-                continue
-            j = rr * w + cc
-            if labels[j] != lab or dirs[j] != 255 or outlet[j] == 1 or mask[j] != 0:
-                continue
-            mask[j] = loops + 1
-            if qt == queue.size:
-                bigger = np.empty(queue.size * 2, dtype=np.int64)
-                bigger[:qt] = queue[:qt]
-                queue = bigger
-            queue[qt] = j
-            qt += 1
+        if labels[i] != 0:
+            seen[i] = 1
+            queue, qt = _append(queue, qt, i)
+    queue, level, qt = _flat_bfs(queue, qt, labels, dirs, outlet, seen, h, w, offs)
+    for p in range(qt):
+        i = queue[p]
+        mask[i] = level[p]
+        if height[labels[i]] < level[p]:
+            height[labels[i]] = level[p]
     # 5. towards lower terrain: BFS from the low edges, combined with the away gradient
-    done = np.zeros(n, dtype=np.uint8)
+    seen[:] = 0
     qt = 0
     for t in range(nlow):
         i = low[t]
-        if done[i]:
-            continue
-        done[i] = 1
-        if qt == queue.size:
-            bigger = np.empty(queue.size * 2, dtype=np.int64)
-            bigger[:qt] = queue[:qt]
-            queue = bigger
-        queue[qt] = i
-        qt += 1
-    qh = 0
-    level_end = qt
-    loops = 1
-    while qh < qt:
-        if qh == level_end:
-            loops += 1
-            level_end = qt
-        i = queue[qh]
-        qh += 1
-        lab = labels[i]
+        if not seen[i]:
+            seen[i] = 1
+            queue, qt = _append(queue, qt, i)
+    queue, level, qt = _flat_bfs(queue, qt, labels, dirs, outlet, seen, h, w, offs)
+    for p in range(qt):
+        i = queue[p]
         if mask[i] > 0:
-            mask[i] = height[lab] - mask[i] + 2 * loops
+            mask[i] = height[labels[i]] - mask[i] + 2 * level[p]
         else:
-            mask[i] = 2 * loops
-        r = i // w
-        c = i - r * w
-        for k in range(8):
-            rr = r + offs[k, 0]
-            cc = c + offs[k, 1]
-            if rr < 0 or cc < 0 or rr >= h or cc >= w:
-                continue
-            j = rr * w + cc
-            if labels[j] != lab or dirs[j] != 255 or outlet[j] == 1 or done[j]:
-                continue
-            done[j] = 1
-            if qt == queue.size:
-                bigger = np.empty(queue.size * 2, dtype=np.int64)
-                bigger[:qt] = queue[:qt]
-                queue = bigger
-            queue[qt] = j
-            qt += 1
+            mask[i] = 2 * level[p]
     # 6. undrained flat cells flow to the same-flat neighbour with the steepest mask descent
     n_resolved = 0
     n_left = 0
