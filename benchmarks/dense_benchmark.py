@@ -38,7 +38,9 @@ views, imgs, _ = ds.block(surface, rng_for(2018, "benchmark", "dense"), extent=1
 cell = 0.1
 side = a["side_cells"]
 grid = GridSpec(-side * cell / 2, side * cell / 2, cell, side, side, "EPSG:32632")
-p = MatchParams(levels=4, window_half_cells=2, z_step_cells=0.5, refine_radius_steps=3, min_correlation=0.3)
+import yaml
+# the default site's matcher settings (levels, window, passes, thresholds), so the rate is the stage's
+p = MatchParams.from_config(yaml.safe_load(open("config/sites/kamech_twin.yaml", encoding="utf-8"))["dense"]["matching"])
 dense_surface(views, GridSpec(-3.2, 3.2, cell, 64, 64, "EPSG:32632"), p, 64, 16, arrays=imgs)  # JIT warm-up
 t = time.perf_counter()
 res = dense_surface(views, grid, p, a["tile"], 16, arrays=imgs)
