@@ -16,7 +16,7 @@ from scipy import ndimage
 
 import dense_synthetic as ds
 from kitegully import InputError
-from kitegully.dense.kernels import occlusion_mask
+from kitegully.dense.kernels import multiview_ncc_stack, occlusion_mask
 from kitegully.dense.matching import MatchParams
 from kitegully.dense.ortho import orthophoto
 from kitegully.dense.shading import hillshade, openness
@@ -132,6 +132,22 @@ def test_final_pass_recovers_what_the_coarse_prior_misses(pillar_case):
     # away from the walls the recovered surface meets the issue's accuracy target
     flat = (seen >= 4) & ((d > radius + 0.6) | (d < radius - 0.6))
     _check_accuracy(out[2], truth, flat)
+
+
+def test_texture_threshold_per_view():
+    """The texture test takes one threshold per view (``min_std_dn / 2**level`` for a view
+    sampled at pyramid level ``level``: 2x2 means halve the noise SD per level). Windows of
+    SD 1.5 DN pass a threshold of 1 DN and fail one of 2 DN."""
+    rng = rng_for(11, "test_dense", "texture-threshold")
+    base = rng.normal(0.0, 1.0, (7, 7))
+    a = 100.0 + 1.5 * (base - base[1:6, 1:6].mean()) / base[1:6, 1:6].std()  # centre window SD 1.5 DN
+    stack = np.stack([a, a, a])[None].astype(np.float32)  # K=1, V=3, 7x7 cells
+    score = np.empty((1, 7, 7), np.float32)
+    nv = np.empty((1, 7, 7), np.int16)
+    multiview_ncc_stack(stack, 2, np.array([1.0, 1.0, 2.0]), score, nv)
+    assert nv[0, 3, 3] == 2 and score[0, 3, 3] == pytest.approx(1.0, abs=1e-3)  # float32 window sums
+    multiview_ncc_stack(stack, 2, np.array([2.0, 1.0, 2.0]), score, nv)
+    assert nv[0, 3, 3] == 1 and np.isnan(score[0, 3, 3])
 
 
 def test_unseen_cells_masked():

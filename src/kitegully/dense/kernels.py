@@ -201,7 +201,8 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
 
     ``stack`` (K, V, H, W) holds the V images resampled on the ground grid at K candidate
     surfaces. For each cell and candidate, every view whose ``(2·half+1)²`` window is
-    complete and has a standard deviation ≥ ``min_std`` is normalised to zero mean and unit
+    complete and has a standard deviation ≥ ``min_std[v]`` (DN, one threshold per view:
+    ``min_std`` is a (V,) array) is normalised to zero mean and unit
     norm (vector ``a_v``); the score is the mean pairwise NCC, obtained without forming
     pairs as ``(‖Σ a_v‖² − n) / (n (n − 1))``. ``score`` (K, H, W) gets NaN where fewer
     than two views remain, ``nviews`` the count of usable views.
@@ -210,7 +211,6 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
     K, V, H, W = stack.shape
     m = 2 * half + 1
     n = m * m
-    min_ss = n * min_std * min_std
     for i in prange(H):
         col1 = np.empty(W, dtype=np.float64)
         col2 = np.empty(W, dtype=np.float64)
@@ -255,7 +255,7 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
                         mu = s1 / n
                         ss = s2 - n * mu * mu
                         mean[v, jc] = mu
-                        inv[v, jc] = 1.0 / np.sqrt(ss) if (c == n and ss >= min_ss and ss > 0.0) else 0.0
+                        inv[v, jc] = 1.0 / np.sqrt(ss) if (c == n and ss >= n * min_std[v] * min_std[v] and ss > 0.0) else 0.0
             for j in range(half, W - half):
                 acc[:] = 0.0
                 nv = 0

@@ -59,7 +59,11 @@ class MatchParams:
     min_views : int
         Cells need at least this many usable images (≥ 2).
     min_std_dn : float
-        Windows with a grey-level SD below this (DN, 0–255) are textureless and unused.
+        Windows with a grey-level SD below this (DN, 0–255) are textureless and unused: set
+        it above the camera's noise SD, where a window's NCC measures noise, not the ground
+        (water, the twin's reservoir). Given for full-resolution images; for a view sampled
+        at pyramid level ``s`` (2×2 means) the threshold is ``min_std_dn / 2**s``, as the
+        noise SD halves with each level while the ground's coarser texture largely survives.
     nan_cost : float
         Cost of a candidate no two images can judge.
     final_passes : int
@@ -208,7 +212,9 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         sample_stack(imgs, Rs, Cs, Ps, levels.astype(np.int64), xl, yl, base, float(dz), stack)
         score = np.empty((K, hl, wl), np.float32)
         nvw = np.empty((K, hl, wl), np.int16)
-        multiview_ncc_stack(stack, params.window_half_cells, params.min_std_dn, score, nvw)
+        # the texture test is against the image noise, which the 2x2-mean pyramid halves per level
+        min_std = params.min_std_dn / 2.0 ** levels.astype(np.float64)
+        multiview_ncc_stack(stack, params.window_half_cells, min_std, score, nvw)
         del stack
         cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
         agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
