@@ -214,6 +214,23 @@ def test_observed_holds_no_truth(twin):
     assert set(js) == {"name_hint", "crs", "extent", "dem_cell_m", "texture_cell_m", "approx_elevation_m", "epochs"}
 
 
+def test_field_network_leaves_out_reaches_under_the_reservoir(twin):
+    """Surveyors walk and map gullies on land: no surveyed vertex lies on a water cell
+    (checked without the mapping displacement), while the truth wadi does run under water."""
+    from kitegully.twin import survey
+
+    lc, grid = read_raster(twin["root"] / "a/truth/landcover.tif")
+    water = lc == CODE["water"]
+    wadi = twin["site"].network[0]
+    assert survey._under_water(wadi.x, wadi.y, water, grid).any()
+    sv = dict(TW["survey"]["field_network"], mapping_error_m=0.0)
+    fn = survey.field_network(twin["site"].network, sv, TW["gullies"]["min_depth_m"], CRS, 7, water=water, grid=grid)
+    xy = np.concatenate([np.asarray(g.coords) for g in fn.geometry])
+    assert not survey._under_water(xy[:, 0], xy[:, 1], water, grid).any()
+    dry = survey.field_network(twin["site"].network, sv, TW["gullies"]["min_depth_m"], CRS, 7)
+    assert dry.length.sum() > fn.length.sum() + 10 * TW["dem_cell_m"]
+
+
 def test_checkpoint_noise_matches_sigma(twin):
     t = pd.read_csv(twin["root"] / "a/truth/checkpoints.csv")
     o = pd.read_csv(twin["root"] / "a/observed/checkpoints.csv")

@@ -92,12 +92,28 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def field_network(gullies: list[Gully], scfg: dict, min_depth: float, crs: str, seed: int) -> gpd.GeoDataFrame:
+def _under_water(x: np.ndarray, y: np.ndarray, water: np.ndarray | None, grid: GridSpec | None) -> np.ndarray:
+    """True for points on a water cell of ``water`` (False everywhere without a mask)."""
+    if water is None or grid is None:
+        return np.zeros(len(x), dtype=bool)
+    r, c = grid.rowcol(np.asarray(x), np.asarray(y))
+    r = np.round(r).astype(int)
+    c = np.round(c).astype(int)
+    inside = (r >= 0) & (c >= 0) & (r < water.shape[0]) & (c < water.shape[1])
+    out = np.zeros(len(x), dtype=bool)
+    out[inside] = water[r[inside], c[inside]]
+    return out
+
+
+def field_network(gullies: list[Gully], scfg: dict, min_depth: float, crs: str, seed: int,
+                  water: np.ndarray | None = None, grid: GridSpec | None = None) -> gpd.GeoDataFrame:
     """The network as surveyed: sections split at confluences and size changes, displaced.
 
     The mapping error is a smooth random displacement field of amplitude
     ``mapping_error_m`` and wavelength ``mapping_wavelength_m`` (GPS positions of
-    upstream/middle/downstream points, delineation on imagery).
+    upstream/middle/downstream points, delineation on imagery). Reaches under open water
+    (``water``, a boolean raster on ``grid``: the reservoir) cannot be walked or seen and
+    are left out.
     """
     rng = rng_for(seed, "twin", "field_network")
     sx, sy = rng.integers(0, 2**31 - 1, 2)
@@ -110,7 +126,7 @@ def field_network(gullies: list[Gully], scfg: dict, min_depth: float, crs: str, 
     rows = []
     for g in gullies:
         cuts = set(confl.get(g.gully_id, []))
-        for a, b in _runs(g.depth >= min_depth):
+        for a, b in _runs((g.depth >= min_depth) & ~_under_water(g.x, g.y, water, grid)):
             start = a
             w0 = g.width[a]
             s = g.s
