@@ -42,6 +42,8 @@ rows = [
     ("cell size (m)", grid.cell),
     ("gully heads", int(hx.size)),
     ("heads on the DEM", int(res.heads_inside.sum())),
+    ("head snapping", f"{cfg['head_snap']} cell within {cfg['head_snap_radius_m']} m"),
+    ("tracing DEM smoothing sigma (m)", cfg["trace_smoothing_m"]),
     ("paths ending at an outlet", res.network.n_paths_to_outlet()),
     ("paths ending in a pit", res.network.n_paths_not_at_outlet()),
     ("traced network length (m)", round(float(res.lines["length_m"].sum()), 1)),

@@ -1,7 +1,8 @@
 """Gully network (Fig. 3 g-j): snap heads, trace steepest descent, stream order, lines.
 
-Heads are snapped to the lowest valid cell within a radius ([I] 1 m) and traced on a
-depression-free DEM (flats resolved or ε gradient), head after head; a path stops at the DEM edge or nodata (outlet) or
+Heads are snapped onto the gully within a radius set from their digitising error ([I]
+lowest cell within 2σ = 4 m) and traced on the depression-free DEM (optionally lightly
+smoothed first; flats resolved or ε gradient), head after head; a path stops at the DEM edge or nodata (outlet) or
 merges into a path traced before. The traced cells form a forest of trees that drain
 to outlets; stream order is Strahler's, and the lines are split at heads and
 confluences into segments that carry their order and length.
@@ -20,8 +21,39 @@ from kitegully.io.raster import GridSpec
 from kitegully.terrain.flow import END_OUTLET, END_PIT, trace_paths
 
 
-def snap_heads(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Snap points to the lowest valid cell whose centre lies within ``radius_m``.
+#: How a digitised head is moved onto the gully (``gully.head_snap``).
+HEAD_SNAPS = ("lowest", "deepest", "patch")
+
+
+def snap_heads(
+    z: np.ndarray,
+    grid: GridSpec,
+    x: np.ndarray,
+    y: np.ndarray,
+    radius_m: float,
+    method: str = "lowest",
+    depth: np.ndarray | None = None,
+    patches: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Snap digitised heads onto a valid cell whose centre lies within ``radius_m``.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata; candidates must be valid on it.
+    grid : GridSpec
+        Its grid.
+    x, y : ndarray
+        Head coordinates (m).
+    radius_m : float
+        Search radius (m), e.g. twice the digitising SD of the heads.
+    method : str
+        ``lowest``: the lowest cell of ``z``; ``deepest``: the cell of greatest ``depth``
+        (the incision below the smoothed surface, Fig. 3 a-d); ``patch``: the nearest cell
+        of a kept depth patch (``patches`` > 0, Fig. 3 e-f), or the lowest cell when no
+        patch is within reach.
+    depth, patches : ndarray (H, W), optional
+        Depth map (m) for ``deepest``, patch labels for ``patch``.
 
     Returns
     -------
@@ -34,6 +66,10 @@ def snap_heads(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, radi
     -----
     Complexity O(k r²) for k heads and a radius of r cells.
     """
+    if method not in HEAD_SNAPS:
+        raise ValueError(f"head snapping must be one of {HEAD_SNAPS}, got {method!r}")
+    if method == "deepest" and depth is None or method == "patch" and patches is None:
+        raise ValueError(f"head snapping {method!r} needs the {'depth map' if method == 'deepest' else 'patch labels'}")
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     row, col = grid.rowcol(x, y)
@@ -51,9 +87,23 @@ def snap_heads(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, radi
     zz = np.full(rr.shape, np.inf)
     zz[ok] = z[rr[ok], cc[ok]]
     zz[~np.isfinite(zz)] = np.inf
-    best = np.argmin(zz, axis=1)
+    valid = np.isfinite(zz)
+    if method == "deepest":
+        cost = np.full(rr.shape, np.inf)
+        cost[ok] = -np.asarray(depth)[rr[ok], cc[ok]]
+        cost[~valid | ~np.isfinite(cost)] = np.inf
+        # a candidate without a finite depth keeps the head on the lowest cell
+        cost = np.where(np.isfinite(cost).any(axis=1)[:, None], cost, zz)
+    elif method == "patch":
+        on = np.zeros(rr.shape, dtype=bool)
+        on[ok] = np.asarray(patches)[rr[ok], cc[ok]] > 0
+        on &= valid
+        cost = np.where(on.any(axis=1)[:, None], np.where(on, dist, np.inf), zz)
+    else:
+        cost = zz
+    best = np.argmin(cost, axis=1)
     k = np.arange(x.size)
-    inside = np.isfinite(zz[k, best])
+    inside = valid[k, best]
     index = np.where(inside, rr[k, best] * grid.width + cc[k, best], -1)
     return index.astype(np.int64), inside
 

@@ -13,12 +13,13 @@ import pandas as pd
 
 from kitegully.gully.depth import depth_map
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
-from kitegully.gully.network import GullyNetwork, network_lines, snap_heads, trace_network
+from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
 from kitegully.gully.patches import depth_patches
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.fill import priority_flood_fill
 from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.holes import interpolate_holes
+from kitegully.terrain.smoothing import gaussian_smooth_fft
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +55,15 @@ class GullyParams:
         photogrammetric match on water): they are not interpolated, so the traced network
         ends at their shore like at the DEM edge ([I] 2500 m² = 0.25 ha); ``None``
         interpolates every interior hole.
+    head_snap : str
+        Where a digitised head is moved to (:data:`kitegully.gully.network.HEAD_SNAPS`):
+        ``lowest`` cell, ``deepest`` cell of the depth map, or nearest cell of a kept
+        depth ``patch``, within ``head_snap_radius_m``.
     head_snap_radius_m : float
-        Heads snap to the lowest cell within this radius (m) ([I] 1 m).
+        Search radius of the head snapping (m), e.g. 2× the digitising SD of the heads.
+    trace_smoothing_m : float
+        Gaussian σ (m) of a smoothing of the DEM used only for the flow tracing (0 = trace
+        on the DEM itself); the depth map always uses the raw DEM.
     buffer_m : float
         Buffer around the network (m); 15 m.
     """
@@ -68,7 +76,9 @@ class GullyParams:
     flat_routing: str = "resolve"
     fill_epsilon_m: float = 1e-4
     water_min_area_m2: float | None = 2500.0
+    head_snap: str = "lowest"
     head_snap_radius_m: float = 1.0
+    trace_smoothing_m: float = 0.0
     buffer_m: float = 15.0
 
     @classmethod
@@ -79,6 +89,8 @@ class GullyParams:
     def __post_init__(self) -> None:
         if self.flat_routing not in FLAT_ROUTINGS:
             raise ValueError(f"flat_routing must be one of {FLAT_ROUTINGS}, got {self.flat_routing!r}")
+        if self.head_snap not in HEAD_SNAPS:
+            raise ValueError(f"head_snap must be one of {HEAD_SNAPS}, got {self.head_snap!r}")
 
 
 @dataclass
@@ -149,7 +161,13 @@ def map_gullies(
     t0 = time.perf_counter()
     water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
     zi, n_holes = interpolate_holes(dem, water_cells)
-    inside_idx, inside = snap_heads(zi, grid, heads_x, heads_y, params.head_snap_radius_m)
+    inside_idx, inside = snap_heads(
+        zi, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels
+    )
+    if params.trace_smoothing_m > 0:
+        holes = ~np.isfinite(zi)
+        zi = gaussian_smooth_fft(zi, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas, workers=workers)
+        zi[holes] = np.nan
     resolve = params.flat_routing == "resolve"
     filled, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
     del zi
