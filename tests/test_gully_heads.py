@@ -36,11 +36,11 @@ def traced_xy(res):
 
 def test_head_beside_the_gully_is_snapped_into_it_and_follows_the_bed():
     grid, z, xs, yc = furrowed_gully()
-    hx, hy = np.array([xs[20]]), np.array([yc + 2.5])  # 1 m outside the gully edge, in a furrow bottom
-    # radius 2 sigma of the head position: the head lands on the gully floor and its path stays on it
-    res = map_gullies(z, grid, hx, hy, GullyParams(head_snap="lowest", head_snap_radius_m=2 * HEAD_SD), workers=1)
+    hx, hy = np.array([xs[60]]), np.array([yc + 2.5])  # 1 m outside the gully edge, in a furrow bottom
+    # radius 3 sigma of the head position (99 % of 2-D errors): the head lands on the gully floor and its path stays on it
+    res = map_gullies(z, grid, hx, hy, GullyParams(head_snap="lowest", head_snap_radius_m=3 * HEAD_SD), workers=1)
     xy = traced_xy(res)
-    assert np.hypot(xy[0, 0] - hx[0], xy[0, 1] - hy[0]) <= 2 * HEAD_SD + CELL
+    assert np.hypot(xy[0, 0] - hx[0], xy[0, 1] - hy[0]) <= 3 * HEAD_SD + CELL
     assert np.all(np.abs(xy[:, 1] - yc) <= HALF_FLOOR + CELL)
     assert abs(xy[:, 0].max() - grid.bounds[2]) < CELL  # down to the outlet (east edge)
     assert res.network.n_paths_to_outlet() == 1
@@ -52,8 +52,8 @@ def test_head_beside_the_gully_is_snapped_into_it_and_follows_the_bed():
 @pytest.mark.parametrize("method", ["deepest", "patch"])
 def test_other_snapping_methods_land_in_the_gully(method):
     grid, z, xs, yc = furrowed_gully()
-    hx, hy = np.array([xs[20]]), np.array([yc - 2.5])
-    res = map_gullies(z, grid, hx, hy, GullyParams(head_snap=method, head_snap_radius_m=2 * HEAD_SD), workers=1)
+    hx, hy = np.array([xs[60]]), np.array([yc - 2.5])
+    res = map_gullies(z, grid, hx, hy, GullyParams(head_snap=method, head_snap_radius_m=3 * HEAD_SD), workers=1)
     xy = traced_xy(res)
     assert np.all(np.abs(xy[:, 1] - yc) <= HALF_FLOOR + 0.5 + CELL)  # inside the gully (floor or wall)
     assert res.network.n_paths_to_outlet() == 1
@@ -85,12 +85,12 @@ def test_snap_fallbacks_and_errors():
 def test_trace_smoothing_leaves_the_depth_map_and_water_alone():
     grid, z, xs, yc = furrowed_gully()
     z[20:80, 250:330] = np.nan  # open water (60 x 80 cells = 192 m2 >= water_min_area_m2 below)
-    hx, hy = np.array([xs[20]]), np.array([yc])
-    kw = dict(head_snap_radius_m=2 * HEAD_SD, water_min_area_m2=100.0)
+    hx, hy = np.array([xs[60]]), np.array([yc])
+    kw = dict(head_snap_radius_m=3 * HEAD_SD, water_min_area_m2=100.0)
     raw = map_gullies(z, grid, hx, hy, GullyParams(**kw), workers=1)
     smooth = map_gullies(z, grid, hx, hy, GullyParams(trace_smoothing_m=0.5, **kw), workers=1)
     np.testing.assert_array_equal(raw.depth, smooth.depth)
-    np.testing.assert_array_equal(raw.gully, smooth.gully)
+    np.testing.assert_array_equal(raw.patch_labels, smooth.patch_labels)
     xy = traced_xy(smooth)
     assert np.all(np.abs(xy[:, 1] - yc) <= HALF_FLOOR + CELL)  # smoothing by σ = 0.5 m keeps a 2 m floor
     assert smooth.network.n_paths_to_outlet() == 1

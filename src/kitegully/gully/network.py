@@ -1,7 +1,7 @@
 """Gully network (Fig. 3 g-j): snap heads, trace steepest descent, stream order, lines.
 
 Heads are snapped onto the gully within a radius set from their digitising error ([I]
-lowest cell within 2σ = 4 m) and traced on the depression-free DEM (optionally lightly
+lowest cell within 3σ = 6 m) and traced on the depression-free DEM (optionally lightly
 smoothed first; flats resolved or ε gradient), head after head; a path stops at the DEM edge or nodata (outlet) or
 merges into a path traced before. The traced cells form a forest of trees that drain
 to outlets; stream order is Strahler's, and the lines are split at heads and
@@ -46,7 +46,7 @@ def snap_heads(
     x, y : ndarray
         Head coordinates (m).
     radius_m : float
-        Search radius (m), e.g. twice the digitising SD of the heads.
+        Search radius (m), e.g. three times the digitising SD of the heads.
     method : str
         ``lowest``: the lowest cell of ``z``; ``deepest``: the cell of greatest ``depth``
         (the incision below the smoothed surface, Fig. 3 a-d); ``patch``: the nearest cell

@@ -60,7 +60,7 @@ class GullyParams:
         ``lowest`` cell, ``deepest`` cell of the depth map, or nearest cell of a kept
         depth ``patch``, within ``head_snap_radius_m``.
     head_snap_radius_m : float
-        Search radius of the head snapping (m), e.g. 2× the digitising SD of the heads.
+        Search radius of the head snapping (m), e.g. 3× the digitising SD of the heads (P(r ≤ 3σ) = 1 − e^(−4.5) ≈ 99 % for a 2-D Gaussian error).
     trace_smoothing_m : float
         Gaussian σ (m) of a smoothing of the DEM used only for the flow tracing (0 = trace
         on the DEM itself); the depth map always uses the raw DEM.
