@@ -107,6 +107,22 @@ def test_tiny_second_mode_below_min_fraction_is_not_bimodal():
     assert not res.bimodal and res.valley is None
 
 
+def test_a_few_outlying_cells_do_not_make_a_peak():
+    # A kite orthophoto's ExG has rare outliers (dark shadows, saturated roofs) far from
+    # the data; the histogram spans the fixed ExG range, so those isolated counts used to
+    # survive the smoothing as a "peak" and hide the real valley.
+    rng = np.random.default_rng(3)
+    values = np.concatenate([_mixture(30_000, 70_000), rng.uniform(-0.45, -0.35, 20), rng.uniform(0.6, 0.7, 10)])
+    edges = np.linspace(-1.0, 2.0, 257)
+    counts = np.histogram(values, bins=edges)[0]
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    res = find_thresholds(counts, centres, min_class_fraction=0.01, max_valley_ratio=0.7)
+    assert res.bimodal, res.reason
+    assert res.low_peak == pytest.approx(0.0, abs=0.03) and res.high_peak == pytest.approx(0.3, abs=0.03)
+    assert 0.05 < res.valley < 0.2
+    assert res.low_fraction == pytest.approx(0.30, abs=0.02)
+
+
 # --- region growing ------------------------------------------------------------------
 def _pieces(n=60):
     r, c = np.mgrid[0:n, 0:n]

@@ -1,13 +1,23 @@
 """Automatic ExG threshold: the valley between two histogram peaks, Otsu alongside.
 
 Mayr et al. (2016, sect. 2.4.2) find the two peaks of the (blurred) ExG histogram and
-take the minimum between them; Otsu's threshold drifts towards the larger class.  We
-use ``skimage.filters.threshold_minimum`` [I] (it smooths the histogram with a 3-bin
-mean until two maxima remain and returns the valley) and then check that the histogram
-really is bimodal: both sides of the valley must hold at least ``min_class_fraction``
-of the cells and the smoothed valley must be at most ``max_valley_ratio`` x the lower
-peak.  A histogram that fails is reported as not bimodal and no valley is returned:
-it is never forced into two classes.
+take the minimum between them; Otsu's threshold drifts towards the larger class.  The
+peaks are found as ``skimage.filters.threshold_minimum`` finds them [I]: the histogram
+is smoothed with a 3-bin mean until two maxima remain.  The valley is then the lowest
+point between those two peaks of the histogram smoothed only by a Gaussian of
+``valley_smoothing_bins`` (the middle of the lowest run where it is flat) [I]: the
+repeated smoothing that isolates the peaks also spreads the larger class into the
+valley and pushes its minimum towards the smaller class, and on a broad, flat valley
+that shift depends on a handful of cells.  The histogram must then really be bimodal: both sides of the valley
+must hold at least ``min_class_fraction`` of the cells and the valley of the fully
+smoothed histogram must be at most ``max_valley_ratio`` x the lower peak.  A histogram
+that fails is reported as not bimodal and no valley is returned: it is never forced
+into two classes.
+
+Before the peaks are sought, the outermost ``tail_fraction`` of the cells on each side is
+cut off the histogram [I]: a kite orthophoto holds rare ExG outliers (deep shadow,
+saturated roofs) far from the data, and those isolated counts would otherwise outlive
+the smoothing as a "peak" while the real two modes merge into one.
 """
 
 from __future__ import annotations
@@ -16,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
-from skimage.filters import threshold_minimum, threshold_otsu
+from skimage.filters import threshold_otsu
 
 
 @dataclass
@@ -95,12 +105,32 @@ def _smooth_to_two_maxima(counts: np.ndarray, max_iter: int) -> tuple[np.ndarray
     return smooth, maxima
 
 
+def _central_bins(counts: np.ndarray, tail_fraction: float) -> tuple[int, int]:
+    """First and last bin of the histogram once ``tail_fraction`` of the cells is cut off each end."""
+    cum = np.cumsum(counts)
+    total = cum[-1]
+    cut = tail_fraction * total
+    lo = int(np.searchsorted(cum, cut, side="right"))
+    hi = int(np.searchsorted(cum, total - cut, side="left"))
+    return min(lo, hi), max(lo, hi)
+
+
+def _middle_of_lowest_run(values: np.ndarray) -> int:
+    """Index in the middle of the first run of the minimum value (the lower one of two middles)."""
+    at_min = values == values.min()
+    start = int(np.argmax(at_min))
+    stop = start + (int(np.argmin(at_min[start:])) if not at_min[start:].all() else at_min.size - start)
+    return (start + stop - 1) // 2
+
+
 def find_thresholds(
     counts: np.ndarray,
     centres: np.ndarray,
     min_class_fraction: float,
     max_valley_ratio: float,
     max_iter: int = 10000,
+    tail_fraction: float = 1e-3,
+    valley_smoothing_bins: float = 2.0,
 ) -> ThresholdResult:
     """Valley and Otsu thresholds of a histogram, with the bimodality check.
 
@@ -112,6 +142,12 @@ def find_thresholds(
         Least share of all cells each side of the valley must hold [I].
     max_valley_ratio
         Largest allowed (smoothed valley count) / (lower peak count) [I].
+    tail_fraction
+        Share of the cells cut off each end of the histogram before the peak search [I];
+        the class fractions are still counted over all cells.
+    valley_smoothing_bins
+        Gaussian sigma (bins) of the histogram in which the valley is located [I]: enough
+        to calm the Poisson noise of a sparse valley, far less than the peak search uses.
     """
     counts = np.asarray(counts, dtype=np.int64)
     centres = np.asarray(centres, dtype=np.float64)
@@ -119,18 +155,18 @@ def find_thresholds(
     if total == 0:
         return ThresholdResult(None, None, False, "no valid values", counts=counts, centres=centres)
     otsu = float(threshold_otsu(hist=(counts, centres))) if np.count_nonzero(counts) > 1 else None
-    try:
-        valley = float(threshold_minimum(hist=(counts, centres), max_num_iter=max_iter))
-    except RuntimeError:
-        return ThresholdResult(None, otsu, False, "the smoothed histogram has a single peak", counts=counts, centres=centres)
-    nz = np.flatnonzero(counts)
-    trimmed = counts[nz[0]: nz[-1] + 1]
-    tcentres = centres[nz[0]: nz[-1] + 1]
+    lo, hi = _central_bins(counts, tail_fraction)
+    # one empty bin each side, so that a mode at the cut still reads as a peak
+    width = centres[1] - centres[0] if centres.size > 1 else 1.0
+    trimmed = np.concatenate([[0], counts[lo:hi + 1], [0]])
+    tcentres = np.concatenate([[centres[lo] - width], centres[lo:hi + 1], [centres[hi] + width]])
     smooth, maxima = _smooth_to_two_maxima(trimmed, max_iter)
     if len(maxima) != 2:
         return ThresholdResult(None, otsu, False, "the smoothed histogram has a single peak", counts=counts, centres=centres)
     i0, i1 = maxima
     ratio = float(smooth[i0:i1 + 1].min() / min(smooth[i0], smooth[i1]))
+    light = ndimage.gaussian_filter1d(trimmed.astype(np.float64), valley_smoothing_bins, mode="constant")
+    valley = float(tcentres[i0 + _middle_of_lowest_run(light[i0:i1 + 1])])
     low_fraction = float(counts[centres <= valley].sum() / total)
     res = ThresholdResult(
         valley, otsu, True, "two peaks separated by a valley",
