@@ -108,7 +108,8 @@ def centrelines(params, side: int, cell: float, x_origin: float, y_origin: float
 
 # --------------------------------------------------------------------------- child: whole stage
 def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> None:
-    """Whole gully mapping chain as the gully_map rule runs it (called in a child process)."""
+    """Whole gully mapping chain as the gully_map rule runs it, with the default site's
+    ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
     sys.path.insert(0, str(REPO / "src"))
     from kitegully.gully.pipeline import GullyParams, map_gullies
     from kitegully.io.raster import read_raster, write_raster
@@ -118,7 +119,11 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     dem, grid = read_raster(dem_path)
     heads = np.load(heads_path)
     t_read = time.perf_counter() - t0
-    res = map_gullies(dem, grid, heads[0], heads[1], GullyParams(), workers=threads)
+    import yaml
+
+    site = yaml.safe_load((REPO / "config" / "sites" / "kamech_twin.yaml").read_text())
+    params = GullyParams.from_config(site["gully"])  # the default site's settings, as the rule uses them
+    res = map_gullies(dem, grid, heads[0], heads[1], params, workers=threads)
     t1 = time.perf_counter()
     out = Path(out_dir)
     write_raster(out / "depth.tif", res.depth, grid)
