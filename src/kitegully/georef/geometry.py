@@ -126,3 +126,39 @@ def triangulate(
         miss = np.sqrt(ss / count)
     miss[~ok] = np.nan
     return X, miss
+
+
+def triangulation_covariance(intr: np.ndarray, rv: np.ndarray, t: np.ndarray, X: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Covariance (3×3, m²) of a point intersected from its rays, from the image noise alone.
+
+    First-order propagation of independent pixel noise ``sigma_px`` through the projection:
+    ``Σ = σ² (JᵀJ)⁻¹`` with ``J`` the (2n × 3) Jacobian of the n projections of ``X``
+    (central differences). It carries the ray geometry: a point seen from a short
+    baseline is weak in depth, however many rays it has. The cameras are taken as exact.
+
+    Parameters
+    ----------
+    intr, rv, t : (n, 5), (n, 3), (n, 3) intrinsics and pose of each observing image.
+    X : (3,) the point.
+    sigma_px : standard deviation of each pixel coordinate.
+
+    Returns
+    -------
+    (3, 3) covariance; all NaN where fewer than two rays or the geometry is singular.
+    """
+    n = len(rv)
+    if n < 2 or not np.all(np.isfinite(X)):
+        return np.full((3, 3), np.nan)
+    depth = np.median(np.abs((rotate(rv, np.repeat(X[None], n, 0)) + t)[:, 2]))
+    h = 1e-6 * max(depth, 1.0)
+    J = np.empty((2 * n, 3))
+    for axis in range(3):
+        step = np.zeros(3)
+        step[axis] = h
+        plus = project(intr, rv, t, np.repeat((X + step)[None], n, 0))
+        minus = project(intr, rv, t, np.repeat((X - step)[None], n, 0))
+        J[:, axis] = ((plus - minus) / (2 * h)).ravel()
+    normal = J.T @ J
+    if np.linalg.cond(normal) > 1e12:
+        return np.full((3, 3), np.nan)
+    return sigma_px**2 * np.linalg.inv(normal)

@@ -15,8 +15,11 @@ Flags (``flag`` column, ``;``-separated):
   ``qa.max_triangulation_px``): not used;
 * ``outlier`` – disagrees with the others after the transform (residual above
   ``qa.max_residual_m`` while the others agree within it without it): not used;
-* ``poor_fit`` – used, but its residual exceeds 3 σ, σ combining the survey sd and the
-  image measurement sd projected to the ground.
+* ``poor_fit`` – used, but its leave-one-out misfit (the solution without it, so it cannot
+  have pulled the block towards itself) exceeds 3 σ on some axis, σ combining the survey
+  sd, the click noise (``bundle.sigma_gcp_px``) propagated through the GCP's own rays
+  (:func:`kitegully.georef.geometry.triangulation_covariance`) and the block's own
+  placement error, estimated robustly from the other GCPs' leave-one-out residuals [I].
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ import pandas as pd
 from kitegully import InputError
 from kitegully.georef.bundle import Block, BundleSettings, adjust
 from kitegully.georef.gcp_io import GCP
-from kitegully.georef.geometry import camera_centres, project, triangulate
+from kitegully.georef.geometry import camera_centres, project, triangulate, triangulation_covariance
 from kitegully.georef.model import transform_block
 from kitegully.georef.similarity import Similarity, robust_similarity, tape_horn, umeyama
 from kitegully.sfm.images import ImageInfo, to_sfm_pixels
@@ -114,6 +117,12 @@ def triangulate_gcps(block: Block, obs: list[GcpObs]) -> tuple[np.ndarray, np.nd
         p = project(block.intr[ci], block.rv[o.rows], block.t[o.rows], np.repeat(Xk, len(o.rows), 0))
         rp[k] = np.sqrt(np.mean(np.sum((p - o.xy) ** 2, axis=1)))
     return X, rp
+
+
+def gcp_triangulation_covariance(block: Block, o: GcpObs, X: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Covariance (3×3, m²) of the GCP intersected from its observations with ``sigma_px`` click noise."""
+    ci = block.cam_of_image[o.rows]
+    return triangulation_covariance(block.intr[ci], block.rv[o.rows], block.t[o.rows], X, sigma_px)
 
 
 def reprojection_of(block: Block, o: GcpObs, X: np.ndarray) -> float:
@@ -209,33 +218,46 @@ def georeference(
     log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
     local, sim, report = solve(block_model, obs, survey_local, X_model, use, params["method"], settings, tape_edges)
 
-    # expected misfit: survey sd and the image measurement sd projected to the ground
-    # (sigma_gcp_px x GSD / sqrt(n_obs) per axis; heights ~ twice as weak [I])
     gsd = ground_sampling_distance(local)
-    sig = np.array([params["sigma_gcp_xy_m"]] * 2 + [params["sigma_gcp_z_m"]])
     X_final, _ = triangulate_gcps(local, obs)
-    rows = []
-    for k, o in enumerate(obs):
-        d = X_final[k] - survey_local[k]
-        img_sd = bp["sigma_gcp_px"] * gsd / np.sqrt(max(len(o.rows), 1)) * np.array([1.0, 1.0, 2.0])
-        if use[k] and np.any(np.abs(d) > 3 * np.hypot(sig, img_sd)):
-            o.flags.append("poor_fit")
-        rows.append(_row(o, d, reprojection_of(local, o, survey_local[k]), bool(use[k])))
-    residuals = pd.DataFrame(rows, columns=RESIDUAL_COLUMNS)
+    d_final = X_final - survey_local
 
-    loo_rows = []
+    # leave-one-out: each used GCP checked against a solution without it
     n_use = int(use.sum())
+    d_loo: dict[int, np.ndarray] = {}
+    rp_loo: dict[int, float] = {}
     for k in np.flatnonzero(use):
-        o = obs[k]
         if n_use - 1 < 3:
-            loo_rows.append(_row(o, np.full(3, np.nan), float("nan"), False, extra="too_few_gcps_to_leave_one_out"))
             continue
         use_k = use.copy()
         use_k[k] = False
         loc_k, _, _ = solve(block_model, obs, survey_local, X_model, use_k, params["method"], settings, tape_edges)
-        Xk, _ = triangulate_gcps(loc_k, [o])
-        d = Xk[0] - survey_local[k]
-        loo_rows.append(_row(o, d, reprojection_of(loc_k, o, survey_local[k]), False, extra="checkpoint"))
+        Xk, _ = triangulate_gcps(loc_k, [obs[k]])
+        d_loo[k] = Xk[0] - survey_local[k]
+        rp_loo[k] = reprojection_of(loc_k, obs[k], survey_local[k])
+
+    sig_survey = np.array([params["sigma_gcp_xy_m"]] * 2 + [params["sigma_gcp_z_m"]])
+    for k in np.flatnonzero(use):
+        o = obs[k]
+        sd_click = np.sqrt(np.diag(gcp_triangulation_covariance(local, o, X_final[k], bp["sigma_gcp_px"])))
+        sd_block = _block_sd(d_loo, exclude=k)
+        expected = np.sqrt(sig_survey**2 + sd_click**2 + sd_block**2)
+        # tested where it cannot have pulled the block towards itself: its leave-one-out
+        # misfit (the adjusted residual only when too few GCPs are left to leave one out)
+        misfit = d_loo.get(k, d_final[k])
+        log.info("%s: misfit %s m, expected sd %s m (survey, clicks through its rays, block from the others' "
+                 "leave-one-out)", o.gcp.gcp_id, np.round(misfit, 3), np.round(expected, 3))
+        if np.any(np.abs(misfit) > 3 * expected):
+            o.flags.append("poor_fit")
+
+    rows = [_row(o, d_final[k], reprojection_of(local, o, survey_local[k]), bool(use[k])) for k, o in enumerate(obs)]
+    residuals = pd.DataFrame(rows, columns=RESIDUAL_COLUMNS)
+    loo_rows = []
+    for k in np.flatnonzero(use):
+        if k in d_loo:
+            loo_rows.append(_row(obs[k], d_loo[k], rp_loo[k], False, extra="checkpoint"))
+        else:
+            loo_rows.append(_row(obs[k], np.full(3, np.nan), float("nan"), False, extra="too_few_gcps_to_leave_one_out"))
     loo = pd.DataFrame(loo_rows, columns=RESIDUAL_COLUMNS)
 
     report.update(_stats(residuals, loo, qa, obs, use))
@@ -243,6 +265,19 @@ def georeference(
     report["method"] = params["method"]
     report["gsd_m"] = gsd
     return GeorefResult(local, offset, sim, residuals, loo, report)
+
+
+def _block_sd(d_loo: dict[int, np.ndarray], exclude: int) -> np.ndarray:
+    """Robust per-axis sd (1.4826 x median |d|) of the other GCPs' leave-one-out residuals.
+
+    How well the block itself is placed where no GCP holds it: the part of a GCP's misfit
+    that neither its survey nor its clicks explain. Zero with fewer than three others.
+    The median keeps one bad GCP from inflating it.
+    """
+    others = np.array([d for j, d in d_loo.items() if j != exclude and np.all(np.isfinite(d))])
+    if len(others) < 3:
+        return np.zeros(3)
+    return 1.4826 * np.median(np.abs(others), axis=0)
 
 
 def _row(o: GcpObs, d: np.ndarray, reproj: float, used: bool, extra: str = "") -> dict:
