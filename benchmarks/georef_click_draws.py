@@ -23,7 +23,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -36,17 +35,18 @@ from kitegully.georef.evaluate import evaluate_twin  # noqa: E402
 from kitegully.georef.stage import run_georef_stage  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
 from kitegully.seeds import rng_for  # noqa: E402
+from kitegully.twin.camera import Camera  # noqa: E402
 from kitegully.twin.flight_gcps import digitise, read_odm_gcp_list, write_odm_gcp_list  # noqa: E402
 
-OUT_KEYS = ("model", "transform", "summary", "residuals", "loo", "calibration", "cameras", "cloud", "figure")
+# the georef_adjust rule's products, by the names run_georef_stage expects
+OUTPUTS = {"model": "model", "transform": "transform.json", "summary": "summary.json", "residuals": "gcp_residuals.csv",
+           "loo": "loo_checkpoints.csv", "calibration": "camera_calibration.csv", "cameras": "camera_positions.gpkg",
+           "cloud": "sparse_cloud.las", "figure": "gcp_residuals.png"}
 
 
-def one_draw(site: dict, results: Path, gcp_file: Path, work: Path) -> dict:
-    """Georeference with ``gcp_file`` into ``work`` and score against the flight truth."""
-    names = {"model": "model", "transform": "transform.json", "summary": "summary.json", "residuals": "gcp_residuals.csv",
-             "loo": "loo_checkpoints.csv", "calibration": "camera_calibration.csv", "cameras": "camera_positions.gpkg",
-             "cloud": "sparse_cloud.las", "figure": "gcp_residuals.png"}
-    out = {k: str(work / names[k]) for k in OUT_KEYS}
+def one_draw(site: dict, results: Path, gcp_file: Path, work: Path, poses: pd.DataFrame, gsd_m: float, n_images: int) -> dict:
+    """Georeference with ``gcp_file`` into ``work`` and score against the true ``poses``."""
+    out = {k: str(work / name) for k, name in OUTPUTS.items()}
     t0 = time.perf_counter()
     summary = run_georef_stage(
         model_dir=results / "sfm" / "model", image_info_json=results / "sfm" / "image_info.json", gcp_file=gcp_file,
@@ -55,10 +55,8 @@ def one_draw(site: dict, results: Path, gcp_file: Path, work: Path) -> dict:
     )
     seconds = time.perf_counter() - t0
     cams = read_vector(out["cameras"])
-    stats = pd.read_csv(results / "flight" / "image_stats.csv")
     residuals = pd.read_csv(out["residuals"])
-    _, ev = evaluate_twin(pd.DataFrame(cams.drop(columns="geometry")), pd.read_csv(results / "flight" / "truth" / "poses.csv"),
-                          residuals, pd.read_csv(out["loo"]), float(stats["gsd_m"].median()), len(stats))
+    _, ev = evaluate_twin(pd.DataFrame(cams.drop(columns="geometry")), poses, residuals, pd.read_csv(out["loo"]), gsd_m, n_images)
     flagged = residuals.loc[residuals["flag"].fillna("").astype(str).str.contains("poor_fit|outlier|ray_miss"), "gcp_id"].tolist()
     return {
         "camera_max_gsd": ev["camera_max_error_m"] / ev["gsd_m"], "camera_rmse_m": ev["camera_rmse_m"],
@@ -87,8 +85,10 @@ def main() -> None:
     survey = (observed.groupby("gcp_id")[["geo_x", "geo_y", "geo_z"]].first()
               .rename(columns={"geo_x": "x", "geo_y": "y", "geo_z": "z"}).reset_index())
     truth_px = pd.read_csv(results / "flight" / "truth" / "gcp_pixels.csv")
-    cam = json.loads((results / "flight" / "truth" / "camera.json").read_text())
-    camera = SimpleNamespace(cx=cam["cx"], cy=cam["cy"])
+    camera = Camera.read_json(results / "flight" / "truth" / "camera.json")
+    poses = pd.read_csv(results / "flight" / "truth" / "poses.csv")
+    stats = pd.read_csv(results / "flight" / "image_stats.csv")
+    gsd_m = float(stats["gsd_m"].median())
     g = site["flight"]["gcps"]
 
     rows = []
@@ -103,7 +103,7 @@ def main() -> None:
                 obs = digitise(truth_px, camera, rng, g["click_sigma_px"], g["max_images_per_target"])
                 path = work / "gcp_list.txt"
                 write_odm_gcp_list(path, crs, obs, survey)
-            row = {"draw": label, **one_draw(site, results, path, work)}
+            row = {"draw": label, **one_draw(site, results, path, work, poses, gsd_m, len(stats))}
             rows.append(row)
             print(json.dumps(row), flush=True)
     df = pd.DataFrame(rows)

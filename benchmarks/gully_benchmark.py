@@ -107,6 +107,13 @@ def centrelines(params, side: int, cell: float, x_origin: float, y_origin: float
 
 
 # --------------------------------------------------------------------------- child: whole stage
+def site_gully_config() -> dict:
+    """The default site's ``gully:`` section: the children run with the rules' settings."""
+    import yaml
+
+    return yaml.safe_load((REPO / "config" / "sites" / "kamech_twin.yaml").read_text())["gully"]
+
+
 def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> None:
     """Whole gully mapping chain as the gully_map rule runs it, with the default site's
     ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
@@ -119,11 +126,7 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     dem, grid = read_raster(dem_path)
     heads = np.load(heads_path)
     t_read = time.perf_counter() - t0
-    import yaml
-
-    site = yaml.safe_load((REPO / "config" / "sites" / "kamech_twin.yaml").read_text())
-    params = GullyParams.from_config(site["gully"])  # the default site's settings, as the rule uses them
-    res = map_gullies(dem, grid, heads[0], heads[1], params, workers=threads)
+    res = map_gullies(dem, grid, heads[0], heads[1], GullyParams.from_config(site_gully_config()), workers=threads)
     t1 = time.perf_counter()
     out = Path(out_dir)
     write_raster(out / "depth.tif", res.depth, grid)
@@ -157,9 +160,11 @@ def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
     net = GullyNetwork.load(Path(out_dir) / "network.npz")
     reference = read_vector(Path(out_dir) / "reference.gpkg")
     domain = footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(net, grid).geometry])
-    sensitivity_table(dem, grid, net, [5.0, 10.0, 20.0], [0.15, 0.25, 0.5], 1.0, 15.0, 8, 4.0,
-                      reference=reference, tolerance_m=5.0, domain=domain,
-                      workers=threads, known_depths={10.0: depth})
+    g = site_gully_config()
+    sensitivity_table(dem, grid, net, g["sensitivity"]["sigmas_m"], g["sensitivity"]["depth_thresholds_m"],
+                      g["min_patch_volume_m3"], g["buffer_m"], g["connectivity"], g["truncate_sigmas"],
+                      reference=reference, tolerance_m=g["validation"]["tolerance_m"], domain=domain,
+                      workers=threads, known_depths={g["sigma_m"]: depth})
     print(json.dumps({"sensitivity_s": time.perf_counter() - t0}))
 
 

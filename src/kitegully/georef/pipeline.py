@@ -226,9 +226,7 @@ def georeference(
     n_use = int(use.sum())
     d_loo: dict[int, np.ndarray] = {}
     rp_loo: dict[int, float] = {}
-    for k in np.flatnonzero(use):
-        if n_use - 1 < 3:
-            continue
+    for k in np.flatnonzero(use) if n_use - 1 >= 3 else []:
         use_k = use.copy()
         use_k[k] = False
         loc_k, _, _ = solve(block_model, obs, survey_local, X_model, use_k, params["method"], settings, tape_edges)

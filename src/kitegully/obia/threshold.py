@@ -8,11 +8,11 @@ point between those two peaks of the histogram smoothed only by a Gaussian of
 ``valley_smoothing_bins`` (the middle of the lowest run where it is flat) [I]: the
 repeated smoothing that isolates the peaks also spreads the larger class into the
 valley and pushes its minimum towards the smaller class, and on a broad, flat valley
-that shift depends on a handful of cells.  The histogram must then really be bimodal: both sides of the valley
-must hold at least ``min_class_fraction`` of the cells and the valley of the fully
-smoothed histogram must be at most ``max_valley_ratio`` x the lower peak.  A histogram
-that fails is reported as not bimodal and no valley is returned: it is never forced
-into two classes.
+that shift depends on a handful of cells.  The histogram must then really be bimodal:
+both sides of the valley must hold at least ``min_class_fraction`` of the cells and the
+valley of the fully smoothed histogram must be at most ``max_valley_ratio`` x the lower
+peak.  A histogram that fails is reported as not bimodal and no valley is returned: it
+is never forced into two classes.
 
 Before the peaks are sought, the outermost ``tail_fraction`` of the cells on each side is
 cut off the histogram [I]: a kite orthophoto holds rare ExG outliers (deep shadow,
@@ -117,10 +117,10 @@ def _central_bins(counts: np.ndarray, tail_fraction: float) -> tuple[int, int]:
 
 def _middle_of_lowest_run(values: np.ndarray) -> int:
     """Index in the middle of the first run of the minimum value (the lower one of two middles)."""
-    at_min = values == values.min()
-    start = int(np.argmax(at_min))
-    stop = start + (int(np.argmin(at_min[start:])) if not at_min[start:].all() else at_min.size - start)
-    return (start + stop - 1) // 2
+    at_min = np.flatnonzero(values == values.min())
+    breaks = np.flatnonzero(np.diff(at_min) > 1)
+    last = at_min[breaks[0]] if breaks.size else at_min[-1]
+    return int(at_min[0] + last) // 2
 
 
 def find_thresholds(
