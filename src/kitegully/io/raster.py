@@ -70,6 +70,77 @@ class GridSpec:
         return GridSpec(self.x0, self.y0, cell, w, h, self.crs)
 
 
+@dataclass
+class Raster:
+    """An array that knows its grid: data, north-up grid (transform + CRS) and nodata.
+
+    What :meth:`read` returns and :meth:`write` takes, like xDEM's ``DEM``. Float rasters
+    carry NaN for nodata in memory (``nodata`` is then ``nan``); integer rasters keep
+    their sentinel in ``nodata``. Nodata is decided once, here, and never re-derived.
+
+    Attributes
+    ----------
+    data : numpy.ndarray
+        2-D ``(rows, cols)`` or bands-first 3-D ``(bands, rows, cols)`` array.
+    grid : GridSpec
+        Cell size, origin, shape and CRS.
+    nodata : float, int or None
+        Nodata value of integer rasters; NaN for float rasters.
+    """
+
+    data: np.ndarray
+    grid: GridSpec
+    nodata: float | int | None = None
+
+    def __post_init__(self) -> None:
+        if self.data.shape[-2:] != (self.grid.height, self.grid.width):
+            raise ValueError(f"array shape {self.data.shape[-2:]} does not match grid {(self.grid.height, self.grid.width)}")
+        if self.nodata is None and self.data.dtype.kind == "f":
+            self.nodata = float("nan")
+
+    @classmethod
+    def read(cls, path: str | Path, band: int | None = 1) -> "Raster":
+        """Read one band (or all with ``band=None``); see :func:`read_raster` for the checks."""
+        data, grid, nodata = _read(path, band)
+        return cls(data, grid, nodata)
+
+    def write(self, path: str | Path, band_names: list[str] | None = None, tags: dict[str, str] | None = None) -> None:
+        """Write as a tiled, compressed GeoTIFF (see :func:`write_raster`)."""
+        write_raster(path, self.data, self.grid, nodata=self.nodata, band_names=band_names, tags=tags)
+
+    @property
+    def transform(self) -> Affine:
+        return self.grid.transform
+
+    @property
+    def crs(self) -> str:
+        return self.grid.crs
+
+    @property
+    def cell(self) -> float:
+        return self.grid.cell
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) in map units."""
+        return self.grid.bounds
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Boolean mask of cells with data (all bands valid for a 3-D raster)."""
+        if self.nodata is None:
+            ok = np.ones(self.data.shape, bool)
+        elif isinstance(self.nodata, float) and np.isnan(self.nodata):
+            ok = np.isfinite(self.data)
+        else:
+            ok = self.data != self.nodata
+        return ok.all(axis=0) if ok.ndim == 3 else ok
+
+    def with_data(self, data: np.ndarray, nodata: float | int | None = None) -> "Raster":
+        """A raster on the same grid holding ``data``."""
+        return Raster(data, self.grid, nodata)
+
+
 def _profile(grid: GridSpec, count: int, dtype: str, nodata) -> dict:
     tiled = grid.width >= 256 and grid.height >= 256
     profile = dict(
@@ -128,6 +199,11 @@ def read_raster(path: str | Path, band: int | None = 1) -> tuple[np.ndarray, Gri
     Nodata values of float rasters become NaN. Raises :class:`InputError` naming the
     file when it cannot be opened, is not north-up, or has no CRS.
     """
+    data, grid, _ = _read(path, band)
+    return data, grid
+
+
+def _read(path: str | Path, band: int | None) -> tuple[np.ndarray, GridSpec, float | int | None]:
     path = Path(path)
     try:
         src = rasterio.open(path)
@@ -143,9 +219,12 @@ def read_raster(path: str | Path, band: int | None = 1) -> tuple[np.ndarray, Gri
             raise InputError(f"{path}: cells are not square ({t.a} x {-t.e})")
         grid = GridSpec(t.c, t.f, t.a, src.width, src.height, src.crs.to_string())
         data = src.read(band) if band is not None else src.read()
-        if data.dtype.kind == "f" and src.nodata is not None and not np.isnan(src.nodata):
-            data = np.where(data == src.nodata, np.nan, data)
-    return data, grid
+        nodata = src.nodata
+        if data.dtype.kind == "f":
+            if nodata is not None and not np.isnan(nodata):
+                data = np.where(data == nodata, np.nan, data)
+            nodata = float("nan")
+    return data, grid, nodata
 
 
 def iter_tiles(grid: GridSpec, tile: int, overlap: int) -> Iterator[tuple[Window, Window]]:
