@@ -25,7 +25,7 @@ RUN_MEASURES = re.compile(r"(^|_|\s)(time|seconds|_s$|wall|cpu|memory|mem_|mb|ce
 def _drop_run_measures(df: pd.DataFrame) -> pd.DataFrame:
     cols = [c for c in df.columns if not RUN_MEASURES.search(str(c))]
     df = df[cols]
-    if len(df.columns) and df.dtypes.iloc[0] == object:
+    if len(df.columns) and not pd.api.types.is_numeric_dtype(df.dtypes.iloc[0]):
         keep = ~df.iloc[:, 0].astype(str).str.contains(RUN_MEASURES)
         df = df[keep.to_numpy()]
     return df.reset_index(drop=True)
