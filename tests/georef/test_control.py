@@ -1,6 +1,6 @@
 """QA of the georeferencing run on a synthetic block: flags, outliers, leave-one-out, errors.
 
-Built on the synthetic block of test_georef_bundle (GSD 0.05 m, tie noise 0.3 px, GCP
+Built on the synthetic block of tests/georef/test_bundle.py (GSD 0.05 m, tie noise 0.3 px, GCP
 pixel noise 0.5 px, survey noise 0.01 m), here without a dome.
 """
 
@@ -14,7 +14,7 @@ from kitegully.georef.gcp_io import GCP
 from kitegully.georef.geometry import project, rotvec_to_matrix, triangulate, triangulation_covariance
 from kitegully.georef.pipeline import georeference
 from kitegully.sfm.images import ImageInfo
-from test_georef_bundle import GSD, synthetic_block
+from georef.test_bundle import GSD, synthetic_block
 
 PARAMS = {
     "method": "gcp_bundle",

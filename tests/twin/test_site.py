@@ -22,7 +22,7 @@ from kitegully.twin.survey import rtk_observe
 from kitegully.twin.targets import eligible, sample_bilinear
 from kitegully.twin.terrain import pregully_grid
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 SITE = load_yaml(REPO / "config" / "sites" / "tiny_twin.yaml")
 TW = SITE["twin"]
 CRS = SITE["site"]["crs"]
@@ -337,16 +337,3 @@ def test_site_config_files_validate():
     cfg.update(bad)
     with pytest.raises(InputError, match="twin.gullies.u_shape_share"):
         validate_config(cfg)
-
-
-@pytest.mark.slow
-def test_workflow_tiny_twin(tmp_path):
-    from snakemake_utils import run_snakemake
-
-    res = tmp_path / "results"
-    base = res / "tiny_twin" / "twin"
-    targets = [str(base / "site.json"), str(base / "figures/twin_site_overview.png"), str(base / "epoch2/truth/dtm.tif")]
-    run_snakemake(REPO / "config/sites/tiny_twin.yaml", res, targets, cores=2)
-    for t in targets:
-        assert Path(t).is_file()
-    assert (res / "tiny_twin/logs/twin/epoch1.log").is_file()
