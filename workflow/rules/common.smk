@@ -1,5 +1,8 @@
 # Shared helpers for all rule files: paths, logs and the list of final targets.
 
+# The stages in data-flow order; each has workflow/rules/<stage>.smk (the Snakefile stops
+# with an error naming a listed stage whose rule file is missing). A new stage is added here
+# together with its rule file (docs/architecture.md, "Adding a stage").
 STAGES = [
     "tether",
     "twin",
@@ -9,9 +12,7 @@ STAGES = [
     "dense",
     "validate",
     "gully",
-    "polygons",
     "obia",
-    "change",
 ]
 
 RESULTS = Path(config["results_dir"]) / SITE
