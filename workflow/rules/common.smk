@@ -50,6 +50,12 @@ def all_targets():
     return TARGETS
 
 
+def config_keys(section, keys):
+    """The named keys of config[section]: what a rule passes in ``params:`` when it uses only
+    part of a section (a change to a key it ignores then does not rerun it)."""
+    return {k: config[section][k] for k in keys if k in config[section]}
+
+
 def caption(name):
     """Report caption file, relative to workflow/rules/ (where report() is called)."""
     return f"../report/{name}.rst"
