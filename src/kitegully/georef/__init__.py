@@ -18,6 +18,7 @@ from importlib import import_module
 _EXPORTS = {
     "georeference": "stage", "GeorefParams": "stage", "GeorefQA": "stage",
     "georeference_block": "control", "GeorefResult": "control",
+    "evaluate_against_flight_truth": "evaluate",
 }
 __all__ = sorted(_EXPORTS)
 
