@@ -217,9 +217,9 @@ def georeference_block(
 
     Notes
     -----
-    About 90 lines: the phases (observations, candidate GCPs, robust selection, solution,
-    leave-one-out, flags, tables) share the per-GCP arrays, so they are kept in one reading
-    order; each heavy step is a named function above. Cost: (n_used + 1) bundle solutions.
+    Phases: :func:`collect_observations`, :func:`triangulate_gcps`, :func:`select_gcps`,
+    :func:`solve`, :func:`leave_one_out`, :func:`flag_poor_fits`, :func:`residual_tables`.
+    Cost: (n_used + 1) bundle solutions.
     """
     qa = params.qa
     settings = params.bundle
@@ -232,6 +232,33 @@ def georeference_block(
     offset[2] = 0.0
     survey_local = survey - offset
     X_model, rp_model = triangulate_gcps(block_model, obs)
+    use = select_gcps(obs, X_model, rp_model, survey_local, qa, params.method)
+    log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
+    local, sim, report = solve(block_model, obs, survey_local, X_model, use, params.method, settings, tape_edges)
+
+    gsd = ground_sampling_distance(local)
+    X_final, _ = triangulate_gcps(local, obs)
+    d_final = X_final - survey_local
+    d_loo, rp_loo = leave_one_out(block_model, obs, survey_local, X_model, use, params.method, settings, tape_edges)
+    flag_poor_fits(local, obs, use, X_final, d_final, d_loo, params)
+    residuals, loo = residual_tables(local, obs, use, survey_local, d_final, d_loo, rp_loo)
+
+    report.update(_stats(residuals, loo, qa, obs, use))
+    report["offset_m"] = offset.tolist()
+    report["method"] = params.method
+    report["gsd_m"] = gsd
+    return GeorefResult(local, offset, sim, residuals, loo, report)
+
+
+def select_gcps(obs: list[GcpObs], X_model: np.ndarray, rp_model: np.ndarray, survey_local: np.ndarray, qa: GeorefQA,
+                method: str) -> np.ndarray:
+    """The GCPs the solution uses: seen in two registered images, rays meeting, no outlier.
+
+    Appends ``ray_miss`` and ``outlier`` to the flags of those left out (the outlier test,
+    a robust similarity, is skipped for ``tape_horn``, whose GPS positions are not
+    accurate enough for it). Raises :class:`InputError` naming every GCP when fewer than
+    three are usable. Returns a boolean mask over ``obs``.
+    """
     cand = np.array([len(o.rows) >= 2 and np.all(np.isfinite(X_model[k])) for k, o in enumerate(obs)])
     for k, o in enumerate(obs):
         if cand[k] and rp_model[k] > qa.max_triangulation_px:
@@ -242,35 +269,48 @@ def georeference_block(
         raise InputError(f"fewer than three usable GCPs (need at least 3 seen in two registered images whose rays meet): {bad}")
     use = cand.copy()
     idx = np.flatnonzero(cand)
-    if params.method != "tape_horn":
+    if method != "tape_horn":
         _, inl = robust_similarity(X_model[idx], survey_local[idx], qa.max_residual_m)
         for k, ok in zip(idx, inl):
             if not ok:
                 obs[k].flags.append("outlier")
                 use[k] = False
-    log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
-    local, sim, report = solve(block_model, obs, survey_local, X_model, use, params.method, settings, tape_edges)
+    return use
 
-    gsd = ground_sampling_distance(local)
-    X_final, _ = triangulate_gcps(local, obs)
-    d_final = X_final - survey_local
 
-    # leave-one-out: each used GCP checked against a solution without it
+def leave_one_out(
+    block_model: Block, obs: list[GcpObs], survey_local: np.ndarray, X_model: np.ndarray, use: np.ndarray, method: str,
+    settings: BundleSettings, tape_edges: list[tuple[str, str, float]] | None,
+) -> tuple[dict[int, np.ndarray], dict[int, float]]:
+    """Each used GCP checked against a solution without it (needs at least 3 others).
+
+    Returns its misfit (local frame, m) and the RMS reprojection error (px) of its surveyed
+    position, by index into ``obs``. Cost: one :func:`solve` per used GCP.
+    """
     n_use = int(use.sum())
     d_loo: dict[int, np.ndarray] = {}
     rp_loo: dict[int, float] = {}
     for k in np.flatnonzero(use) if n_use - 1 >= 3 else []:
         use_k = use.copy()
         use_k[k] = False
-        loc_k, _, _ = solve(block_model, obs, survey_local, X_model, use_k, params.method, settings, tape_edges)
+        loc_k, _, _ = solve(block_model, obs, survey_local, X_model, use_k, method, settings, tape_edges)
         Xk, _ = triangulate_gcps(loc_k, [obs[k]])
         d_loo[k] = Xk[0] - survey_local[k]
         rp_loo[k] = reprojection_of(loc_k, obs[k], survey_local[k])
+    return d_loo, rp_loo
 
+
+def flag_poor_fits(local: Block, obs: list[GcpObs], use: np.ndarray, X_final: np.ndarray, d_final: np.ndarray,
+                   d_loo: dict[int, np.ndarray], params: GeorefParams) -> None:
+    """Append ``poor_fit`` to used GCPs whose misfit exceeds 3 σ on some axis (module docstring).
+
+    σ combines the survey SD, the click noise through the GCP's own rays and the block's
+    placement error from the others' leave-one-out residuals.
+    """
     sig_survey = np.array([params.sigma_gcp_xy_m] * 2 + [params.sigma_gcp_z_m])
     for k in np.flatnonzero(use):
         o = obs[k]
-        sd_click = np.sqrt(np.diag(gcp_triangulation_covariance(local, o, X_final[k], settings.sigma_gcp_px)))
+        sd_click = np.sqrt(np.diag(gcp_triangulation_covariance(local, o, X_final[k], params.bundle.sigma_gcp_px)))
         sd_block = _block_sd(d_loo, exclude=k)
         expected = np.sqrt(sig_survey**2 + sd_click**2 + sd_block**2)
         # tested where it cannot have pulled the block towards itself: its leave-one-out
@@ -281,6 +321,10 @@ def georeference_block(
         if np.any(np.abs(misfit) > 3 * expected):
             o.flags.append("poor_fit")
 
+
+def residual_tables(local: Block, obs: list[GcpObs], use: np.ndarray, survey_local: np.ndarray, d_final: np.ndarray,
+                    d_loo: dict[int, np.ndarray], rp_loo: dict[int, float]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The GCP residual table (every GCP) and the leave-one-out table (used GCPs), columns :data:`RESIDUAL_COLUMNS`."""
     rows = [_row(o, d_final[k], reprojection_of(local, o, survey_local[k]), bool(use[k])) for k, o in enumerate(obs)]
     residuals = pd.DataFrame(rows, columns=RESIDUAL_COLUMNS)
     loo_rows = []
@@ -289,13 +333,7 @@ def georeference_block(
             loo_rows.append(_row(obs[k], d_loo[k], rp_loo[k], False, extra="checkpoint"))
         else:
             loo_rows.append(_row(obs[k], np.full(3, np.nan), float("nan"), False, extra="too_few_gcps_to_leave_one_out"))
-    loo = pd.DataFrame(loo_rows, columns=RESIDUAL_COLUMNS)
-
-    report.update(_stats(residuals, loo, qa, obs, use))
-    report["offset_m"] = offset.tolist()
-    report["method"] = params.method
-    report["gsd_m"] = gsd
-    return GeorefResult(local, offset, sim, residuals, loo, report)
+    return residuals, pd.DataFrame(loo_rows, columns=RESIDUAL_COLUMNS)
 
 
 def _block_sd(d_loo: dict[int, np.ndarray], exclude: int) -> np.ndarray:
