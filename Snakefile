@@ -38,10 +38,13 @@ include: "workflow/rules/common.smk"
 
 # One rule file per stage, in data-flow order. Each file registers its final outputs with
 # add_targets() and decides itself whether it applies to the site (e.g. twin-only stages).
-for _stage in STAGES:
-    if Path(f"workflow/rules/{_stage}.smk").exists():
+_missing = [s for s in STAGES if not Path(workflow.basedir, "workflow", "rules", f"{s}.smk").exists()]
+if _missing:
+    raise WorkflowError(f"STAGES in workflow/rules/common.smk lists {', '.join(_missing)} without a rule file workflow/rules/<stage>.smk")
 
-        include: f"workflow/rules/{_stage}.smk"
+for _stage in STAGES:
+
+    include: f"workflow/rules/{_stage}.smk"
 
 
 rule all:

@@ -32,13 +32,13 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
 from kitegully.georef.evaluate import evaluate_twin  # noqa: E402
-from kitegully.georef.stage import run_georef_stage  # noqa: E402
+from kitegully.georef import GeorefParams, georeference  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
 from kitegully.seeds import rng_for  # noqa: E402
 from kitegully.twin.camera import Camera  # noqa: E402
 from kitegully.twin.flight_gcps import digitise, read_odm_gcp_list, write_odm_gcp_list  # noqa: E402
 
-# the georef_adjust rule's products, by the names run_georef_stage expects
+# the georef_adjust rule's products, by the names georeference expects
 OUTPUTS = {"model": "model", "transform": "transform.json", "summary": "summary.json", "residuals": "gcp_residuals.csv",
            "loo": "loo_checkpoints.csv", "calibration": "camera_calibration.csv", "cameras": "camera_positions.gpkg",
            "cloud": "sparse_cloud.las", "figure": "gcp_residuals.png"}
@@ -48,9 +48,9 @@ def one_draw(site: dict, results: Path, gcp_file: Path, work: Path, poses: pd.Da
     """Georeference with ``gcp_file`` into ``work`` and score against the true ``poses``."""
     out = {k: str(work / name) for k, name in OUTPUTS.items()}
     t0 = time.perf_counter()
-    summary = run_georef_stage(
+    summary = georeference(
         model_dir=results / "sfm" / "model", image_info_json=results / "sfm" / "image_info.json", gcp_file=gcp_file,
-        sfm_frame=site["sfm"]["image_frame"], params=site["georef"], crs=site["site"]["crs"], out=out,
+        sfm_frame=site["sfm"]["image_frame"], params=GeorefParams.from_config(site["georef"]), crs=site["site"]["crs"], out=out,
         seed=int(rng_for(site["seed"], "georef").integers(2**31 - 1)),  # the rule's tie selection
     )
     seconds = time.perf_counter() - t0

@@ -23,10 +23,10 @@ sys.path.insert(0, str(REPO / "src"))
 
 CHILD = r"""
 import json, sys, numba
-from kitegully.twin.site import build_site, generate_epoch
+from kitegully.twin import TwinParams, build_site, generate_epoch
 a = json.loads(sys.argv[1])
 numba.set_num_threads(a["threads"])
-site = build_site(a["tw"], a["crs"], a["seed"], epoch=1)
+site = build_site(TwinParams.from_config(a["tw"]), a["crs"], a["seed"], epoch=1)
 r = generate_epoch(site, a["out"], texture=a["texture"])
 print(json.dumps(r))
 """

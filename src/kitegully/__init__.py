@@ -2,7 +2,8 @@
 
 Subpackages each have one concern: ``tether`` (kite line and flight planning),
 ``twin`` (synthetic sites), ``sfm``, ``georef``, ``dense``, ``terrain``, ``gully``,
-``obia``, ``change``, ``evaluate`` and ``io``.
+``obia``, ``evaluate`` and ``io``. The shape every stage package follows is written down
+in docs/architecture.md.
 """
 
 __version__ = "0.1.0"

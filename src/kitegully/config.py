@@ -125,3 +125,41 @@ def validate_config(
         names = ", ".join(str(s) for s in sources) or "configuration"
         raise InputError(_format_error(error, names))
     return copy.deepcopy(dict(config))
+
+
+def config_section(cfg: Any, where: str, keys: Iterable[str], optional: Iterable[str] = ()) -> Mapping[str, Any]:
+    """Check that a config section holds exactly ``keys`` (plus any of ``optional``).
+
+    Used by the ``from_config`` classmethods of the stage parameter dataclasses, so a
+    section built by hand (tests, benchmarks) is held to the same keys as the schema.
+
+    Parameters
+    ----------
+    cfg
+        The section (a mapping).
+    where
+        Its key path for messages, e.g. ``"georef.qa"``.
+    keys, optional
+        Required and optional key names.
+
+    Returns
+    -------
+    Mapping
+        ``cfg`` itself.
+
+    Raises
+    ------
+    InputError
+        Naming the section and the first missing or unknown key.
+    """
+    if not isinstance(cfg, Mapping):
+        raise InputError(f"{where}: must be a mapping of keys, got {type(cfg).__name__}")
+    keys = list(keys)
+    allowed = set(keys) | set(optional)
+    missing = [k for k in keys if k not in cfg]
+    if missing:
+        raise InputError(f"{where}: missing key '{missing[0]}'")
+    unknown = sorted(str(k) for k in cfg if k not in allowed)
+    if unknown:
+        raise InputError(f"{where}: unknown key '{unknown[0]}' (allowed here: {', '.join(sorted(allowed))})")
+    return cfg

@@ -1,5 +1,8 @@
 # Shared helpers for all rule files: paths, logs and the list of final targets.
 
+# The stages in data-flow order; each has workflow/rules/<stage>.smk (the Snakefile stops
+# with an error naming a listed stage whose rule file is missing). A new stage is added here
+# together with its rule file (docs/architecture.md, "Adding a stage").
 STAGES = [
     "tether",
     "twin",
@@ -9,9 +12,7 @@ STAGES = [
     "dense",
     "validate",
     "gully",
-    "polygons",
     "obia",
-    "change",
 ]
 
 RESULTS = Path(config["results_dir"]) / SITE
@@ -47,6 +48,12 @@ def add_targets(*paths):
 
 def all_targets():
     return TARGETS
+
+
+def config_keys(section, keys):
+    """The named keys of config[section]: what a rule passes in ``params:`` when it uses only
+    part of a section (a change to a key it ignores then does not rerun it)."""
+    return {k: config[section][k] for k in keys if k in config[section]}
 
 
 def caption(name):

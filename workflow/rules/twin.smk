@@ -3,6 +3,7 @@
 # rules may read it. twin/site.json holds what a flight planner knows (extent, CRS, cells).
 
 if IS_TWIN and "twin" in config:
+    from kitegully.twin.site import EPOCH2_KEYS as TWIN_EPOCH2_KEYS, EPOCH_KEYS as TWIN_EPOCH_KEYS, PLAN_KEYS as TWIN_PLAN_KEYS
 
     TWIN_TRUTH = ["dtm.tif", "dsm.tif", "landcover.tif", "landcover_classes.csv", "texture.tif", "targets.csv",
                   "checkpoints.csv", "gully_centrelines.gpkg", "gully_polygons.gpkg", "gully_heads.gpkg"]
@@ -17,7 +18,7 @@ if IS_TWIN and "twin" in config:
         output:
             site=result("twin", "site.json"),
         params:
-            tw=config["twin"],
+            twin=config_keys("twin", TWIN_PLAN_KEYS),
             crs=config["site"]["crs"],
             seed=config["seed"],
         log:
@@ -30,7 +31,7 @@ if IS_TWIN and "twin" in config:
             **twin_epoch_outputs(""),
             stats=report(result("twin", "truth/site_statistics.csv"), caption=caption("twin_statistics"), category="2 Twin"),
         params:
-            tw=config["twin"],
+            twin=config_keys("twin", TWIN_PLAN_KEYS + TWIN_EPOCH_KEYS),
             crs=config["site"]["crs"],
             seed=config["seed"],
             epoch=1,
@@ -50,7 +51,7 @@ if IS_TWIN and "twin" in config:
             **twin_epoch_outputs("epoch2/"),
             stats=report(result("twin", "epoch2/truth/site_statistics.csv"), caption=caption("twin_statistics_epoch2"), category="2 Twin"),
         params:
-            tw=config["twin"],
+            twin=config_keys("twin", TWIN_PLAN_KEYS + TWIN_EPOCH_KEYS + TWIN_EPOCH2_KEYS),
             crs=config["site"]["crs"],
             seed=config["seed"],
             epoch=2,

@@ -28,7 +28,7 @@ if "validate" in config and "dense" in config:
                 map=report(result("validate", "checkpoint_error_map.png"), caption=caption("validate_error_map"), category="DEM validation"),
                 **({"groups": report(result("validate", "checkpoint_summary_by_group.csv"), caption=caption("validate_groups"), category="DEM validation")} if IS_TWIN else {}),
             params:
-                validate=config["validate"],
+                validate=config_keys("validate", ("bare_classes", "histogram_bins", "error_limit_m")),
             log:
                 logfile("validate", "validate_checkpoints"),
             script:
@@ -55,7 +55,7 @@ if "validate" in config and "dense" in config:
                 profile_stats=report(result("validate", "profile_stats.csv"), caption=caption("validate_profile_stats"), category="DEM validation"),
                 profile_png=report(result("validate", "profile.png"), caption=caption("validate_profile"), category="DEM validation"),
             params:
-                validate=config["validate"],
+                validate=config_keys("validate", ("vegetation_classes", "error_limit_m", "figure_max_px", "profile")),
             log:
                 logfile("validate", "validate_truth"),
             script:

@@ -2,12 +2,12 @@
 
 from pathlib import Path
 
-from kitegully.dense.stage import run_dense_stage
+from kitegully.dense import DenseParams, match_dense_surface
 from kitegully.logs import setup_script_logging
 
 log = setup_script_logging(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821
-run_dense_stage(
-    sm.input.model, sm.input.transform, Path(sm.input.sfm_work) / "images", sm.params.crs, sm.params.dense,
-    sm.threads, dict(sm.output), site_json=sm.input.get("site"),
+match_dense_surface(
+    sm.input.model, sm.input.transform, Path(sm.input.sfm_work) / "images", sm.params.crs,
+    DenseParams.from_config(sm.params.dense), sm.threads, dict(sm.output), site_json=sm.input.get("site"),
 )

@@ -1,18 +1,18 @@
 """Rule georef_adjust: SfM model + GCP file -> georeferenced model, residual tables, products (thin adapter)."""
 
-from kitegully.georef.stage import run_georef_stage
+from kitegully.georef import GeorefParams, georeference
 from kitegully.logs import setup_script_logging
 from kitegully.seeds import rng_for
 
 log = setup_script_logging(snakemake.log[0])
 out = {k: snakemake.output[k] for k in
        ("model", "transform", "summary", "residuals", "loo", "calibration", "cameras", "cloud", "figure")}
-run_georef_stage(
+georeference(
     model_dir=snakemake.input.model,
     image_info_json=snakemake.input.image_info,
     gcp_file=snakemake.input.gcp,
     sfm_frame=snakemake.params.sfm_frame,
-    params=snakemake.params.georef,
+    params=GeorefParams.from_config(snakemake.params.georef),
     crs=snakemake.params.crs,
     seed=int(rng_for(snakemake.params.seed, "georef").integers(2**31 - 1)),
     out=out,

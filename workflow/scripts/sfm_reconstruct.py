@@ -2,18 +2,18 @@
 
 from kitegully.logs import setup_script_logging
 from kitegully.seeds import rng_for
-from kitegully.sfm.stage import run_sfm_stage
+from kitegully.sfm import SfmParams, reconstruct_model
 
 log = setup_script_logging(snakemake.log[0])
 seed = int(rng_for(snakemake.params.seed, "sfm").integers(2**31 - 1))
-run_sfm_stage(
+reconstruct_model(
     images_dir=snakemake.input.images,
     work_dir=snakemake.output.work,
     model_dir=snakemake.output.model,
     summary_json=snakemake.output.summary,
     images_csv=snakemake.output.images_csv,
     image_info_json=snakemake.output.image_info,
-    params=snakemake.params.sfm,
+    params=SfmParams.from_config(snakemake.params.sfm),
     seed=seed,
     threads=snakemake.threads,
     camera_log=snakemake.input.camera_log[0] if snakemake.input.camera_log else None,

@@ -1,11 +1,10 @@
 """Rule twin_figures: hillshade with gullies, land-cover map, site overview."""
 
 from kitegully.logs import setup_script_logging
-from kitegully.twin import figures
+from kitegully.twin.figures import twin_figures
 
 log = setup_script_logging(snakemake.log[0])
 i, o = snakemake.input, snakemake.output
-figures.hillshade_gullies(i.dtm, i.centrelines, o.hillshade, attribution=snakemake.params.attribution)
-figures.landcover_map(i.landcover, o.landcover, attribution=snakemake.params.attribution)
-figures.site_overview(i.texture, i.targets, i.checkpoints, i.heads, o.overview, attribution=snakemake.params.attribution)
+twin_figures(i.dtm, i.centrelines, i.landcover, i.texture, i.targets, i.checkpoints, i.heads,
+             o.hillshade, o.landcover, o.overview, attribution=snakemake.params.attribution)
 log.info("twin figures written")

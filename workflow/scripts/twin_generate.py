@@ -6,7 +6,7 @@ import numba
 import pandas as pd
 
 from kitegully.logs import setup_script_logging
-from kitegully.twin.site import build_site, generate_epoch
+from kitegully.twin import TwinParams, build_site, generate_epoch
 
 log = setup_script_logging(snakemake.log[0])
 numba.set_num_threads(max(1, min(snakemake.threads, numba.config.NUMBA_NUM_THREADS)))
@@ -15,7 +15,7 @@ out_dir = Path(snakemake.output.truth_dtm_tif).parent.parent
 fixed = None
 if epoch == 2:
     fixed = {"targets": pd.read_csv(snakemake.input.targets), "checkpoints": pd.read_csv(snakemake.input.checkpoints)}
-site = build_site(snakemake.params.tw, snakemake.params.crs, snakemake.params.seed, epoch=epoch)
+site = build_site(TwinParams.from_config(snakemake.params.twin), snakemake.params.crs, snakemake.params.seed, epoch=epoch)
 timing = generate_epoch(site, out_dir, fixed_points=fixed)
 missing = [p for p in snakemake.output if not Path(p).exists()]
 if missing:

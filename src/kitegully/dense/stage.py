@@ -1,4 +1,7 @@
-"""The dense stage end to end: georeferenced model → DSM, correlation, orthophoto, shading.
+"""The dense stage: its parameters and its entry point :func:`match_dense_surface`.
+
+:func:`match_dense_surface` turns the georeferenced model into a DSM, correlation raster,
+true orthophoto and relief shading; :class:`DenseParams` holds the ``dense`` config section.
 
 Products (all in the site CRS): ``dsm.tif`` (float32, NaN nodata), ``correlation.tif``
 (NCC at the chosen elevation), ``orthophoto.tif`` (uint8 bands, 0 = nodata),
@@ -10,6 +13,7 @@ from __future__ import annotations
 import logging
 import resource
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -17,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.dense.matching import MatchParams
 from kitegully.dense.ortho import orthophoto
 from kitegully.dense.shading import hillshade, openness
@@ -27,6 +32,144 @@ from kitegully.io.raster import GridSpec, write_raster
 from kitegully.io.tables import write_table
 
 log = logging.getLogger(__name__)
+
+
+def _positive(cfg: Mapping[str, Any], key: str, where: str, low: float = 0.0, strict: bool = True) -> float:
+    v = cfg[key]
+    if not (v > low if strict else v >= low):
+        raise InputError(f"{where}.{key}: must be {'above' if strict else 'at least'} {low:g}, got {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class OrthoParams:
+    """True orthophoto (``dense.orthophoto``).
+
+    Attributes
+    ----------
+    upsample : int
+        Orthophoto cells per DSM cell side (ortho cell = ``cell_m / upsample``; [I] the
+        images' GSD is finer than the DSM cell).
+    tile_cells : int
+        Orthophoto tile side (ortho cells).
+    overlap_m : float
+        DSM margin around a tile for the occlusion test (m; [I] longer than the shadow of
+        the tallest object at the images' viewing angles).
+    occlusion_tolerance_m : float
+        A line of sight is blocked where the DSM rises this much above it (m; [I] about
+        the DSM's noise).
+    """
+
+    upsample: int
+    tile_cells: int
+    overlap_m: float
+    occlusion_tolerance_m: float
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "OrthoParams":
+        """Build from ``dense.orthophoto``; raises InputError naming a bad key."""
+        config_section(cfg, "dense.orthophoto", cls.__dataclass_fields__)
+        _positive(cfg, "upsample", "dense.orthophoto", 1, strict=False)
+        _positive(cfg, "tile_cells", "dense.orthophoto", 16, strict=False)
+        _positive(cfg, "overlap_m", "dense.orthophoto", strict=False)
+        _positive(cfg, "occlusion_tolerance_m", "dense.orthophoto", strict=False)
+        return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
+
+
+@dataclass(frozen=True)
+class ShadingParams:
+    """Relief shading figures (``dense.shading``).
+
+    Attributes
+    ----------
+    azimuth_deg, altitude_deg : float
+        Hillshade sun azimuth from north and elevation (deg).
+    openness_radius_m : float
+        Search radius of the positive-openness shading (m; [I] a few gully widths).
+    """
+
+    azimuth_deg: float
+    altitude_deg: float
+    openness_radius_m: float
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "ShadingParams":
+        """Build from ``dense.shading``; raises InputError naming a bad key."""
+        config_section(cfg, "dense.shading", cls.__dataclass_fields__)
+        if not (0 <= cfg["azimuth_deg"] <= 360 and 0 < cfg["altitude_deg"] <= 90):
+            raise InputError("dense.shading: azimuth_deg must lie in 0-360 and altitude_deg in (0, 90]")
+        _positive(cfg, "openness_radius_m", "dense.shading")
+        return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
+
+
+@dataclass(frozen=True)
+class DenseParams:
+    """Parameters of the dense stage (the ``dense`` config section).
+
+    Attributes
+    ----------
+    cell_m : float
+        DSM cell size (m; [P] 0.20 m in Feurer et al. 2018).
+    extent : None, "site" or dict
+        DSM extent: None = the tie points' extent trimmed by ``extent_percentile``;
+        ``site`` = the twin's ``site.json`` extent; else ``{xmin, ymin, xmax, ymax}`` in
+        the site CRS (m).
+    extent_percentile : float
+        Percent of tie points trimmed on each side for the automatic extent (0-10).
+    tile_cells : int
+        Core tile side (DSM cells); memory grows with its square.
+    overlap_cells : int
+        Overlap added on every side of a tile (cells; [I] a multiple of 2^(levels-1) so
+        the pyramid levels stay aligned).
+    max_cached_images : int
+        Image pyramids kept in memory (LRU cache).
+    matching : MatchParams
+        Object-space matching (``dense.matching``; see :class:`kitegully.dense.matching.MatchParams`).
+    orthophoto : OrthoParams
+        True orthophoto (``dense.orthophoto``).
+    shading : ShadingParams
+        Relief shading (``dense.shading``).
+    figure_max_px : int
+        Figures show the rasters decimated to at most this many pixels per side.
+    threads : int
+        Threads of the rule (Snakemake ``threads:``; the script passes the granted count).
+    """
+
+    cell_m: float
+    extent: Any
+    extent_percentile: float
+    tile_cells: int
+    overlap_cells: int
+    max_cached_images: int
+    matching: MatchParams
+    orthophoto: OrthoParams
+    shading: ShadingParams
+    figure_max_px: int
+    threads: int
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "DenseParams":
+        """Build from the ``dense`` config section; raises InputError naming a bad key."""
+        config_section(cfg, "dense", cls.__dataclass_fields__)
+        _positive(cfg, "cell_m", "dense")
+        ext = cfg["extent"]
+        if ext is not None and ext != "site":
+            config_section(ext, "dense.extent", ("xmin", "ymin", "xmax", "ymax"))
+            if ext["xmax"] <= ext["xmin"] or ext["ymax"] <= ext["ymin"]:
+                raise InputError(f"dense.extent: xmax/ymax must exceed xmin/ymin, got {dict(ext)}")
+            ext = {k: ext[k] for k in ("xmin", "ymin", "xmax", "ymax")}
+        if not 0 <= cfg["extent_percentile"] <= 10:
+            raise InputError(f"dense.extent_percentile: must lie in 0-10, got {cfg['extent_percentile']!r}")
+        for key, low in (("tile_cells", 16), ("overlap_cells", 0), ("max_cached_images", 2), ("figure_max_px", 100),
+                         ("threads", 1)):
+            _positive(cfg, key, "dense", low, strict=False)
+        config_section(cfg["matching"], "dense.matching", MatchParams.__dataclass_fields__)
+        return cls(
+            cell_m=cfg["cell_m"], extent=ext, extent_percentile=cfg["extent_percentile"], tile_cells=cfg["tile_cells"],
+            overlap_cells=cfg["overlap_cells"], max_cached_images=cfg["max_cached_images"],
+            matching=MatchParams.from_config(cfg["matching"]), orthophoto=OrthoParams.from_config(cfg["orthophoto"]),
+            shading=ShadingParams.from_config(cfg["shading"]), figure_max_px=cfg["figure_max_px"], threads=cfg["threads"],
+        )
 
 
 def peak_memory_mb() -> float:
@@ -46,12 +189,12 @@ def read_site_extent(site_json: str | Path) -> dict[str, float]:
         raise InputError(f"{path}: cannot read extent xmin, ymin, xmax, ymax ({exc})") from None
 
 
-def site_grid(views: ViewSet, cfg: Mapping[str, Any], crs: str, site_json: str | Path | None = None) -> GridSpec:
+def site_grid(views: ViewSet, params: DenseParams, crs: str, site_json: str | Path | None = None) -> GridSpec:
     """DSM grid: the configured extent, the site's extent (``extent: site``, from
     ``site_json``) or the trimmed tie-point extent (``extent: null``); origin snapped to
     whole multiples of the cell (so it aligns with any grid of the same cell)."""
-    cell = float(cfg["cell_m"])
-    ext = cfg["extent"]
+    cell = float(params.cell_m)
+    ext = params.extent
     if ext == "site":
         if site_json is None:
             raise InputError("dense.extent is 'site' but the site has no site.json (use null or an explicit extent)")
@@ -60,7 +203,7 @@ def site_grid(views: ViewSet, cfg: Mapping[str, Any], crs: str, site_json: str |
         P = views.sparse_points
         if len(P) < 10:
             raise InputError("dense.extent is null but the model has fewer than 10 tie points to derive it from")
-        q = float(cfg["extent_percentile"])
+        q = float(params.extent_percentile)
         xmin, xmax = np.percentile(P[:, 0], [q, 100 - q]) + views.offset[0]
         ymin, ymax = np.percentile(P[:, 1], [q, 100 - q]) + views.offset[1]
     else:
@@ -92,34 +235,66 @@ def _show(ax, img, grid: GridSpec, max_px: int, cmap: str = "gray", **kw):
     return im
 
 
-def shading_figures(dsm: np.ndarray, grid: GridSpec, cfg: Mapping[str, Any], hill_png: str | Path,
+def shading_figures(dsm: np.ndarray, grid: GridSpec, sh: ShadingParams, figure_max_px: int, hill_png: str | Path,
                     open_png: str | Path) -> None:
     """Hillshade and openness figures of the DSM (Fig. 8 style), axes in site metres."""
-    sh = cfg["shading"]
-    hs = hillshade(dsm, grid.cell, sh["azimuth_deg"], sh["altitude_deg"])
+    hs = hillshade(dsm, grid.cell, sh.azimuth_deg, sh.altitude_deg)
     fig, ax = new_figure(figsize=(7, 6))
-    im = _show(ax, np.where(np.isfinite(dsm), hs, np.nan), grid, cfg["figure_max_px"], vmin=0, vmax=1)
+    im = _show(ax, np.where(np.isfinite(dsm), hs, np.nan), grid, figure_max_px, vmin=0, vmax=1)
     ax.set(xlabel="Easting (m)", ylabel="Northing (m)",
-           title=f"DSM hillshade (sun az {sh['azimuth_deg']:g}°, alt {sh['altitude_deg']:g}°), cell {grid.cell:g} m")
+           title=f"DSM hillshade (sun az {sh.azimuth_deg:g}°, alt {sh.altitude_deg:g}°), cell {grid.cell:g} m")
     ax.ticklabel_format(useOffset=False, style="plain")
     fig.colorbar(im, ax=ax, shrink=0.7, label="illumination (0–1)")
     save_figure(fig, hill_png)
-    op = openness(dsm, grid.cell, sh["openness_radius_m"])
+    op = openness(dsm, grid.cell, sh.openness_radius_m)
     fig, ax = new_figure(figsize=(7, 6))
     lo, hi = np.nanpercentile(op, [2, 98]) if np.isfinite(op).any() else (60, 90)
-    im = _show(ax, op, grid, cfg["figure_max_px"], vmin=lo, vmax=hi)
+    im = _show(ax, op, grid, figure_max_px, vmin=lo, vmax=hi)
     ax.set(xlabel="Easting (m)", ylabel="Northing (m)",
-           title=f"Positive openness within {sh['openness_radius_m']:g} m (sky-view-like shading)")
+           title=f"Positive openness within {sh.openness_radius_m:g} m (sky-view-like shading)")
     ax.ticklabel_format(useOffset=False, style="plain")
     fig.colorbar(im, ax=ax, shrink=0.7, label="openness (°); low = hollows, gullies")
     save_figure(fig, open_png)
 
 
-def run_dense_stage(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path, crs: str,
-                    cfg: Mapping[str, Any], threads: int, out: Mapping[str, str | Path],
-                    site_json: str | Path | None = None) -> dict:
-    """Run matching, orthophoto and shading; write the products named in ``out``
-    (keys ``dsm, correlation, orthophoto, hillshade, openness, summary``). Returns the summary."""
+def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path, crs: str,
+                        params: DenseParams, threads: int, out: Mapping[str, str | Path],
+                        site_json: str | Path | None = None) -> dict:
+    """Dense matching, orthophoto and shading of the georeferenced model; writes the products.
+
+    Parameters
+    ----------
+    model_dir : path
+        Georeferenced COLMAP model folder (local frame).
+    transform_json : path or None
+        The georef stage's ``transform.json`` (offset of the local frame); None = no offset.
+    image_dir : path
+        Folder of the prepared images the model names.
+    crs : str
+        Site CRS.
+    params : DenseParams
+        The stage's parameters.
+    threads : int
+        Threads granted to the rule (numba).
+    out : mapping
+        Product name → path; keys dsm, correlation, orthophoto, hillshade, openness, summary.
+    site_json : path, optional
+        The twin's ``site.json`` (needed by ``extent: site``).
+
+    Returns
+    -------
+    dict
+        The summary written to ``out["summary"]`` (coverage, speed, memory).
+
+    Raises
+    ------
+    InputError
+        Not a COLMAP model folder, no extent to derive, or no valid cell matched.
+
+    Notes
+    -----
+    Cost O(cells x labels x views) for the matching (:func:`kitegully.dense.surface.dense_surface`).
+    """
     import numba
     import pycolmap
 
@@ -129,26 +304,26 @@ def run_dense_stage(model_dir: str | Path, transform_json: str | Path | None, im
         raise InputError(f"{model_dir}: not a COLMAP model folder (no images.bin or images.txt)")
     rec = pycolmap.Reconstruction(str(model_dir))
     views = views_from_reconstruction(rec, image_dir, read_offset(transform_json), where=str(model_dir))
-    grid = site_grid(views, cfg, crs, site_json)
-    params = MatchParams.from_config(cfg["matching"])
+    grid = site_grid(views, params, crs, site_json)
+    mp = params.matching
     log.info("dense: %d images, grid %d x %d cells of %.3f m (%.2f ha), %d levels",
              len(views.images), grid.width, grid.height, grid.cell, grid.width * grid.height * grid.cell ** 2 / 1e4,
-             params.levels)
+             mp.levels)
     t0 = time.perf_counter()
-    res = dense_surface(views, grid, params, cfg["tile_cells"], cfg["overlap_cells"], cfg["max_cached_images"])
+    res = dense_surface(views, grid, mp, params.tile_cells, params.overlap_cells, params.max_cached_images)
     t_match = time.perf_counter() - t0
     if not np.isfinite(res.dsm).any():
         raise InputError(f"{model_dir}: dense matching found no valid cell (check the images and the model's orientation)")
     write_raster(out["dsm"], res.dsm, grid, tags={"units": "m", "nodata": "NaN"})
     write_raster(out["correlation"], res.ncc, grid, tags={"units": "NCC (-1..1)"})
-    oc = cfg["orthophoto"]
+    oc = params.orthophoto
     t1 = time.perf_counter()
-    img, og, _ = orthophoto(views, res.dsm, grid, oc["upsample"], oc["tile_cells"], oc["overlap_m"],
-                            oc["occlusion_tolerance_m"], cfg["max_cached_images"])
+    img, og, _ = orthophoto(views, res.dsm, grid, oc.upsample, oc.tile_cells, oc.overlap_m,
+                            oc.occlusion_tolerance_m, params.max_cached_images)
     t_ortho = time.perf_counter() - t1
     names = ["R", "G", "B", "NIR"][: img.shape[0]] if img.shape[0] >= 3 else ["grey"] * img.shape[0]
     write_raster(out["orthophoto"], img, og, nodata=0, band_names=names)
-    shading_figures(res.dsm, grid, cfg, out["hillshade"], out["openness"])
+    shading_figures(res.dsm, grid, params.shading, params.figure_max_px, out["hillshade"], out["openness"])
     cells = grid.width * grid.height
     summary = {
         "images": len(views.images), "cell_m": grid.cell, "width_cells": grid.width, "height_cells": grid.height,

@@ -3,21 +3,135 @@
 Errors are always ``e = z_model − z_reference`` (positive: the model is too high). The
 statistics follow the style of Feurer et al. 2018 Table 3 (mean, median, SD, RMSE, NMAD,
 5th and 95th percentiles, n) and Table 5 (min, quartiles, median, mean, SD, max).
+
+The validate stage's entry points are :func:`validate_checkpoints` (every site) and
+:func:`validate_against_truth` (twin sites, evaluation only), with their parameters
+:class:`CheckpointParams` and :class:`TruthParams`, each built from the keys of the
+``validate`` config section it uses.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 
 STAT_NAMES = ("mean", "median", "sd", "rmse", "nmad", "p05", "p95", "n")
 PROFILE_STAT_NAMES = ("min", "q25", "median", "q75", "max", "mean", "sd", "n")
+
+#: Keys of the ``validate`` config section (each entry point's parameters take their own).
+VALIDATE_KEYS = ("bare_classes", "vegetation_classes", "histogram_bins", "error_limit_m", "figure_max_px", "profile")
+
+
+def _common_checks(cfg: Mapping[str, Any]) -> None:
+    if "error_limit_m" in cfg and not cfg["error_limit_m"] > 0:
+        raise InputError(f"validate.error_limit_m: must be positive, got {cfg['error_limit_m']!r}")
+    if "figure_max_px" in cfg and cfg["figure_max_px"] < 100:
+        raise InputError(f"validate.figure_max_px: must be at least 100, got {cfg['figure_max_px']!r}")
+
+
+@dataclass(frozen=True)
+class CheckpointParams:
+    """Parameters of :func:`validate_checkpoints` (keys of the ``validate`` section).
+
+    Attributes
+    ----------
+    bare_classes : tuple of str
+        Twin land-cover classes counted as bare ground for the checkpoint target ([I]
+        where the DSM is the ground: bare, ploughed, track, gully).
+    histogram_bins : int
+        Bins of the checkpoint error histogram (at least 5).
+    error_limit_m : float
+        Colour scale limit of the error map (± m).
+    """
+
+    bare_classes: tuple[str, ...]
+    histogram_bins: int
+    error_limit_m: float
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "CheckpointParams":
+        """Build from the ``validate`` section or the sub-section of its keys; raises InputError naming a bad key."""
+        config_section(cfg, "validate", cls.__dataclass_fields__, optional=VALIDATE_KEYS)
+        _common_checks(cfg)
+        if cfg["histogram_bins"] < 5:
+            raise InputError(f"validate.histogram_bins: must be at least 5, got {cfg['histogram_bins']!r}")
+        return cls(tuple(cfg["bare_classes"]), cfg["histogram_bins"], cfg["error_limit_m"])
+
+
+@dataclass(frozen=True)
+class ProfileParams:
+    """The profile across a gully (``validate.profile``; Feurer et al. 2018 Fig. 10, Table 5).
+
+    Attributes
+    ----------
+    polyline : list of [x, y] or None
+        Profile vertices in the site CRS (m); None = across the longest true gully
+        centreline (twins).
+    auto_length_m : float
+        Length of the automatic profile (m).
+    spacing_m : float
+        Sample spacing along the profile (m; [I] the DSM cell).
+    reference : str
+        Truth surface the profile is compared with: ``dtm`` (the field-surveyed ground, as
+        in the paper [P]) or ``dsm``.
+    """
+
+    polyline: list | None
+    auto_length_m: float
+    spacing_m: float
+    reference: str
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "ProfileParams":
+        """Build from ``validate.profile``; raises InputError naming a bad key."""
+        config_section(cfg, "validate.profile", cls.__dataclass_fields__)
+        if cfg["reference"] not in ("dtm", "dsm"):
+            raise InputError(f"validate.profile.reference: must be dtm or dsm, got {cfg['reference']!r}")
+        for key in ("auto_length_m", "spacing_m"):
+            if not cfg[key] > 0:
+                raise InputError(f"validate.profile.{key}: must be positive, got {cfg[key]!r}")
+        line = cfg["polyline"]
+        if line is not None and (len(line) < 2 or any(len(v) != 2 for v in line)):
+            raise InputError("validate.profile.polyline: must be null or at least two [x, y] vertices")
+        return cls(line, cfg["auto_length_m"], cfg["spacing_m"], cfg["reference"])
+
+
+@dataclass(frozen=True)
+class TruthParams:
+    """Parameters of :func:`validate_against_truth` (keys of the ``validate`` section).
+
+    Attributes
+    ----------
+    vegetation_classes : tuple of str
+        Land-cover classes left out of the "without vegetation" profile statistics (Table 5).
+    error_limit_m : float
+        Colour scale limit of the error map (± m).
+    figure_max_px : int
+        The error raster map is decimated to at most this many pixels per side.
+    profile : ProfileParams
+        The profile across a gully.
+    """
+
+    vegetation_classes: tuple[str, ...]
+    error_limit_m: float
+    figure_max_px: int
+    profile: ProfileParams
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "TruthParams":
+        """Build from the ``validate`` section or the sub-section of its keys; raises InputError naming a bad key."""
+        config_section(cfg, "validate", cls.__dataclass_fields__, optional=VALIDATE_KEYS)
+        _common_checks(cfg)
+        return cls(tuple(cfg["vegetation_classes"]), cfg["error_limit_m"], cfg["figure_max_px"],
+                   ProfileParams.from_config(cfg["profile"]))
 
 
 def sample_bilinear(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -233,12 +347,32 @@ def checkpoint_figures(errors: pd.DataFrame, hist_png: str | Path, map_png: str 
     save_figure(fig, map_png)
 
 
-def run_checkpoint_validation(dsm_path, checkpoints_path, cfg: Mapping, out: Mapping,
-                              landcover_path=None, classes_path=None) -> pd.DataFrame:
-    """Checkpoint errors, ``statistic, value_m`` summary, histogram and map.
+def validate_checkpoints(dsm_path, checkpoints_path, params: CheckpointParams, out: Mapping,
+                         landcover_path=None, classes_path=None) -> pd.DataFrame:
+    """DSM errors at independent checkpoints: error table, summary, histogram and map.
 
-    With a land-cover raster (twin sites, evaluation only), also writes ``out["groups"]``:
-    statistics for all, bare-ground (``cfg["bare_classes"]``) and other checkpoints.
+    Parameters
+    ----------
+    dsm_path, checkpoints_path : path
+        The DSM (GeoTIFF, NaN nodata) and the checkpoint table (id, x, y, z in the site CRS).
+    params : CheckpointParams
+        Parameters.
+    out : mapping
+        Product name → path; keys errors, summary, histogram, map (and groups with a land cover).
+    landcover_path, classes_path : path, optional
+        Twin land-cover truth and its class table (evaluation only): also writes
+        ``out["groups"]``, statistics for all, bare-ground (``params.bare_classes``) and
+        other checkpoints.
+
+    Returns
+    -------
+    DataFrame
+        One row per checkpoint with its error ``error_m`` (DSM − checkpoint).
+
+    Raises
+    ------
+    InputError
+        An all-nodata DSM or an unreadable checkpoint table.
     """
     from kitegully.io.raster import read_raster
     from kitegully.io.tables import write_table
@@ -253,7 +387,7 @@ def run_checkpoint_validation(dsm_path, checkpoints_path, cfg: Mapping, out: Map
         names = read_class_names(classes_path)
         codes = sample_nearest(lc, lgrid, err["x_m"].to_numpy(), err["y_m"].to_numpy())
         err["landcover"] = [names.get(int(c), "unknown") for c in codes]
-        bare = err["landcover"].isin(cfg["bare_classes"]).to_numpy()
+        bare = err["landcover"].isin(list(params.bare_classes)).to_numpy()
         groups = {"all": np.ones(len(err), bool), "bare": bare, "other": ~bare}
         rows = {g: error_stats(err["error_m"].to_numpy()[m]) for g, m in groups.items()}
         tab = pd.DataFrame({"statistic": list(STAT_NAMES), **{f"{g}_m": [rows[g][k] for k in STAT_NAMES] for g in groups}})
@@ -266,7 +400,7 @@ def run_checkpoint_validation(dsm_path, checkpoints_path, cfg: Mapping, out: Map
         import logging
 
         logging.getLogger(__name__).warning("%d of %d checkpoints fall on DSM nodata or outside it", n_missing, len(err))
-    checkpoint_figures(err, out["histogram"], out["map"], cfg["histogram_bins"], cfg["error_limit_m"], stats)
+    checkpoint_figures(err, out["histogram"], out["map"], params.histogram_bins, params.error_limit_m, stats)
     return err
 
 
@@ -287,10 +421,28 @@ def auto_profile(centrelines_path, length_m: float) -> list[list[float]]:
     return [[p.x - n[0], p.y - n[1]], [p.x + n[0], p.y + n[1]]]
 
 
-def run_truth_validation(dsm_path, truth_dsm_path, truth_dtm_path, landcover_path, classes_path,
-                         centrelines_path, cfg: Mapping, out: Mapping) -> dict:
-    """Twin only: DSM − truth error raster, stats by land cover, error map, and the profile
-    comparison (Fig. 10 / Table 5) along the configured or automatic polyline."""
+def validate_against_truth(dsm_path, truth_dsm_path, truth_dtm_path, landcover_path, classes_path,
+                           centrelines_path, params: TruthParams, out: Mapping) -> dict:
+    """Twin only (evaluation): DSM − truth error raster, statistics by land cover, error map
+    and the profile comparison (Fig. 10 / Table 5) along the configured or automatic polyline.
+
+    Parameters
+    ----------
+    dsm_path : path
+        The DSM.
+    truth_dsm_path, truth_dtm_path, landcover_path, classes_path, centrelines_path : path
+        The twin's truth: surface, ground, land cover and its classes, gully centrelines.
+    params : TruthParams
+        Parameters.
+    out : mapping
+        Product name → path; keys error_raster, by_landcover, error_map, profile,
+        profile_stats, profile_png.
+
+    Returns
+    -------
+    dict
+        Error statistics of DSM − truth DSM over all cells.
+    """
     import logging
 
     from kitegully.io.figures import new_figure, save_figure
@@ -311,9 +463,9 @@ def run_truth_validation(dsm_path, truth_dsm_path, truth_dtm_path, landcover_pat
     tab.insert(2, "valid_pct", [100.0 * float(np.isfinite(err).mean())] +
                [100.0 * float(np.isfinite(err[lc_on == c]).mean()) for c in present])
     write_table(tab, out["by_landcover"])
-    lim = cfg["error_limit_m"]
+    lim = params.error_limit_m
     fig, ax = new_figure(figsize=(7, 5.5))
-    step = max(1, int(np.ceil(max(err.shape) / cfg["figure_max_px"])))
+    step = max(1, int(np.ceil(max(err.shape) / params.figure_max_px)))
     xmin, ymin, xmax, ymax = grid.bounds
     im = ax.imshow(err[::step, ::step], extent=(xmin, xmax, ymin, ymax), cmap="RdBu_r", vmin=-lim, vmax=lim,
                    interpolation="nearest")
@@ -322,16 +474,16 @@ def run_truth_validation(dsm_path, truth_dsm_path, truth_dtm_path, landcover_pat
     ax.set_title("DSM error against the twin's true surface")
     save_figure(fig, out["error_map"])
     # profile (Feurer et al. 2018 Fig. 10 / Table 5)
-    pc = cfg["profile"]
-    verts = pc["polyline"] if pc["polyline"] else auto_profile(centrelines_path, pc["auto_length_m"])
-    ref_path = truth_dtm_path if pc["reference"] == "dtm" else truth_dsm_path
+    pc = params.profile
+    verts = pc.polyline if pc.polyline else auto_profile(centrelines_path, pc.auto_length_m)
+    ref_path = truth_dtm_path if pc.reference == "dtm" else truth_dsm_path
     ref, rgrid = read_raster(ref_path)
-    prof, ptab = profile_comparison(dsm, grid, ref, rgrid, verts, pc["spacing_m"], lc, lgrid,
-                                    codes_of(names, cfg["vegetation_classes"]))
+    prof, ptab = profile_comparison(dsm, grid, ref, rgrid, verts, pc.spacing_m, lc, lgrid,
+                                    codes_of(names, list(params.vegetation_classes)))
     write_table(prof, out["profile"])
     write_table(ptab, out["profile_stats"])
     fig, (a1, a2) = new_figure(2, 1, figsize=(7, 5), sharex=True)
-    a1.plot(prof["distance_m"], prof["z_ref_m"], "k-", lw=1.2, label=f"truth {pc['reference'].upper()}")
+    a1.plot(prof["distance_m"], prof["z_ref_m"], "k-", lw=1.2, label=f"truth {pc.reference.upper()}")
     a1.plot(prof["distance_m"], prof["z_model_m"], "-", color="tab:orange", lw=1.0, label="kite DSM")
     v = prof["vegetation"].to_numpy()
     if v.any():

@@ -1,9 +1,29 @@
 """Ground control: GCP files, triangulation, similarity transforms, GCP bundle adjustment, QA.
 
-Modules: ``gcp_io`` (ODM ``gcp_list.txt`` and CSV parsing, reprojection with pyproj),
-``geometry`` (camera projection, rotations, multi-view triangulation), ``similarity``
-(Umeyama/Horn 7-parameter fits, tape-distance scale), ``bundle`` (our sparse
-least-squares bundle adjustment with GCP terms; COLMAP's has none), ``model`` (moving
-data between pycolmap models and arrays) and ``pipeline`` (QA flags, leave-one-out, the
-whole georeferencing run).
+Entry point (docs/architecture.md): :func:`georeference` with its parameters
+:class:`GeorefParams` (both in ``stage``); :func:`georeference_block` is the same on arrays.
+Imported lazily, so ``import kitegully.georef.gcp_io`` stays light.
+
+Modules: ``stage`` (the stage: parameters, files in and out), ``control`` (QA flags,
+leave-one-out, the georeferencing of a block), ``gcp_io`` (ODM ``gcp_list.txt`` and CSV
+parsing, reprojection with pyproj), ``geometry`` (camera projection, rotations,
+multi-view triangulation), ``similarity`` (Umeyama/Horn 7-parameter fits, tape-distance
+scale), ``bundle`` (our sparse least-squares bundle adjustment with GCP terms; COLMAP's
+has none), ``model`` (moving data between pycolmap models and arrays), ``export``
+(products) and ``evaluate`` (twin evaluation against the flight truth).
 """
+
+from importlib import import_module
+
+_EXPORTS = {
+    "georeference": "stage", "GeorefParams": "stage", "GeorefQA": "stage",
+    "georeference_block": "control", "GeorefResult": "control",
+    "evaluate_against_flight_truth": "evaluate",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

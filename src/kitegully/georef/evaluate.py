@@ -56,3 +56,43 @@ def evaluate_twin(cameras: pd.DataFrame, truth_poses: pd.DataFrame, residuals: p
     }
     summary["all_targets_met"] = all(summary["targets"].values())
     return table, summary
+
+
+def evaluate_against_flight_truth(cameras_gpkg, poses_csv, image_stats_csv, residuals_csv, loo_csv, sfm_summary_json,
+                                  table_csv, summary_json) -> dict:
+    """Twin only (evaluation): the georef stage's products against the flight truth, written out.
+
+    Parameters
+    ----------
+    cameras_gpkg, residuals_csv, loo_csv : path
+        The georef stage's camera positions and GCP / leave-one-out residual tables.
+    poses_csv, image_stats_csv : path
+        The flight truth: camera poses and the rendered images' statistics (``gsd_m``; the
+        median is the GSD the targets are expressed in).
+    sfm_summary_json : path
+        The SfM summary (``n_images``).
+    table_csv, summary_json : path
+        Outputs: per-image camera errors and the target checks.
+
+    Returns
+    -------
+    dict
+        The summary written to ``summary_json``.
+    """
+    import json
+
+    from kitegully.georef.export import clean_json
+    from kitegully.io.tables import write_table
+    from kitegully.io.vectors import read_vector
+
+    cams = read_vector(cameras_gpkg)
+    gsd = float(pd.read_csv(image_stats_csv)["gsd_m"].median())
+    sfm = json.loads(open(sfm_summary_json, encoding="utf-8").read())
+    table, summary = evaluate_twin(
+        pd.DataFrame(cams.drop(columns="geometry")), pd.read_csv(poses_csv), pd.read_csv(residuals_csv),
+        pd.read_csv(loo_csv), gsd, sfm["n_images"],
+    )
+    write_table(table, table_csv)
+    with open(summary_json, "w", encoding="utf-8") as fh:
+        json.dump(clean_json(summary), fh, indent=2)
+    return summary

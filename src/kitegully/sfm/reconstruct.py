@@ -12,6 +12,7 @@ import shutil
 import time
 from collections import defaultdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pycolmap
@@ -19,6 +20,9 @@ import pycolmap
 from kitegully import InputError
 from kitegully.sfm.images import ImageInfo
 from kitegully.sfm.priors import write_position_priors
+
+if TYPE_CHECKING:
+    from kitegully.sfm.stage import SfmParams
 
 log = logging.getLogger(__name__)
 
@@ -182,7 +186,7 @@ def run_sfm(
     image_dir: str | Path,
     work_dir: str | Path,
     model_dir: str | Path,
-    params: dict,
+    params: SfmParams,
     seed: int,
     num_threads: int,
     positions: dict[str, np.ndarray] | None = None,
@@ -199,19 +203,19 @@ def run_sfm(
     pycolmap.set_random_seed(seed)
     t0 = time.perf_counter()
     extract_features(
-        database, image_dir, infos, params["camera_model"], params["default_focal_factor"],
-        params["max_num_features"], num_threads, params["first_octave"],
+        database, image_dir, infos, params.camera_model, params.default_focal_factor,
+        params.max_num_features, num_threads, params.first_octave,
     )
     t1 = time.perf_counter()
-    m = params["matching"]
-    n_priors = write_position_priors(database, positions, m["gps_sigma_m"]) if positions else 0
+    m = params.matching
+    n_priors = write_position_priors(database, positions, m.gps_sigma_m) if positions else 0
     used = match_features(
-        database, len(infos), m["method"], m["overlap"], m["exhaustive_max_images"], num_threads,
-        n_priors, m["spatial_max_distance_m"], m["spatial_max_neighbors"],
+        database, len(infos), m.method, m.overlap, m.exhaustive_max_images, num_threads,
+        n_priors, m.spatial_max_distance_m, m.spatial_max_neighbors,
     )
     t2 = time.perf_counter()
     rec = incremental_map(
-        database, image_dir, model_dir, params["refine_principal_point"], params["min_num_matches"], seed, num_threads
+        database, image_dir, model_dir, params.refine_principal_point, params.min_num_matches, seed, num_threads
     )
     t3 = time.perf_counter()
     timings = {

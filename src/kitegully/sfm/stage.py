@@ -1,14 +1,22 @@
-"""The SfM stage end to end: prepare images, reconstruct, write the model and its summary."""
+"""The SfM stage: its parameters and its entry point :func:`reconstruct_model`.
+
+:func:`reconstruct_model` prepares the images, runs pycolmap (features, matching,
+incremental mapping with one shared self-calibrated camera) and writes the model,
+``summary.json``, the image table and ``image_info.json``; :class:`SfmParams` holds the
+``sfm`` config section.
+"""
 
 from __future__ import annotations
 
 import json
 import logging
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any, Mapping
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.io.tables import write_table
 from kitegully.sfm.images import ImageInfo, list_images, prepare_images
 from kitegully.sfm.priors import positions_from_log
@@ -17,37 +25,191 @@ from kitegully.sfm.summary import image_table, model_summary
 
 log = logging.getLogger(__name__)
 
+MATCHING_METHODS = ("auto", "sequential", "exhaustive", "spatial")
 
-def run_sfm_stage(
+
+def _at_least(cfg: Mapping[str, Any], key: str, low: float, where: str) -> Any:
+    if cfg[key] < low:
+        raise InputError(f"{where}.{key}: must be at least {low}, got {cfg[key]!r}")
+    return cfg[key]
+
+
+@dataclass(frozen=True)
+class SfmMatching:
+    """Image pair selection and the camera GPS log (``sfm.matching``).
+
+    Attributes
+    ----------
+    method : str
+        ``sequential`` (capture order, ``overlap`` neighbours), ``exhaustive`` (all pairs),
+        ``spatial`` (nearest images by logged position) or ``auto`` (exhaustive up to
+        ``exhaustive_max_images``, else spatial with a camera log, else sequential).
+    overlap : int
+        Neighbours in capture order matched with each image ([I] consecutive kite photos
+        overlap for about this many frames).
+    exhaustive_max_images : int
+        Largest image count matched exhaustively by ``auto`` ([I] quadratic cost).
+    camera_log : str or None
+        GPS log of the camera: a path, ``flight`` (a twin's simulated logger; resolved by the
+        rule) or None.
+    log_time_offset_s : float
+        Camera clock minus GPS clock (s).
+    log_max_gap_s : float
+        Images further than this from any GPS fix get no position (s).
+    gps_sigma_m : float
+        SD of the logged positions (m), stored with the priors ([P] QSTARZ-class logger).
+    spatial_max_distance_m : float
+        Spatial matching pairs images whose logged positions are closer than this (m; [I]
+        about one image footprint).
+    spatial_max_neighbors : int
+        At most this many nearest images are matched with each image (spatial).
+    """
+
+    method: str
+    overlap: int
+    exhaustive_max_images: int
+    camera_log: str | None
+    log_time_offset_s: float
+    log_max_gap_s: float
+    gps_sigma_m: float
+    spatial_max_distance_m: float
+    spatial_max_neighbors: int
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "SfmMatching":
+        """Build from ``sfm.matching`` (keys of the same names); raises InputError naming a bad key."""
+        config_section(cfg, "sfm.matching", cls.__dataclass_fields__)
+        if cfg["method"] not in MATCHING_METHODS:
+            raise InputError(f"sfm.matching.method: must be one of {', '.join(MATCHING_METHODS)}, got {cfg['method']!r}")
+        for key, low in (("overlap", 1), ("exhaustive_max_images", 2), ("spatial_max_neighbors", 1)):
+            _at_least(cfg, key, low, "sfm.matching")
+        for key in ("log_max_gap_s", "gps_sigma_m", "spatial_max_distance_m"):
+            if not cfg[key] > 0:
+                raise InputError(f"sfm.matching.{key}: must be positive, got {cfg[key]!r}")
+        return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
+
+
+@dataclass(frozen=True)
+class SfmParams:
+    """Parameters of the SfM stage (the ``sfm`` config section).
+
+    Attributes
+    ----------
+    image_frame : str
+        Pixel frame SfM works in: ``stored`` (the sensor's pixels as stored in the file,
+        one camera even when some files carry an EXIF rotation tag) or ``display`` (turned
+        upright by the EXIF orientation tag, one camera per image shape).
+    max_image_size : int
+        Longest image side given to SfM (px); 0 keeps the full resolution.
+    skip_unreadable : bool
+        Skip corrupt or truncated images with a warning instead of stopping.
+    jpeg_quality : int
+        JPEG quality (50-100) of the prepared copies SfM reads.
+    camera_model : str
+        COLMAP camera model, ``SIMPLE_RADIAL`` or ``RADIAL`` (f, cx, cy, k1, k2).
+    default_focal_factor : float
+        Focal length prior as a multiple of the longest image side when EXIF has none.
+    max_num_features : int
+        Most SIFT features per image.
+    first_octave : int
+        First SIFT octave: -1 doubles the image first (COLMAP's default, about 4x the cost),
+        0 starts at full resolution ([I] enough where the GSD is far below the DEM cell).
+    refine_principal_point : bool
+        Refine the principal point in COLMAP's bundle adjustment (self-calibration).
+    min_num_matches : int
+        Fewest verified matches for an image pair to be used by the mapper.
+    matching : SfmMatching
+        Pair selection and camera log (``sfm.matching``).
+    threads : int
+        CPU threads of the rule (Snakemake ``threads:``; the script passes the granted count).
+    """
+
+    image_frame: str
+    max_image_size: int
+    skip_unreadable: bool
+    jpeg_quality: int
+    camera_model: str
+    default_focal_factor: float
+    max_num_features: int
+    first_octave: int
+    refine_principal_point: bool
+    min_num_matches: int
+    matching: SfmMatching
+    threads: int
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "SfmParams":
+        """Build from the ``sfm`` config section; raises InputError naming a bad key."""
+        config_section(cfg, "sfm", cls.__dataclass_fields__)
+        for key, allowed in (("image_frame", ("stored", "display")), ("camera_model", ("SIMPLE_RADIAL", "RADIAL"))):
+            if cfg[key] not in allowed:
+                raise InputError(f"sfm.{key}: must be one of {', '.join(allowed)}, got {cfg[key]!r}")
+        for key, low in (("max_image_size", 0), ("max_num_features", 100), ("min_num_matches", 5), ("threads", 1),
+                         ("jpeg_quality", 50), ("first_octave", -1)):
+            _at_least(cfg, key, low, "sfm")
+        if cfg["jpeg_quality"] > 100 or cfg["first_octave"] > 2:
+            raise InputError("sfm.jpeg_quality must be at most 100 and sfm.first_octave at most 2")
+        if not cfg["default_focal_factor"] > 0:
+            raise InputError(f"sfm.default_focal_factor: must be positive, got {cfg['default_focal_factor']!r}")
+        values = {k: cfg[k] for k in cls.__dataclass_fields__ if k != "matching"}
+        return cls(matching=SfmMatching.from_config(cfg["matching"]), **values)
+
+
+def reconstruct_model(
     images_dir: str | Path, work_dir: str | Path, model_dir: str | Path, summary_json: str | Path,
-    images_csv: str | Path, image_info_json: str | Path, params: dict, seed: int, threads: int,
+    images_csv: str | Path, image_info_json: str | Path, params: SfmParams, seed: int, threads: int,
     camera_log: str | Path | None = None, crs: str | None = None,
 ) -> dict:
-    """Prepare the images, run pycolmap and write ``summary.json`` and the image table.
+    """Prepare the images, run pycolmap and write the model, ``summary.json`` and the image tables.
 
-    ``params`` is the ``sfm`` config section. ``camera_log`` (GPX/CSV of the camera's GPS
-    logger, positions in ``crs``) gives approximate positions for spatial matching.
-    Returns the summary.
+    Parameters
+    ----------
+    images_dir : path
+        Folder of the photographs.
+    work_dir, model_dir : path
+        Work folder (prepared images, database) and the output COLMAP model folder.
+    summary_json, images_csv, image_info_json : path
+        Outputs: model statistics, per-image table, prepared-image information.
+    params : SfmParams
+        The stage's parameters.
+    seed : int
+        pycolmap's random seed.
+    threads : int
+        Threads granted to the rule.
+    camera_log : path, optional
+        GPX/CSV of the camera's GPS logger (positions in ``crs``) for spatial matching.
+    crs : str, optional
+        Site CRS of the camera log positions.
+
+    Returns
+    -------
+    dict
+        The summary written to ``summary_json``.
+
+    Raises
+    ------
+    InputError
+        No readable image, or an unreadable camera log.
     """
     t0 = time.perf_counter()
     work_dir = Path(work_dir)
     files = list_images(images_dir)
     infos = prepare_images(
-        files, work_dir / "images", params["max_image_size"], params["image_frame"], params["skip_unreadable"],
-        params["jpeg_quality"],
+        files, work_dir / "images", params.max_image_size, params.image_frame, params.skip_unreadable,
+        params.jpeg_quality,
     )
     t1 = time.perf_counter()
     positions = None
     if camera_log is not None:
-        m = params["matching"]
-        positions = positions_from_log(infos, camera_log, crs, m["log_time_offset_s"], m["log_max_gap_s"])
+        m = params.matching
+        positions = positions_from_log(infos, camera_log, crs, m.log_time_offset_s, m.log_max_gap_s)
     rec, timings = run_sfm(infos, work_dir / "images", work_dir, model_dir, params, seed, threads, positions)
     total = time.perf_counter() - t0
     summary = model_summary(rec, infos)
     if summary["images_left_out"]:
         log.warning("images left out of the largest model: %s", ", ".join(summary["images_left_out"]))
     summary.update(
-        image_frame=params["image_frame"], max_image_size_px=params["max_image_size"], threads=threads,
+        image_frame=params.image_frame, max_image_size_px=params.max_image_size, threads=threads,
         prepare_s=t1 - t0, total_s=total, images_per_minute=len(infos) / total * 60.0, **timings,
     )
     Path(summary_json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")

@@ -102,3 +102,23 @@ def site_overview(texture: Path, targets: Path, checkpoints: Path, heads: Path, 
     _axes(ax, extent)
     ax.set_title("Twin site overview (true-colour texture)")
     save_figure(fig, out, attribution)
+
+
+def twin_figures(dtm, centrelines, landcover, texture, targets, checkpoints, heads, hillshade_png, landcover_png,
+                 overview_png, attribution: str | None = None) -> None:
+    """The twin's three report figures: hillshade with gullies, land-cover map, site overview.
+
+    Parameters
+    ----------
+    dtm, centrelines, landcover, texture, targets : path
+        The twin's truth (epoch 1).
+    checkpoints, heads : path
+        The observed checkpoints and digitised gully heads.
+    hillshade_png, landcover_png, overview_png : path
+        The figures written.
+    attribution : str, optional
+        Data attribution printed on the figures.
+    """
+    hillshade_gullies(dtm, centrelines, hillshade_png, attribution=attribution)
+    landcover_map(landcover, landcover_png, attribution=attribution)
+    site_overview(texture, targets, checkpoints, heads, overview_png, attribution=attribution)

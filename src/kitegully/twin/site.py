@@ -9,11 +9,14 @@ chosen on the written rasters; the texture is a second tiled pass.
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping
 
 import geopandas as gpd
 import numpy as np
@@ -25,6 +28,7 @@ from scipy.spatial import cKDTree
 from shapely.geometry import LineString, Point
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.io.raster import GridSpec, _profile
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
@@ -45,11 +49,110 @@ def sub_seed(seed: int, *names: str) -> int:
     return int(rng_for(seed, "twin", *names).integers(0, 2**31 - 1))
 
 
+#: ``twin`` keys that planning a site needs (:func:`build_site` of epoch 1, ``site.json``).
+PLAN_KEYS = ("extent", "dem_cell_m", "texture_cell_m", "site_json_elevation_step_m", "terrain", "reservoir", "fields",
+             "gullies", "landcover")
+#: ``twin`` keys that writing an epoch needs besides the plan (:func:`generate_epoch`).
+EPOCH_KEYS = ("tile_cells", "texture_tile_cells", "texture", "targets", "survey")
+#: ``twin`` keys of the second epoch's erosion.
+EPOCH2_KEYS = ("epoch2",)
+
+
+def _frozen(group: Any) -> Mapping[str, Any]:
+    """Read-only copy of a config group (its top-level keys cannot be rebound)."""
+    return MappingProxyType(copy.deepcopy(dict(group)))
+
+
+@dataclass(frozen=True)
+class TwinParams:
+    """Parameters of the twin (the ``twin`` config section, or the part a rule passes).
+
+    The top-level groups are documented key by key in
+    ``config/schema/stages/twin.schema.yaml`` and read by the modules named below; here they
+    are read-only mappings. Rules pass only what they use: ``site.json`` the plan
+    (:data:`PLAN_KEYS`), epoch 1 also :data:`EPOCH_KEYS`, epoch 2 also ``epoch2``.
+
+    Attributes
+    ----------
+    extent : Mapping
+        ``xmin, ymin, width_m, height_m`` of the site in its CRS (m).
+    dem_cell_m : float
+        Cell of the truth DTM/DSM and land cover (m).
+    texture_cell_m : float
+        Cell of the texture; divides ``dem_cell_m`` by a whole factor of at least 2 (m).
+    site_json_elevation_step_m : float
+        ``site.json`` rounds the elevation range to this step (m).
+    terrain, reservoir : Mapping
+        Valley, banks, micro-relief and the dam lake (``twin.terrain``).
+    fields : Mapping
+        Field layout, tillage (``twin.landcover.Fields``).
+    gullies : Mapping
+        Gully heads, tracing, shapes (``twin.gullies``).
+    landcover : Mapping
+        Tracks, buildings, trees, shrubs, bare patches (``twin.landcover``).
+    tile_cells, texture_tile_cells : int or None
+        Tile side of the DEM and texture passes (cells); None when the rule only plans.
+    texture : Mapping or None
+        Reflectance (``twin.texture``).
+    targets : Mapping or None
+        GCP targets (``twin.targets``).
+    survey : Mapping or None
+        RTK survey, checkpoints, field network, digitised heads (``twin.survey``).
+    epoch2 : Mapping or None
+        Second-epoch erosion (``twin.epochs``); None for epoch 1.
+    """
+
+    extent: Mapping[str, Any]
+    dem_cell_m: float
+    texture_cell_m: float
+    site_json_elevation_step_m: float
+    terrain: Mapping[str, Any]
+    reservoir: Mapping[str, Any]
+    fields: Mapping[str, Any]
+    gullies: Mapping[str, Any]
+    landcover: Mapping[str, Any]
+    tile_cells: int | None = None
+    texture_tile_cells: int | None = None
+    texture: Mapping[str, Any] | None = None
+    targets: Mapping[str, Any] | None = None
+    survey: Mapping[str, Any] | None = None
+    epoch2: Mapping[str, Any] | None = None
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "TwinParams":
+        """Build from the ``twin`` section (or its plan / epoch keys); raises InputError naming a bad key.
+
+        Checks the keys and what the schema cannot express: the texture cell divides the
+        DEM cell by a whole factor of at least 2, the extent spans at least 20 DEM cells,
+        and the epoch keys come all together.
+        """
+        config_section(cfg, "twin", PLAN_KEYS, optional=EPOCH_KEYS + EPOCH2_KEYS)
+        given = [k for k in EPOCH_KEYS if k in cfg]
+        if given and len(given) < len(EPOCH_KEYS):
+            raise InputError(f"twin: missing key '{[k for k in EPOCH_KEYS if k not in cfg][0]}' (the epoch keys "
+                             f"{', '.join(EPOCH_KEYS)} come together)")
+        config_section(cfg["extent"], "twin.extent", ("xmin", "ymin", "width_m", "height_m"))
+        check_config(cfg)
+        groups = ("terrain", "reservoir", "fields", "gullies", "landcover", "texture", "targets", "survey", "epoch2")
+        return cls(**{k: (_frozen(cfg[k]) if k in groups + ("extent",) else cfg[k]) for k in cfg})
+
+    @property
+    def tex_factor(self) -> int:
+        """Texture cells per DEM cell side."""
+        return int(round(self.dem_cell_m / self.texture_cell_m))
+
+    def require(self, names: tuple[str, ...], what: str) -> None:
+        """Raise InputError when one of ``names`` was not passed (None)."""
+        missing = [n for n in names if getattr(self, n) is None]
+        if missing:
+            raise InputError(f"twin.{missing[0]}: needed to {what} but not in the parameters the rule passed")
+
+
 @dataclass
 class TwinSite:
-    """Everything planned for one epoch of a twin site."""
+    """Everything planned for one epoch of a twin site (``tw``: its parameters)."""
 
-    tw: dict
+    tw: TwinParams
     crs: str
     seed: int
     epoch: int
@@ -75,8 +178,8 @@ class TwinSite:
         return self.grid.bounds
 
 
-def check_config(tw: dict, source: str = "twin") -> int:
-    """Cross-key checks the schema cannot express; returns the texture factor."""
+def check_config(tw: Mapping[str, Any], source: str = "twin") -> int:
+    """Cross-key checks the schema cannot express (on the ``twin`` section); returns the texture factor."""
     ratio = tw["dem_cell_m"] / tw["texture_cell_m"]
     k = int(round(ratio))
     if k < 2 or abs(ratio - k) > 1e-6:
@@ -88,33 +191,52 @@ def check_config(tw: dict, source: str = "twin") -> int:
     return k
 
 
-def build_site(tw: dict, crs: str, seed: int, epoch: int = 1) -> TwinSite:
-    """Plan a twin site: valley, fields, gully network (epoch 2: eroded), buildings."""
-    k = check_config(tw)
-    e = tw["extent"]
-    cell = tw["dem_cell_m"]
+def build_site(tw: TwinParams, crs: str, seed: int, epoch: int = 1) -> TwinSite:
+    """Plan a twin site: valley, fields, gully network (epoch 2: eroded), buildings.
+
+    Parameters
+    ----------
+    tw : TwinParams
+        The twin's parameters (the plan keys; ``epoch2`` too for epoch 2).
+    crs : str
+        Site CRS.
+    seed : int
+        Master seed.
+    epoch : int
+        1 or 2.
+
+    Returns
+    -------
+    TwinSite
+        The plan that :func:`generate_epoch` and :func:`write_site_json` write out.
+    """
+    if epoch == 2:
+        tw.require(EPOCH2_KEYS, "plan epoch 2")
+    k = tw.tex_factor
+    e = tw.extent
+    cell = tw.dem_cell_m
     W = int(round(e["width_m"] / cell))
     H = int(round(e["height_m"] / cell))
     grid = GridSpec(e["xmin"], e["ymin"] + H * cell, cell, W, H, crs)
     valley = valley_from_config(tw, grid.bounds)
-    fields = lcm.Fields.from_config(tw["fields"], sub_seed(seed, "fields"))
+    fields = lcm.Fields.from_config(tw.fields, sub_seed(seed, "fields"))
     wl, amp = relief_octaves(tw)
-    t = tw["terrain"]
+    t = tw.terrain
     tcell = t["trace_cell_m"]
     tgrid = GridSpec(grid.x0, grid.y0, tcell, int(np.ceil(W * cell / tcell)), int(np.ceil(H * cell / tcell)), crs)
     txs, tys = tgrid.cell_centres()
     keep = wl >= t["trace_min_wavelength_m"]
     z_trace = pregully_grid(valley, txs, tys, sub_seed(seed, "relief"), wl[keep], amp[keep])
-    gcfg = tw["gullies"]
+    gcfg = tw.gullies
     network = gl.trace_network(valley, fields, gcfg, grid.bounds, z_trace, tgrid, seed)
     retreat, widen = {}, None
     if epoch == 2:
         gl.assign_attributes(network, gcfg, valley, seed)  # epoch-1 attributes decide which heads have a headcut
-        retreat = epochs.retreat_heads(network, tw["epoch2"], seed)
-        widen = epochs.widening(network, tw["epoch2"], seed)
+        retreat = epochs.retreat_heads(network, tw.epoch2, seed)
+        widen = epochs.widening(network, tw.epoch2, seed)
     gl.assign_attributes(network, gcfg, valley, seed, widen)
     segs = gl.Segments.from_network(network, gcfg["u_shape_exponent"])
-    buildings = place_buildings(tw["landcover"]["buildings"], valley, fields, network, z_trace, tgrid, seed)
+    buildings = place_buildings(tw.landcover["buildings"], valley, fields, network, z_trace, tgrid, seed)
     log.info("planned epoch %d: %d x %d cells, %d gullies + wadi, %d buildings", epoch, W, H, len(network) - 1, len(buildings))
     return TwinSite(tw, crs, seed, epoch, grid, k, valley, fields, network, segs, buildings, wl, amp,
                     (float(np.nanmin(z_trace)), float(np.nanmax(z_trace))), retreat)
@@ -176,11 +298,11 @@ def compute_tile(site: TwinSite, r0: int, c0: int, nrow: int, ncol: int) -> Tile
     u, vp = v.u_vp(X, Y)
     z = v.base(X, Y) + fbm_grid(xs - v.cx, ys - v.cy, sub_seed(site.seed, "relief"), site.wl, site.amp)
     pi = lcm.plot_index(v, f, u, vp)
-    gcfg = tw["gullies"]
+    gcfg = tw.gullies
     buf = gcfg["zone_buffer_m"]
     depth, rim = gl.carve(site.segs, g.x0 + c0 * cell, g.y0 - r0 * cell, cell, nrow, ncol, buf)
     z = z + lcm.field_humps(f, pi) * np.clip(rim / f.hump_clearance, 0.0, 1.0) - depth
-    lcfg = tw["landcover"]
+    lcfg = tw.landcover
     # --- classes, lowest priority first
     lc = lcm.plot_class(f, pi)
     strip = rim < buf
@@ -211,7 +333,7 @@ def compute_tile(site: TwinSite, r0: int, c0: int, nrow: int, ncol: int) -> Tile
     furrowed = (lcm.plot_class(f, pi) == lcm.CODE["ploughed"]) & ~strip & ~track & ~building & ~water
     z = z + np.where(furrowed, 0.5 * f.furrow_amplitude * (1.0 + np.sin(2 * np.pi * phase / f.furrow_period)), 0.0)
     if site.epoch == 2:
-        e2 = tw["epoch2"]
+        e2 = tw.epoch2
         codes = [lcm.CODE[c] for c in e2["sheet_erosion_classes"]]
         lower = epochs.sheet_erosion(xs - v.cx, ys - v.cy, e2, sub_seed(site.seed, "sheet"))
         z = z - np.where(np.isin(lc, codes), lower, 0.0)
@@ -235,6 +357,7 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
     ``fixed_points`` (epoch 2) holds the epoch-1 ``targets`` and ``checkpoints`` tables,
     re-surveyed on the eroded surface instead of being drawn again.
     """
+    site.tw.require(EPOCH_KEYS, "generate an epoch")
     t0 = time.perf_counter()
     out = Path(out)
     truth, obs = out / "truth", out / "observed"
@@ -245,7 +368,7 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
     tags = {"epoch": str(site.epoch), "seed": str(site.seed), "generator": "kitegully.twin"}
     prof_f = _profile(g, 1, "float32", float("nan"))
     prof_u = _profile(g, 1, "uint8", 0)
-    tiles = list(_tiles(g.height, g.width, site.tw["tile_cells"]))
+    tiles = list(_tiles(g.height, g.width, site.tw.tile_cells))
     zmin, zmax = np.inf, -np.inf
     with rasterio.open(truth / "dtm.tif", "w", **prof_f) as ddtm, rasterio.open(truth / "dsm.tif", "w", **prof_f) as ddsm, \
             rasterio.open(truth / "landcover.tif", "w", **prof_u) as dlc:
@@ -268,8 +391,8 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
         dsm = src.read(1)
     with rasterio.open(truth / "dtm.tif") as src:
         dtm = src.read(1)
-    scfg = site.tw["survey"]
-    tcfg = site.tw["targets"]
+    scfg = site.tw.survey
+    tcfg = site.tw.targets
     if fixed_points is None:
         gcps = tg.select_gcps(tcfg, lc, dsm, g, site.seed)
         centre = survey.lake_centre(lc, g, site.valley.xy(site.valley.u_dam, site.valley.axis_v(site.valley.u_dam)))
@@ -294,7 +417,7 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
     # --- vectors and tables
     classes = pd.DataFrame({"code": list(lcm.CLASSES), "name": list(lcm.CLASSES.values())})
     write_table(classes, truth / "landcover_classes.csv", markdown=False)
-    gcfg = site.tw["gullies"]
+    gcfg = site.tw.gullies
     cl = centrelines(site.network, gcfg["min_depth_m"], gcfg["reach_length_m"], site.crs)
     write_vector(cl, truth / "gully_centrelines.gpkg")
     write_vector(polygons(site.network, gcfg["min_depth_m"], site.crs), truth / "gully_polygons.gpkg")
@@ -318,9 +441,9 @@ def write_texture(site: TwinSite, truth: Path, gcps: pd.DataFrame, lc_full: np.n
     prof.pop("nodata", None)
     prof["photometric"] = "MINISBLACK"
     g = site.grid
-    size = site.tw["texture_tile_cells"]
+    size = site.tw.texture_tile_cells
     tiles = list(_tiles(g.height, g.width, size))
-    tcfg = site.tw["texture"]
+    tcfg = site.tw.texture
     seed = sub_seed(site.seed, "texture")
     t0 = time.perf_counter()
     with rasterio.open(truth / "dtm.tif") as sdtm, rasterio.open(truth / "dsm.tif") as sdsm, \
@@ -333,7 +456,7 @@ def write_texture(site: TwinSite, truth: Path, gcps: pd.DataFrame, lc_full: np.n
             txs = g.x0 + (c0 * k + np.arange(w * k) + 0.5) * tgrid.cell
             tys = g.y0 - (r0 * k + np.arange(h * k) + 0.5) * tgrid.cell
             refl = tx.texture_tile(tcfg, lc, dtm_pad, dsm_pad, phase_pad, g.cell, k, txs - site.valley.cx, tys - site.valley.cy, seed)
-            tg.paint_targets(refl, txs, tys, gcps, site.tw["targets"])
+            tg.paint_targets(refl, txs, tys, gcps, site.tw.targets)
             dst.write(tx.to_uint8(refl), window=Window(c0 * k, r0 * k, w * k, h * k))
             if (i + 1) % max(1, len(tiles) // 10) == 0:
                 log.info("texture tile %d/%d (%.1f s)", i + 1, len(tiles), time.perf_counter() - t0)
@@ -437,7 +560,7 @@ def site_statistics(site: TwinSite, cl: gpd.GeoDataFrame, counts: np.ndarray, zr
 def site_json(site: TwinSite) -> dict:
     """What a planner knows about the area: extent, CRS, cell sizes, rough elevation range."""
     xmin, ymin, xmax, ymax = site.bounds
-    step = site.tw["site_json_elevation_step_m"]
+    step = site.tw.site_json_elevation_step_m
     return {
         "name_hint": "twin",
         "crs": site.crs,

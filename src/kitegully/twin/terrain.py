@@ -15,10 +15,14 @@ vectorised and stateless, so any tile can be evaluated on its own.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kitegully.twin.noise import fbm_grid, octaves
+
+if TYPE_CHECKING:
+    from kitegully.twin.site import TwinParams
 
 
 @dataclass(frozen=True)
@@ -127,10 +131,10 @@ def _smooth_ramp(s):
     return s * s * (3.0 - 2.0 * s)
 
 
-def valley_from_config(tw: dict, bounds: tuple[float, float, float, float]) -> Valley:
-    """Build the :class:`Valley` for a site extent from the ``twin`` config section."""
-    t = tw["terrain"]
-    r = tw["reservoir"]
+def valley_from_config(tw: TwinParams, bounds: tuple[float, float, float, float]) -> Valley:
+    """Build the :class:`Valley` for a site extent from the twin's ``terrain`` and ``reservoir``."""
+    t = tw.terrain
+    r = tw.reservoir
     xmin, ymin, xmax, ymax = bounds
     cx, cy = 0.5 * (xmin + xmax), 0.5 * (ymin + ymax)
     az = np.deg2rad(t["flow_azimuth_deg"])
@@ -167,13 +171,13 @@ def valley_from_config(tw: dict, bounds: tuple[float, float, float, float]) -> V
     )
 
 
-def relief_octaves(tw: dict, min_wavelength: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def relief_octaves(tw: TwinParams, min_wavelength: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Octaves of the fractal micro-relief; ``min_wavelength`` keeps only the coarse prefix.
 
     The prefix keeps the octave indices (and hence the noise seeds) of the full set, so a
     coarse surface is exactly the full surface without its finest octaves.
     """
-    m = tw["terrain"]["microrelief"]
+    m = tw.terrain["microrelief"]
     wl, amp = octaves(m["amplitude_m"], m["max_wavelength_m"], m["min_wavelength_m"], m["hurst"])
     if min_wavelength is not None:
         keep = wl >= min_wavelength

@@ -1,6 +1,6 @@
 """QA of the georeferencing run on a synthetic block: flags, outliers, leave-one-out, errors.
 
-Built on the synthetic block of test_georef_bundle (GSD 0.05 m, tie noise 0.3 px, GCP
+Built on the synthetic block of tests/georef/test_bundle.py (GSD 0.05 m, tie noise 0.3 px, GCP
 pixel noise 0.5 px, survey noise 0.01 m), here without a dome.
 """
 
@@ -12,11 +12,17 @@ import pytest
 from kitegully import InputError
 from kitegully.georef.gcp_io import GCP
 from kitegully.georef.geometry import project, rotvec_to_matrix, triangulate, triangulation_covariance
-from kitegully.georef.pipeline import georeference
+from kitegully.georef import GeorefParams, georeference_block
 from kitegully.sfm.images import ImageInfo
-from test_georef_bundle import GSD, synthetic_block
+from georef.test_bundle import GSD, synthetic_block
 
 PARAMS = {
+    "gcp_format": "odm",
+    "csv_crs": None,
+    "tape_file": None,
+    "max_tie_points": 0,
+    "tie_grid": None,
+    "figure": {"arrow_scale": None},
     "method": "gcp_bundle",
     "gcp_pixel_frame": "stored",
     "gcp_pixel_scale": 1.0,
@@ -28,6 +34,11 @@ PARAMS = {
     "bundle": {"sigma_tie_px": 0.3, "sigma_gcp_px": 0.5, "refine_intrinsics": ["f", "k1", "k2"], "loss": "huber",
                "loss_scale": 3.0, "max_iterations": 30, "rel_tolerance": 1e-6},
 }
+
+
+def georeference(model, gcps, infos, rows, cfg, sfm_frame, tape_edges=None):
+    """The block-level georeferencing with parameters built from a ``georef`` section."""
+    return georeference_block(model, gcps, infos, rows, GeorefParams.from_config(cfg), sfm_frame, tape_edges)
 
 
 def _setup(displace_pixel=None, displace_survey=None, drop=()):
@@ -115,7 +126,7 @@ def test_tape_horn_method_takes_scale_from_the_tape_not_the_gps():
     for g in gcps:
         g.xyz = g.xyz + rng.normal(0, 2.0, 3)
     edges = [(gcps[i].gcp_id, gcps[j].gcp_id, float(np.linalg.norm(truth[i] - truth[j]))) for i, j in ((0, 1), (1, 2), (2, 0), (3, 4), (4, 6))]
-    r = georeference(model, gcps, infos, rows, {**PARAMS, "method": "tape_horn"}, "stored", tape_edges=edges)
+    r = georeference(model, gcps, infos, rows, {**PARAMS, "method": "tape_horn", "tape_file": "tape.csv"}, "stored", tape_edges=edges)
     # distances between GCPs in the result equal the taped ones to the image precision (~1 GSD)
     X = np.array([r.residuals.loc[k, ["dx_m", "dy_m", "dz_m"]].to_numpy(float) for k in range(len(gcps))])
     est = X + np.array([g.xyz for g in gcps])  # triangulated positions in the site CRS
@@ -170,3 +181,14 @@ def test_short_baseline_is_weak_in_height():
 def test_triangulation_covariance_needs_two_rays():
     intr, rv, t = _nadir_cameras(np.array([[0.0, 0.0, 100.0]]))
     assert np.all(np.isnan(triangulation_covariance(intr, rv, t, np.zeros(3), 0.7)))
+
+
+def test_params_name_the_bad_key():
+    with pytest.raises(InputError, match=r"georef.tape_file: the tape_horn method needs a file of taped distances"):
+        GeorefParams.from_config({**PARAMS, "method": "tape_horn"})
+    with pytest.raises(InputError, match=r"georef.qa: missing key 'max_residual_m'"):
+        GeorefParams.from_config({**PARAMS, "qa": {k: v for k, v in PARAMS["qa"].items() if k != "max_residual_m"}})
+    with pytest.raises(InputError, match=r"georef.bundle.refine_intrinsics: must be one of"):
+        GeorefParams.from_config({**PARAMS, "bundle": {**PARAMS["bundle"], "refine_intrinsics": ["f", "k3"]}})
+    p = GeorefParams.from_config(PARAMS)
+    assert p.bundle.refine == ("f", "k1", "k2") and p.bundle.sigma_gcp_xy_m == 0.01 and p.qa.min_gcps_trusted == 4

@@ -20,9 +20,6 @@ from snakemake_utils import REPO, run_snakemake
 
 @pytest.mark.slow
 def test_tiny_twin_dense_and_validation(tmp_path):
-    for stage in ("twin", "flight", "sfm", "georef"):
-        if not (REPO / "workflow" / "rules" / f"{stage}.smk").exists():
-            pytest.skip(f"the {stage} stage is not in the workflow yet")
     results = tmp_path / "results"
     site = results / "tiny_twin"
     run_snakemake(REPO / "config" / "sites" / "tiny_twin.yaml", results,

@@ -13,8 +13,8 @@ import pytest
 
 from kitegully.georef.gcp_io import read_gcps
 from kitegully.georef.model import block_from_reconstruction
-from kitegully.georef.pipeline import collect_observations, triangulate_gcps
-from kitegully.sfm.stage import load_image_infos, run_sfm_stage
+from kitegully.georef.control import collect_observations, triangulate_gcps
+from kitegully.sfm import SfmParams, load_image_infos, reconstruct_model
 
 PARAMS = {
     "image_frame": "stored", "max_image_size": 800, "skip_unreadable": False, "jpeg_quality": 95,
@@ -35,8 +35,8 @@ def small_run(boruszyn_dir, tmp_path_factory):
     src.mkdir()
     for p in sorted((boruszyn_dir / "images").glob("*.jpg"))[:10]:
         shutil.copy(p, src / p.name)
-    summary = run_sfm_stage(src, tmp / "work", tmp / "model", tmp / "summary.json", tmp / "images.csv",
-                            tmp / "info.json", PARAMS, seed=11, threads=2)
+    summary = reconstruct_model(src, tmp / "work", tmp / "model", tmp / "summary.json", tmp / "images.csv",
+                               tmp / "info.json", SfmParams.from_config(PARAMS), seed=11, threads=2)
     return tmp, summary
 
 
@@ -76,3 +76,14 @@ def test_gcp_file_pixels_are_stored_frame_at_2400px(small_run, boruszyn_dir):
     for key, rp in errs.items():
         if key != ("stored", 2400 / 4608):
             assert np.max(rp) > 5 * np.max(good), key
+
+
+def test_params_name_the_bad_key():
+    from kitegully import InputError
+
+    with pytest.raises(InputError, match=r"sfm.matching.method: must be one of"):
+        SfmParams.from_config({**PARAMS, "matching": {**PARAMS["matching"], "method": "vocab_tree"}})
+    with pytest.raises(InputError, match=r"sfm: unknown key 'max_size'"):
+        SfmParams.from_config({**PARAMS, "max_size": 10})
+    p = SfmParams.from_config(PARAMS)
+    assert p.matching.method == "exhaustive" and p.max_image_size == 800

@@ -1,5 +1,9 @@
-"""The georeferencing run: observations → triangulation → robust similarity → GCP bundle
-adjustment, with quality flags and leave-one-out check points.
+"""Ground control of one block: observations → triangulation → robust similarity → GCP
+bundle adjustment, with quality flags and leave-one-out check points.
+
+:func:`georeference_block` works on arrays (a :class:`~kitegully.georef.bundle.Block` and
+the GCPs); :func:`kitegully.georef.stage.georeference` reads the files, calls it and writes
+the products.
 
 Frames: the SfM model frame (arbitrary), and the *local* frame = site CRS minus a round
 ``offset`` (kept so coordinates stay small for later stages). Every result in metres is
@@ -26,6 +30,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -37,6 +42,9 @@ from kitegully.georef.geometry import camera_centres, project, triangulate, tria
 from kitegully.georef.model import transform_block
 from kitegully.georef.similarity import Similarity, robust_similarity, tape_horn, umeyama
 from kitegully.sfm.images import ImageInfo, to_sfm_pixels
+
+if TYPE_CHECKING:
+    from kitegully.georef.stage import GeorefParams, GeorefQA
 
 log = logging.getLogger(__name__)
 
@@ -169,39 +177,91 @@ def solve(
     return local, sim, report
 
 
-def georeference(
+def georeference_block(
     block_model: Block,
     gcps: list[GCP],
     infos: list[ImageInfo],
     image_rows: dict[str, int],
-    params: dict,
+    params: GeorefParams,
     sfm_frame: str,
     tape_edges: list[tuple[str, str, float]] | None = None,
 ) -> GeorefResult:
-    """The whole georeferencing with QA and leave-one-out; see the module docstring.
+    """The whole georeferencing of a block with QA and leave-one-out; see the module docstring.
 
-    ``params`` is the ``georef`` config section. Raises :class:`InputError` naming the
-    GCPs when fewer than three are usable.
+    Parameters
+    ----------
+    block_model : Block
+        The SfM block in its model frame.
+    gcps : list of GCP
+        The GCPs read from the GCP file.
+    infos : list of ImageInfo
+        The images as the SfM stage prepared them.
+    image_rows : dict
+        Prepared image name → block row.
+    params : GeorefParams
+        Method parameters (the ``georef`` config section).
+    sfm_frame : str
+        Pixel frame the SfM worked in (``sfm.image_frame``).
+    tape_edges : list of (str, str, float), optional
+        Taped distances ``(gcp_a, gcp_b, m)`` of the ``tape_horn`` method.
+
+    Returns
+    -------
+    GeorefResult
+        Block in the local frame, offset, transform, residual tables and report.
+
+    Raises
+    ------
+    InputError
+        Naming the GCPs when fewer than three are usable.
+
+    Notes
+    -----
+    Phases: :func:`collect_observations`, :func:`triangulate_gcps`, :func:`select_gcps`,
+    :func:`solve`, :func:`leave_one_out`, :func:`flag_poor_fits`, :func:`residual_tables`.
+    Cost: (n_used + 1) bundle solutions.
     """
-    qa, bp = params["qa"], params["bundle"]
-    settings = BundleSettings(
-        sigma_tie_px=bp["sigma_tie_px"], sigma_gcp_px=bp["sigma_gcp_px"],
-        sigma_gcp_xy_m=params["sigma_gcp_xy_m"], sigma_gcp_z_m=params["sigma_gcp_z_m"],
-        refine=tuple(bp["refine_intrinsics"]), loss=bp["loss"], loss_scale=bp["loss_scale"],
-        max_iterations=bp["max_iterations"],
-    )
+    qa = params.qa
+    settings = params.bundle
     obs = collect_observations(
-        gcps, infos, image_rows, params["gcp_pixel_frame"], sfm_frame, params["gcp_pixel_scale"], qa["coords_tolerance_m"],
-        params["gcp_pixel_offset_px"],
+        gcps, infos, image_rows, params.gcp_pixel_frame, sfm_frame, params.gcp_pixel_scale, qa.coords_tolerance_m,
+        params.gcp_pixel_offset_px,
     )
     survey = np.array([o.gcp.xyz for o in obs])
     offset = np.round(np.median(survey, axis=0) / 100.0) * 100.0
     offset[2] = 0.0
     survey_local = survey - offset
     X_model, rp_model = triangulate_gcps(block_model, obs)
+    use = select_gcps(obs, X_model, rp_model, survey_local, qa, params.method)
+    log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
+    local, sim, report = solve(block_model, obs, survey_local, X_model, use, params.method, settings, tape_edges)
+
+    gsd = ground_sampling_distance(local)
+    X_final, _ = triangulate_gcps(local, obs)
+    d_final = X_final - survey_local
+    d_loo, rp_loo = leave_one_out(block_model, obs, survey_local, X_model, use, params.method, settings, tape_edges)
+    flag_poor_fits(local, obs, use, X_final, d_final, d_loo, params)
+    residuals, loo = residual_tables(local, obs, use, survey_local, d_final, d_loo, rp_loo)
+
+    report.update(_stats(residuals, loo, qa, obs, use))
+    report["offset_m"] = offset.tolist()
+    report["method"] = params.method
+    report["gsd_m"] = gsd
+    return GeorefResult(local, offset, sim, residuals, loo, report)
+
+
+def select_gcps(obs: list[GcpObs], X_model: np.ndarray, rp_model: np.ndarray, survey_local: np.ndarray, qa: GeorefQA,
+                method: str) -> np.ndarray:
+    """The GCPs the solution uses: seen in two registered images, rays meeting, no outlier.
+
+    Appends ``ray_miss`` and ``outlier`` to the flags of those left out (the outlier test,
+    a robust similarity, is skipped for ``tape_horn``, whose GPS positions are not
+    accurate enough for it). Raises :class:`InputError` naming every GCP when fewer than
+    three are usable. Returns a boolean mask over ``obs``.
+    """
     cand = np.array([len(o.rows) >= 2 and np.all(np.isfinite(X_model[k])) for k, o in enumerate(obs)])
     for k, o in enumerate(obs):
-        if cand[k] and rp_model[k] > qa["max_triangulation_px"]:
+        if cand[k] and rp_model[k] > qa.max_triangulation_px:
             o.flags.append("ray_miss")
             cand[k] = False
     if cand.sum() < 3:
@@ -209,35 +269,48 @@ def georeference(
         raise InputError(f"fewer than three usable GCPs (need at least 3 seen in two registered images whose rays meet): {bad}")
     use = cand.copy()
     idx = np.flatnonzero(cand)
-    if params["method"] != "tape_horn":
-        _, inl = robust_similarity(X_model[idx], survey_local[idx], qa["max_residual_m"])
+    if method != "tape_horn":
+        _, inl = robust_similarity(X_model[idx], survey_local[idx], qa.max_residual_m)
         for k, ok in zip(idx, inl):
             if not ok:
                 obs[k].flags.append("outlier")
                 use[k] = False
-    log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
-    local, sim, report = solve(block_model, obs, survey_local, X_model, use, params["method"], settings, tape_edges)
+    return use
 
-    gsd = ground_sampling_distance(local)
-    X_final, _ = triangulate_gcps(local, obs)
-    d_final = X_final - survey_local
 
-    # leave-one-out: each used GCP checked against a solution without it
+def leave_one_out(
+    block_model: Block, obs: list[GcpObs], survey_local: np.ndarray, X_model: np.ndarray, use: np.ndarray, method: str,
+    settings: BundleSettings, tape_edges: list[tuple[str, str, float]] | None,
+) -> tuple[dict[int, np.ndarray], dict[int, float]]:
+    """Each used GCP checked against a solution without it (needs at least 3 others).
+
+    Returns its misfit (local frame, m) and the RMS reprojection error (px) of its surveyed
+    position, by index into ``obs``. Cost: one :func:`solve` per used GCP.
+    """
     n_use = int(use.sum())
     d_loo: dict[int, np.ndarray] = {}
     rp_loo: dict[int, float] = {}
     for k in np.flatnonzero(use) if n_use - 1 >= 3 else []:
         use_k = use.copy()
         use_k[k] = False
-        loc_k, _, _ = solve(block_model, obs, survey_local, X_model, use_k, params["method"], settings, tape_edges)
+        loc_k, _, _ = solve(block_model, obs, survey_local, X_model, use_k, method, settings, tape_edges)
         Xk, _ = triangulate_gcps(loc_k, [obs[k]])
         d_loo[k] = Xk[0] - survey_local[k]
         rp_loo[k] = reprojection_of(loc_k, obs[k], survey_local[k])
+    return d_loo, rp_loo
 
-    sig_survey = np.array([params["sigma_gcp_xy_m"]] * 2 + [params["sigma_gcp_z_m"]])
+
+def flag_poor_fits(local: Block, obs: list[GcpObs], use: np.ndarray, X_final: np.ndarray, d_final: np.ndarray,
+                   d_loo: dict[int, np.ndarray], params: GeorefParams) -> None:
+    """Append ``poor_fit`` to used GCPs whose misfit exceeds 3 σ on some axis (module docstring).
+
+    σ combines the survey SD, the click noise through the GCP's own rays and the block's
+    placement error from the others' leave-one-out residuals.
+    """
+    sig_survey = np.array([params.sigma_gcp_xy_m] * 2 + [params.sigma_gcp_z_m])
     for k in np.flatnonzero(use):
         o = obs[k]
-        sd_click = np.sqrt(np.diag(gcp_triangulation_covariance(local, o, X_final[k], bp["sigma_gcp_px"])))
+        sd_click = np.sqrt(np.diag(gcp_triangulation_covariance(local, o, X_final[k], params.bundle.sigma_gcp_px)))
         sd_block = _block_sd(d_loo, exclude=k)
         expected = np.sqrt(sig_survey**2 + sd_click**2 + sd_block**2)
         # tested where it cannot have pulled the block towards itself: its leave-one-out
@@ -248,6 +321,10 @@ def georeference(
         if np.any(np.abs(misfit) > 3 * expected):
             o.flags.append("poor_fit")
 
+
+def residual_tables(local: Block, obs: list[GcpObs], use: np.ndarray, survey_local: np.ndarray, d_final: np.ndarray,
+                    d_loo: dict[int, np.ndarray], rp_loo: dict[int, float]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The GCP residual table (every GCP) and the leave-one-out table (used GCPs), columns :data:`RESIDUAL_COLUMNS`."""
     rows = [_row(o, d_final[k], reprojection_of(local, o, survey_local[k]), bool(use[k])) for k, o in enumerate(obs)]
     residuals = pd.DataFrame(rows, columns=RESIDUAL_COLUMNS)
     loo_rows = []
@@ -256,13 +333,7 @@ def georeference(
             loo_rows.append(_row(obs[k], d_loo[k], rp_loo[k], False, extra="checkpoint"))
         else:
             loo_rows.append(_row(obs[k], np.full(3, np.nan), float("nan"), False, extra="too_few_gcps_to_leave_one_out"))
-    loo = pd.DataFrame(loo_rows, columns=RESIDUAL_COLUMNS)
-
-    report.update(_stats(residuals, loo, qa, obs, use))
-    report["offset_m"] = offset.tolist()
-    report["method"] = params["method"]
-    report["gsd_m"] = gsd
-    return GeorefResult(local, offset, sim, residuals, loo, report)
+    return residuals, pd.DataFrame(loo_rows, columns=RESIDUAL_COLUMNS)
 
 
 def _block_sd(d_loo: dict[int, np.ndarray], exclude: int) -> np.ndarray:
@@ -292,7 +363,7 @@ def _rmse(v: np.ndarray) -> float:
     return float(np.sqrt(np.mean(v**2))) if len(v) else float("nan")
 
 
-def _stats(res: pd.DataFrame, loo: pd.DataFrame, qa: dict, obs: list[GcpObs], use: np.ndarray) -> dict:
+def _stats(res: pd.DataFrame, loo: pd.DataFrame, qa: GeorefQA, obs: list[GcpObs], use: np.ndarray) -> dict:
     u = res[res["used"]]
     out = {
         "n_gcps_in_file": len(obs),
@@ -304,12 +375,12 @@ def _stats(res: pd.DataFrame, loo: pd.DataFrame, qa: dict, obs: list[GcpObs], us
         "loo_rmse_3d_m": _rmse(loo["d3_m"].to_numpy(float)),
     }
     reasons = []
-    if out["n_gcps_used"] < qa["min_gcps_trusted"]:
-        reasons.append(f"only {out['n_gcps_used']} GCPs usable (at least {qa['min_gcps_trusted']} wanted)")
+    if out["n_gcps_used"] < qa.min_gcps_trusted:
+        reasons.append(f"only {out['n_gcps_used']} GCPs usable (at least {qa.min_gcps_trusted} wanted)")
     if not np.isfinite(out["loo_rmse_3d_m"]):
         reasons.append("no leave-one-out check was possible")
-    elif out["loo_rmse_3d_m"] > qa["required_accuracy_m"]:
-        reasons.append(f"leave-one-out RMSE {out['loo_rmse_3d_m']:.2f} m exceeds the required {qa['required_accuracy_m']} m")
+    elif out["loo_rmse_3d_m"] > qa.required_accuracy_m:
+        reasons.append(f"leave-one-out RMSE {out['loo_rmse_3d_m']:.2f} m exceeds the required {qa.required_accuracy_m} m")
     flagged = res.loc[res["flag"].str.contains("poor_fit|outlier|ray_miss"), "gcp_id"].tolist()
     if flagged:
         reasons.append(f"GCPs flagged: {', '.join(flagged)}")

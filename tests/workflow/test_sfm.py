@@ -19,9 +19,6 @@ from snakemake_utils import REPO, run_snakemake
 
 @pytest.mark.slow
 def test_tiny_twin_end_to_end(tmp_path):
-    for stage in ("twin", "flight"):
-        if not (REPO / "workflow" / "rules" / f"{stage}.smk").exists():
-            pytest.skip(f"the {stage} stage is not in the workflow yet")
     results = tmp_path / "results"
     run_snakemake(REPO / "config" / "sites" / "tiny_twin.yaml", results,
                   [str(results / "tiny_twin" / "georef" / "twin_evaluation.json")], cores=2)

@@ -17,14 +17,15 @@ from kitegully import InputError
 from kitegully.config import load_yaml
 from kitegully.io.raster import read_raster
 from kitegully.twin.landcover import CODE, VEGETATION
-from kitegully.twin.site import OBSERVED_FILES, TRUTH_FILES, build_site, check_config, generate_epoch, sub_seed
+from kitegully.twin.site import OBSERVED_FILES, TRUTH_FILES, TwinParams, build_site, generate_epoch, sub_seed
 from kitegully.twin.survey import rtk_observe
 from kitegully.twin.targets import eligible, sample_bilinear
 from kitegully.twin.terrain import pregully_grid
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 SITE = load_yaml(REPO / "config" / "sites" / "tiny_twin.yaml")
 TW = SITE["twin"]
+PARAMS = TwinParams.from_config(TW)
 CRS = SITE["site"]["crs"]
 SEED = SITE["seed"]
 
@@ -32,10 +33,10 @@ SEED = SITE["seed"]
 @pytest.fixture(scope="module")
 def twin(tmp_path_factory):
     root = tmp_path_factory.mktemp("twin")
-    s1 = build_site(TW, CRS, SEED, epoch=1)
+    s1 = build_site(PARAMS, CRS, SEED, epoch=1)
     generate_epoch(s1, root / "a")
     fixed = {"targets": pd.read_csv(root / "a/truth/targets.csv"), "checkpoints": pd.read_csv(root / "a/truth/checkpoints.csv")}
-    s2 = build_site(TW, CRS, SEED, epoch=2)
+    s2 = build_site(PARAMS, CRS, SEED, epoch=2)
     generate_epoch(s2, root / "a/epoch2", fixed_points=fixed)
     return {"root": root, "site": s1, "site2": s2}
 
@@ -56,7 +57,7 @@ def test_all_contract_files_written(twin):
 def test_same_seed_identical_files(twin):
     """A second generation with the same config gives identical rasters, tables and vectors."""
     root = twin["root"]
-    generate_epoch(build_site(TW, CRS, SEED, epoch=1), root / "b")
+    generate_epoch(build_site(PARAMS, CRS, SEED, epoch=1), root / "b")
     for n in ["dtm.tif", "dsm.tif", "landcover.tif", "texture.tif"]:
         a, _ = read_raster(root / "a/truth" / n, band=None)
         b, _ = read_raster(root / "b/truth" / n, band=None)
@@ -69,8 +70,8 @@ def test_same_seed_identical_files(twin):
 
 
 def test_different_seed_differs():
-    a = build_site(TW, CRS, SEED, epoch=1)
-    b = build_site(TW, CRS, SEED + 1, epoch=1)
+    a = build_site(PARAMS, CRS, SEED, epoch=1)
+    b = build_site(PARAMS, CRS, SEED + 1, epoch=1)
     assert len(a.network) != len(b.network) or not np.allclose(a.network[1].x[:5], b.network[1].x[:5])
 
 
@@ -321,7 +322,22 @@ def test_bad_texture_cell_is_input_error():
     bad = copy.deepcopy(TW)
     bad["texture_cell_m"] = 0.15
     with pytest.raises(InputError, match="texture_cell_m"):
-        check_config(bad)
+        TwinParams.from_config(bad)
+
+
+def test_params_take_the_keys_a_rule_passes():
+    from kitegully.twin import EPOCH_KEYS, PLAN_KEYS
+
+    plan = TwinParams.from_config({k: TW[k] for k in PLAN_KEYS})
+    assert plan.survey is None and plan.epoch2 is None and plan.tex_factor == round(TW["dem_cell_m"] / TW["texture_cell_m"])
+    with pytest.raises(InputError, match=r"twin.epoch2: needed to plan epoch 2"):
+        build_site(plan, CRS, SEED, epoch=2)
+    with pytest.raises(InputError, match=r"twin: missing key 'survey' \(the epoch keys"):
+        TwinParams.from_config({k: TW[k] for k in PLAN_KEYS + EPOCH_KEYS if k != "survey"})
+    with pytest.raises(InputError, match=r"twin: unknown key 'dem_cell'"):
+        TwinParams.from_config({**TW, "dem_cell": 1.0})
+    with pytest.raises(TypeError):
+        PARAMS.gullies["min_depth_m"] = 0.0  # read-only
 
 
 def test_site_config_files_validate():
@@ -337,16 +353,3 @@ def test_site_config_files_validate():
     cfg.update(bad)
     with pytest.raises(InputError, match="twin.gullies.u_shape_share"):
         validate_config(cfg)
-
-
-@pytest.mark.slow
-def test_workflow_tiny_twin(tmp_path):
-    from snakemake_utils import run_snakemake
-
-    res = tmp_path / "results"
-    base = res / "tiny_twin" / "twin"
-    targets = [str(base / "site.json"), str(base / "figures/twin_site_overview.png"), str(base / "epoch2/truth/dtm.tif")]
-    run_snakemake(REPO / "config/sites/tiny_twin.yaml", res, targets, cores=2)
-    for t in targets:
-        assert Path(t).is_file()
-    assert (res / "tiny_twin/logs/twin/epoch1.log").is_file()

@@ -119,3 +119,20 @@ def test_profile_with_and_without_vegetation():
     t = tab.set_index("profile")
     assert t.loc["whole", "max_m"] == pytest.approx(2.0)
     assert t.loc["no_vegetation", "max_m"] < 2.0 and t.loc["no_vegetation", "median_m"] == pytest.approx(0.0)
+
+
+def test_params_take_their_keys_of_the_validate_section():
+    from conftest import REPO
+    from kitegully.config import load_yaml
+    from kitegully.evaluate import CheckpointParams, TruthParams
+
+    v = load_yaml(REPO / "config/sites/kamech_twin.yaml")["validate"]
+    cp = CheckpointParams.from_config(v)
+    assert cp.bare_classes == tuple(v["bare_classes"]) and cp.histogram_bins == v["histogram_bins"]
+    sub = {k: v[k] for k in ("vegetation_classes", "error_limit_m", "figure_max_px", "profile")}
+    tp = TruthParams.from_config(sub)
+    assert tp.profile.reference == v["profile"]["reference"]
+    with pytest.raises(InputError, match=r"validate: missing key 'bare_classes'"):
+        CheckpointParams.from_config(sub)
+    with pytest.raises(InputError, match=r"validate.profile.reference: must be dtm or dsm"):
+        TruthParams.from_config({**sub, "profile": {**v["profile"], "reference": "dem"}})
