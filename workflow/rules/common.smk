@@ -1,6 +1,7 @@
 # Shared helpers for all rule files: paths, logs and the list of final targets.
 
 STAGES = [
+    "inputs",
     "tether",
     "twin",
     "flight",

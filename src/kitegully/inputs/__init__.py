@@ -15,15 +15,25 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from kitegully import InputError
-from kitegully.inputs.crs import site_crs
 from kitegully.inputs.findings import Finding, Findings
-from kitegully.inputs.gcps import check_checkpoints, check_gcp_file, write_checkpoint_copy, write_gcp_copy
-from kitegully.inputs.photos import check_photos
-from kitegully.inputs.points import Z_UNITS
-from kitegully.inputs.rasters import check_raster
-from kitegully.inputs.report import write_report
 
 __all__ = ["InputSettings", "Finding", "Findings", "check_site_inputs", "write_report", "write_gcp_copy", "write_checkpoint_copy"]
+
+Z_UNIT_NAMES = ("m", "ft", "us_ft")
+
+
+def __getattr__(name: str):
+    # the writers live in submodules that import pandas and rasterio; importing them lazily
+    # keeps `kitegully.inputs.crs` (used when the Snakefile validates the config) light
+    if name in ("write_gcp_copy", "write_checkpoint_copy"):
+        from kitegully.inputs import gcps
+
+        return getattr(gcps, name)
+    if name == "write_report":
+        from kitegully.inputs.report import write_report
+
+        return write_report
+    raise AttributeError(name)
 
 log = logging.getLogger(__name__)
 
@@ -66,8 +76,8 @@ class InputSettings:
         inputs = cfg.get("inputs") or {}
         georef = cfg.get("georef") or {}
         z_units = inputs.get("z_units", "m")
-        if z_units not in Z_UNITS:
-            raise InputError(f"inputs.z_units: '{z_units}' is not one of {', '.join(Z_UNITS)}")
+        if z_units not in Z_UNIT_NAMES:
+            raise InputError(f"inputs.z_units: '{z_units}' is not one of {', '.join(Z_UNIT_NAMES)}")
         rasters = tuple((str(r["path"]), r.get("nodata")) for r in inputs.get("rasters") or [])
         return cls(
             crs=cfg["crs"], gcp_format=georef.get("gcp_format", "auto"), csv_crs=georef.get("csv_crs"),
@@ -101,6 +111,11 @@ def check_site_inputs(
         Errors (the run must stop), warnings, notes and facts, in the order found.
         Cost: one full decode of every photograph plus a decimated read of each raster.
     """
+    from kitegully.inputs.crs import site_crs
+    from kitegully.inputs.gcps import check_checkpoints, check_gcp_file
+    from kitegully.inputs.photos import check_photos
+    from kitegully.inputs.rasters import check_raster
+
     found = Findings()
     try:
         crs = site_crs(settings.crs)

@@ -10,7 +10,7 @@ from kitegully import InputError
 
 # [I] Slack around a CRS's published area of use (degrees): survey data a little outside a
 # UTM zone (extended zones) is common and harmless; swapped axes or degrees are far outside.
-AREA_MARGIN_DEG = 3.0
+AREA_MARGIN_DEG = 1.0
 
 
 def site_crs(text: str, source: str = "site.crs") -> CRS:
@@ -88,9 +88,14 @@ def check_coordinates(crs: CRS, x: np.ndarray, y: np.ndarray, lines: list[int], 
     """
     x, y = np.asarray(x, float), np.asarray(y, float)
     label = crs_label(crs)
-    if crs.is_projected and np.all(np.abs(x) <= 180.0) and np.all(np.abs(y) <= 90.0):
+    deg = (np.abs(x) <= 180.0) & (np.abs(y) <= 90.0)
+    if crs.is_projected and deg.all():
         return (f"{what} coordinates look like degrees (x {x.min():.5g} to {x.max():.5g}, y {y.min():.5g} to {y.max():.5g}) "
                 f"but {label} is in metres; give projected coordinates or declare the geographic CRS")
+    if crs.is_projected and deg.any():
+        k = int(np.flatnonzero(deg)[0])
+        return (f"line {lines[k]}: x {x[k]:.6g}, y {y[k]:.6g} look like degrees but {label} is in metres; "
+                f"give projected coordinates")
     inside = inside_area_of_use(crs, x, y)
     if np.all(inside):
         return None

@@ -59,6 +59,13 @@ def check_points(
     if problem:
         found.error(src, problem)
         return False
+    if len(x) >= 3:
+        d_med = np.hypot(x - np.median(x), y - np.median(y)) if crs.is_projected else np.zeros(len(x))
+        k = int(np.argmax(d_med))
+        if d_med[k] > MAX_DISTANCE_TO_PHOTOS_M:
+            found.error(src, f"line {lines[k]}: {what} lies {d_med[k] / 1000:.1f} km from the middle of the others; "
+                             "a photo block is far smaller, so check its coordinates")
+            return False
     gps = [(p.lon, p.lat) for p in photos if np.isfinite(p.lat) and np.isfinite(p.lon)]
     if gps:
         lon, lat = to_lonlat(crs, x, y)
