@@ -17,7 +17,7 @@ from pathlib import Path
 from kitegully import InputError
 from kitegully.inputs.findings import Finding, Findings
 
-__all__ = ["InputSettings", "Finding", "Findings", "check_site_inputs", "write_report", "write_gcp_copy", "write_checkpoint_copy"]
+__all__ = ["InputSettings", "Finding", "Findings", "check_site_inputs", "check_inputs", "write_report", "write_gcp_copy", "write_checkpoint_copy"]
 
 Z_UNIT_NAMES = ("m", "ft", "us_ft")
 
@@ -133,4 +133,31 @@ def check_site_inputs(
     found.facts.update(site_crs=settings.crs, z_units=settings.z_units)
     for f in found.items:
         getattr(log, {"error": "error", "warning": "warning", "note": "info"}[f.level])("%s", f.line)
+    return found
+
+
+def check_inputs(
+    settings: InputSettings, images_dir: str | Path, gcp_file: str | Path, checkpoints: str | Path | None, out: dict, site: str,
+) -> Findings:
+    """Check the site's inputs, write the report, refuse bad inputs, then write the checked copies.
+
+    ``out`` maps ``report`` (markdown), ``json``, ``gcp`` and, when there are checkpoints,
+    ``checkpoints`` to paths. The report is written in any case; the checked GCP and
+    checkpoint copies (heights converted to metres) only when there is no error.
+
+    Raises
+    ------
+    InputError
+        The first error's one line (and how many more the log lists).
+    """
+    from kitegully.inputs.gcps import write_checkpoint_copy, write_gcp_copy
+    from kitegully.inputs.report import write_report
+
+    found = check_site_inputs(settings, images_dir, gcp_file, checkpoints)
+    write_report(found, out["json"], out["report"], site)
+    found.raise_for_errors()
+    write_gcp_copy(gcp_file, out["gcp"], settings.gcp_format, settings.z_units)
+    if checkpoints is not None:
+        write_checkpoint_copy(checkpoints, out["checkpoints"], settings.z_units)
+    log.info("inputs accepted: %d warning(s), %d note(s)", len(found.of("warning")), len(found.of("note")))
     return found

@@ -73,6 +73,11 @@ def inside_area_of_use(crs: CRS, x: np.ndarray, y: np.ndarray, margin_deg: float
     return np.isfinite(lon) & np.isfinite(lat) & lon_ok & lat_ok & round_trip
 
 
+def area_name(crs: CRS) -> str:
+    """The CRS's area of use, its first sentence (pyproj's full text lists every country)."""
+    return crs.area_of_use.name.split(". ")[0].rstrip(".") if crs.area_of_use else "no published area"
+
+
 def crs_label(crs: CRS) -> str:
     """Short name: ``EPSG:32632`` when it has a code, else its name."""
     code = crs.to_epsg()
@@ -101,8 +106,8 @@ def check_coordinates(crs: CRS, x: np.ndarray, y: np.ndarray, lines: list[int], 
         return None
     if not np.any(inside) and np.all(inside_area_of_use(crs, y, x)):
         return (f"easting and northing look swapped: line {lines[0]} has x {x[0]:.3f}, y {y[0]:.3f}, which lies outside "
-                f"{label} ({crs.area_of_use.name}), but swapped every {what} falls inside it")
+                f"{label} ({area_name(crs)}), but swapped every {what} falls inside it")
     k = int(np.flatnonzero(~inside)[0])
     n_out = int((~inside).sum())
-    return (f"{n_out} {what}(s) lie outside the area of use of {label} ({crs.area_of_use.name}), "
+    return (f"{n_out} {what}(s) lie outside the area of use of {label} ({area_name(crs)}), "
             f"first on line {lines[k]} (x {x[k]:.3f}, y {y[k]:.3f}); check the CRS and the coordinates")

@@ -145,7 +145,8 @@ def _check_images(rows: GcpRows, photos: list[Photo], frame: str, scale: float, 
     other = "display" if frame == "stored" else "stored"
     other_sizes = np.array([by_name[rows.images[j]].size_in(other) for j in idx], float)
     other_ok = bool(np.all(np.max(px / other_sizes, axis=1) <= limit))
-    fit_txt = (f"they fit inside the images at gcp_pixel_scale {min(fits):g}" if fits
+    best = min(fits) if fits else None
+    fit_txt = (f"they fit inside the images at gcp_pixel_scale {best:g}{' (full resolution)' if best == 1.0 else ''}" if fits
                else "they fit at no usual scale") + f" (the smallest scale that holds them all is {need:.4f})"
     if other_ok:
         fit_txt = f"they fit in the {other} (EXIF-{'rotated' if other == 'display' else 'unrotated'}) frame at the declared scale; set georef.gcp_pixel_frame: {other}"

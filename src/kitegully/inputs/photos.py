@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import piexif
-from PIL import Image
+from PIL import Image, UnidentifiedImageError
 
 from kitegully import InputError
 from kitegully.inputs.findings import Findings
@@ -114,7 +114,11 @@ def check_photos(images_dir: str | Path, found: Findings) -> list[Photo]:
                 w, h = im.size
         except Exception as exc:  # any decoder error: unreadable or truncated
             reason = str(exc).split("\n")[0]
-            bad.append(f"{path.name} ({'truncated' if 'truncated' in reason else reason})")
+            if isinstance(exc, UnidentifiedImageError):
+                reason = "not an image file"
+            elif "truncated" in reason.lower():
+                reason = "truncated"
+            bad.append(f"{path.name} ({reason})")
             continue
         digest = hashlib.sha1(path.read_bytes()).hexdigest()
         if digest in digests:
