@@ -138,6 +138,7 @@ def test_declared_nodata_sentinel_is_accepted(tmp_path):
     assert _run(site)[0].ok
 
 
+@pytest.mark.realdata
 def test_boruszyn_real_data_passes(boruszyn_dir, tmp_path):
     s = InputSettings(crs="EPSG:2180", gcp_format="odm", gcp_pixel_scale=0.5208333333333334)
     out = {k: tmp_path / v for k, v in dict(report="r.md", json="r.json", gcp="g.txt").items()}
