@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import shutil
 
-from site_factory import CHECKPOINTS, GCP_XYZ, LAT, LON, X0, Y0, gcp_lines, write_dem, write_photo
+from site_factory import CHECKPOINTS, GCP_XYZ, LAT, LON, gcp_lines, write_dem, write_heads, write_photo
 
 
 def _gcp(site, text):
@@ -113,4 +113,12 @@ RASTERS = [
     ("raster_undeclared_float_max", lambda s: write_dem(s["dem"], fill=3.4028235e38), {}),
 ]
 
-CASES = PHOTOS + GCPS + CHECKPOINT_CASES + RASTERS
+VECTORS = [
+    ("heads_missing", lambda s: s["heads"].unlink(), {}),
+    ("heads_not_a_vector_file", lambda s: s["heads"].write_text("x"), {}),
+    ("heads_without_crs", lambda s: write_heads(s["heads"], crs=None), {}),
+    ("heads_other_crs", lambda s: write_heads(s["heads"], crs="EPSG:4326"), {}),
+    ("heads_empty", lambda s: write_heads(s["heads"], n=0), {}),
+]
+
+CASES = PHOTOS + GCPS + CHECKPOINT_CASES + RASTERS + VECTORS

@@ -68,6 +68,18 @@ def write_dem(path: Path, crs: str | None = "EPSG:32632", res: tuple[float, floa
     return path
 
 
+def write_heads(path: Path, crs: str | None = "EPSG:32632", n: int = 3) -> Path:
+    """Gully head points (GeoPackage)."""
+    import geopandas as gpd
+    from shapely.geometry import Point
+
+    if path.exists():
+        path.unlink()
+    gdf = gpd.GeoDataFrame({"id": list(range(n))}, geometry=[Point(X0 + 10 * i, Y0 + 20) for i in range(n)], crs=crs)
+    gdf.to_file(path, driver="GPKG")
+    return path
+
+
 def make_site(root: Path) -> dict:
     """Write the valid site under ``root``; returns its paths."""
     images = root / "images"
@@ -79,6 +91,7 @@ def make_site(root: Path) -> dict:
     cps = root / "checkpoints.csv"
     cps.write_text("id,x,y,z\n" + "".join(f"{i},{x},{y},{z}\n" for i, x, y, z in CHECKPOINTS), encoding="utf-8")
     dem = write_dem(root / "dem.tif")
+    heads = write_heads(root / "heads.gpkg")
     out = root / "out"
     out.mkdir()
-    return {"root": root, "images": images, "gcp": gcp, "checkpoints": cps, "dem": dem, "out": out}
+    return {"root": root, "images": images, "gcp": gcp, "checkpoints": cps, "dem": dem, "heads": heads, "out": out}

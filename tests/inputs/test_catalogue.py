@@ -77,11 +77,17 @@ EXPECTED = {
     'raster_undeclared_9999': '{root}/dem.tif: 9 cells hold -9999 but the raster declares no such nodata value; declare it (nodata in the file or inputs.rasters[].nodata) so it is not read as elevation',
     'raster_undeclared_32768': '{root}/dem.tif: 9 cells hold -32768 but the raster declares no such nodata value; declare it (nodata in the file or inputs.rasters[].nodata) so it is not read as elevation',
     'raster_undeclared_float_max': '{root}/dem.tif: 9 cells hold 3.4e38 (float32 maximum) but the raster declares no such nodata value; declare it (nodata in the file or inputs.rasters[].nodata) so it is not read as elevation',
+    'heads_missing': '{root}/heads.gpkg: file named in gully.heads_file not found',
+    'heads_not_a_vector_file': "{root}/heads.gpkg: not a readable vector file ('{root}/heads.gpkg' not recognized as being in a supported file format.)",
+    'heads_without_crs': '{root}/heads.gpkg: the layer has no CRS; it must be in the site CRS EPSG:32632',
+    'heads_other_crs': '{root}/heads.gpkg: the layer is in EPSG:4326, not the site CRS EPSG:32632; reproject it first',
+    'heads_empty': '{root}/heads.gpkg: the layer named in gully.heads_file has no features',
 }
 
 
 def _run(site: dict, **over):
-    settings = InputSettings(**{"crs": "EPSG:32632", "gcp_format": "odm", "rasters": ((str(site["dem"]), None),), **over})
+    settings = InputSettings(**{"crs": "EPSG:32632", "gcp_format": "odm", "rasters": ((str(site["dem"]), None),),
+                           "vectors": ((str(site["heads"]), "gully.heads_file"),), **over})
     out = {k: site["out"] / v for k, v in dict(report="report.md", json="report.json", gcp="gcp.txt", checkpoints="cp.csv").items()}
     return check_inputs(settings, site["images"], site["gcp"], site["checkpoints"], out, "t"), out
 

@@ -21,7 +21,18 @@ if "sfm" in config:
             src["checkpoints"] = ins["checkpoints"]
         if ins.get("rasters"):
             src["rasters"] = [r["path"] for r in ins["rasters"]]
+        if INPUTS_VECTORS:
+            src["vectors"] = list(INPUTS_VECTORS.values())
         return src
+
+    # vector files a real site hands in (twins make their own), by the config key naming them
+    INPUTS_VECTORS = {} if IS_TWIN or "gully" not in config else {
+        k: v for k, v in {
+            "gully.heads_file": config["gully"]["heads_file"],
+            "gully.reference_network_file": config["gully"]["reference_network_file"],
+            "gully.validation.catchment_file": config["gully"]["validation"]["catchment_file"],
+        }.items() if v
+    }
 
     INPUTS_SRC = inputs_sources()
     INPUTS_GCP = result("inputs", "gcp_file" + Path(INPUTS_SRC["gcp"]).suffix)
@@ -41,6 +52,7 @@ if "sfm" in config:
                 "inputs": {k: v for k, v in config.get("inputs", {}).items() if k in ("z_units", "rasters")},
                 "georef": {k: v for k, v in config.get("georef", {}).items()
                            if k in ("gcp_format", "csv_crs", "gcp_pixel_frame", "gcp_pixel_scale")},
+                "vectors": INPUTS_VECTORS,
             },
             site=SITE,
         log:

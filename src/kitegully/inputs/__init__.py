@@ -60,6 +60,9 @@ class InputSettings:
         that look like feet under ``m`` are refused.
     rasters : tuple of (str, float or None)
         Rasters handed in (``inputs.rasters``): path and the declared nodata value.
+    vectors : tuple of (str, str)
+        Vector files handed in and the config key naming each (``gully.heads_file``,
+        ``gully.reference_network_file``, ``gully.validation.catchment_file``).
     """
 
     crs: str
@@ -69,10 +72,11 @@ class InputSettings:
     gcp_pixel_scale: float = 1.0
     z_units: str = "m"
     rasters: tuple[tuple[str, float | None], ...] = ()
+    vectors: tuple[tuple[str, str], ...] = ()
 
     @classmethod
     def from_config(cls, cfg: dict) -> "InputSettings":
-        """Build from ``{"crs": site.crs, "inputs": inputs section or {}, "georef": georef section or {}}``."""
+        """Build from ``{"crs": site.crs, "inputs": {...}, "georef": {...}, "vectors": {config key: path}}``."""
         inputs = cfg.get("inputs") or {}
         georef = cfg.get("georef") or {}
         z_units = inputs.get("z_units", "m")
@@ -83,6 +87,7 @@ class InputSettings:
             crs=cfg["crs"], gcp_format=georef.get("gcp_format", "auto"), csv_crs=georef.get("csv_crs"),
             gcp_pixel_frame=georef.get("gcp_pixel_frame", "stored"), gcp_pixel_scale=float(georef.get("gcp_pixel_scale", 1.0)),
             z_units=z_units, rasters=rasters,
+            vectors=tuple((str(p), k) for k, p in (cfg.get("vectors") or {}).items() if p),
         )
 
 
@@ -115,6 +120,7 @@ def check_site_inputs(
     from kitegully.inputs.gcps import check_checkpoints, check_gcp_file
     from kitegully.inputs.photos import check_photos
     from kitegully.inputs.rasters import check_raster
+    from kitegully.inputs.vectors import check_vector
 
     found = Findings()
     try:
@@ -130,6 +136,8 @@ def check_site_inputs(
         check_checkpoints(checkpoints, crs, settings.z_units, photos, found)
     for path, nodata in settings.rasters:
         check_raster(path, crs, nodata, found)
+    for path, key in settings.vectors:
+        check_vector(path, key, crs, found)
     found.facts.update(site_crs=settings.crs, z_units=settings.z_units)
     for f in found.items:
         getattr(log, {"error": "error", "warning": "warning", "note": "info"}[f.level])("%s", f.line)
