@@ -17,8 +17,9 @@ MAX_DISTANCE_TO_PHOTOS_M = 5000.0
 # Highest terrain on Earth (m): no metre height can exceed it.
 MAX_HEIGHT_M = 8850.0
 # [I] Margin by which ground heights may exceed the cameras' GPS altitude before they are
-# "above the cameras": consumer GPS altitude is good to a few tens of metres.
-ALTITUDE_SLACK_M = 50.0
+# "above the cameras": consumer GPS altitude is good to a few tens of metres, and ellipsoidal
+# GCP heights differ from the camera's sea-level altitude by the geoid undulation (|N| < 110 m).
+ALTITUDE_SLACK_M = 100.0
 
 
 def check_heights(z: np.ndarray, units: str, photos: list[Photo], found: Findings, src: str, what: str) -> bool:
