@@ -34,8 +34,8 @@ EXPECTED = {
     'photo_truncated': '{root}/images: unreadable or truncated image(s): img_2.jpg (truncated)',
     'photo_duplicate_content': '{root}/images: the same photograph under two names: img_9.jpg = img_0.jpg; remove the copies',
     'photos_fewer_than_three': '{root}/images: only 2 readable photograph(s); structure from motion needs at least 3',
-    'photos_mixed_camera_models': "{root}/images: photographs from 2 cameras (Canon PowerShot A3300 IS 64x48 px: 2; Canon EOS 5D 64x48 px: 1); SfM self-calibrates one shared camera, so give one camera's photos per site",
-    'photos_mixed_pixel_sizes': "{root}/images: photographs from 2 cameras (Canon PowerShot A3300 IS 64x48 px: 2; Canon PowerShot A3300 IS 80x60 px: 1); SfM self-calibrates one shared camera, so give one camera's photos per site",
+    'photos_mixed_camera_models': "{root}/images: photographs from 2 cameras (Canon PowerShot A3300 IS 64x48 px: 2; Canon EOS 5D 64x48 px: 1); each camera is calibrated on its own, so each needs at least 3 photos: remove the odd ones or add more",
+    'photos_mixed_pixel_sizes': "{root}/images: photographs from 2 cameras (Canon PowerShot A3300 IS 64x48 px: 2; Canon PowerShot A3300 IS 80x60 px: 1); each camera is calibrated on its own, so each needs at least 3 photos: remove the odd ones or add more",
     'gcp_file_missing': '{root}/gcp_list.txt: GCP file not found',
     'gcp_file_empty': '{root}/gcp_list.txt: GCP file is empty',
     'gcp_unknown_projection': "{root}/gcp_list.txt: line 1: projection 'EPSG:99999' is not understood (Invalid projection: EPSG:99999: (Internal Proj Error: proj_create: crs not found: EPSG:99999))",
@@ -133,6 +133,18 @@ def test_heights_in_feet_are_converted_when_declared(tmp_path):
     z = [float(ln.split()[2]) for ln in out["gcp"].read_text().splitlines()[1:]]
     assert np.allclose(z, [r[2] for r in GCP_XYZ for _ in (0, 1)], atol=1e-3)
     assert np.allclose(pd.read_csv(out["checkpoints"])["z"], pd.read_csv(tmp_path / "site" / "checkpoints.csv")["z"] * 0.3048)
+
+
+def test_two_cameras_with_three_photos_each_are_accepted_with_a_warning(tmp_path):
+    from site_factory import write_photo
+
+    site = make_site(tmp_path / "site")
+    for k in range(3, 6):
+        write_photo(site["images"] / f"img_{k}.jpg", k, model=b"Canon EOS 5D")
+    found, _ = _run(site)
+    assert found.ok and len(found.facts["cameras"]) == 2
+    assert [f.message for f in found.of("warning")] == [
+        "photographs from 2 cameras (Canon PowerShot A3300 IS 64x48 px: 3; Canon EOS 5D 64x48 px: 3); SfM calibrates one camera group each"]
 
 
 def test_declared_nodata_sentinel_is_accepted(tmp_path):

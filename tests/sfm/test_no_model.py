@@ -56,3 +56,32 @@ def test_photos_from_one_spot_are_diagnosed_as_no_baseline(tmp_path):
                      params["max_num_features"], 1, params["first_octave"])
     match_features(db, len(infos), "exhaustive", 10, 60, 1)
     assert why_no_model(db, 15).startswith("all 3 overlapping photo pair(s) were taken from one spot (pure camera rotation: no baseline)")
+
+
+def test_two_cameras_get_one_camera_group_each(tmp_path):
+    import piexif
+
+    photos = tmp_path / "mixed"
+    photos.mkdir()
+    rng = np.random.default_rng(3)
+    for k in range(4):
+        model = b"Canon PowerShot A3300 IS" if k < 2 else b"Canon EOS 5D"
+        exif = piexif.dump({"0th": {piexif.ImageIFD.Make: b"Canon", piexif.ImageIFD.Model: model}, "Exif": {}, "GPS": {}, "1st": {}})
+        from PIL import Image
+
+        Image.fromarray(rng.integers(0, 255, (120, 160, 3), dtype=np.uint8)).save(photos / f"p{k}.jpg", exif=exif)
+    infos = prepare_images(list_images(photos), tmp_path / "images", 160)
+    assert sorted({i.camera for i in infos}) == ["Canon EOS 5D", "Canon PowerShot A3300 IS"]
+    params = _params(160)
+    db = tmp_path / "database.db"
+    extract_features(db, tmp_path / "images", infos, params["camera_model"], params["default_focal_factor"],
+                     params["max_num_features"], 1, params["first_octave"])
+    import pycolmap
+
+    d = pycolmap.Database.open(str(db))
+    try:
+        cams = {im.name: im.camera_id for im in d.read_all_images()}
+    finally:
+        d.close()
+    by_cam = {i.camera: {cams[j.sfm_name] for j in infos if j.camera == i.camera} for i in infos}
+    assert all(len(v) == 1 for v in by_cam.values()) and len(set().union(*by_cam.values())) == 2

@@ -13,7 +13,7 @@ from PIL import Image, UnidentifiedImageError
 
 from kitegully import InputError
 from kitegully.inputs.findings import Findings
-from kitegully.sfm.images import exif_orientation, list_images
+from kitegully.sfm.images import exif_camera, exif_orientation, list_images
 
 log = logging.getLogger(__name__)
 
@@ -78,21 +78,17 @@ def _gps(exif: dict) -> tuple[float, float, float]:
 
 
 def _camera(exif: dict) -> str:
-    zeroth = exif.get("0th", {}) or {}
-    make = zeroth.get(piexif.ImageIFD.Make, b"").decode("ascii", "replace").strip("\x00 ")
-    model = zeroth.get(piexif.ImageIFD.Model, b"").decode("ascii", "replace").strip("\x00 ")
-    if model.lower().startswith(make.lower()):
-        make = ""
-    return " ".join(p for p in (make, model) if p) or "unknown camera"
+    return exif_camera(exif) or "unknown camera"
 
 
 def check_photos(images_dir: str | Path, found: Findings) -> list[Photo]:
     """Read every photograph completely; record what is wrong in ``found``.
 
     Errors: folder missing or empty, unreadable or truncated files (all named in one
-    sentence), the same content under two names, fewer than three readable photos, more
-    than one camera (EXIF make, model and pixel size: SfM shares one self-calibrated
-    camera). Time O(total pixels), one image in memory at a time.
+    sentence), the same content under two names, fewer than three readable photos, a
+    camera (EXIF make, model and pixel size) with fewer than three photos when there are
+    several (SfM calibrates one camera group each; several cameras alone are a warning).
+    Time O(total pixels), one image in memory at a time.
 
     Returns
     -------
@@ -141,7 +137,12 @@ def check_photos(images_dir: str | Path, found: Findings) -> list[Photo]:
         cameras[p.camera] = cameras.get(p.camera, 0) + 1
     if len(cameras) > 1:
         groups = "; ".join(f"{c}: {n}" for c, n in sorted(cameras.items(), key=lambda kv: -kv[1]))
-        found.error(src, f"photographs from {len(cameras)} cameras ({groups}); SfM self-calibrates one shared camera, so give one camera's photos per site")
+        small = [c for c, n in cameras.items() if n < MIN_PHOTOS]
+        if small:
+            found.error(src, f"photographs from {len(cameras)} cameras ({groups}); each camera is calibrated on its own, "
+                             f"so each needs at least {MIN_PHOTOS} photos: remove the odd ones or add more")
+        else:
+            found.warning(src, f"photographs from {len(cameras)} cameras ({groups}); SfM calibrates one camera group each")
     has_gps = sum(np.isfinite(p.lat) for p in photos)
     found.facts.update(n_photos=len(photos), cameras=cameras, n_photos_with_gps=int(has_gps))
     if photos and has_gps == 0:

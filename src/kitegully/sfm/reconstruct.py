@@ -45,7 +45,10 @@ def extract_features(
     num_threads: int,
     first_octave: int = -1,
 ) -> None:
-    """SIFT features for every prepared image; one shared camera per image shape.
+    """SIFT features for every prepared image; one shared camera per camera group.
+
+    A camera group is one EXIF camera (make and model) at one image shape: a folder with
+    photos of two cameras gets two self-calibrated cameras.
 
     ``first_octave`` -1 doubles the image first (COLMAP's default, most features, about 4x
     the cost); 0 starts at full resolution.
@@ -53,22 +56,23 @@ def extract_features(
     The focal-length prior is the median EXIF focal length of the group (in SfM pixels),
     or ``default_focal_factor`` × the larger image side when EXIF lacks it.
     """
-    groups: dict[tuple[int, int], list[ImageInfo]] = defaultdict(list)
+    groups: dict[tuple[int, int, str], list[ImageInfo]] = defaultdict(list)
     for info in infos:
-        groups[(info.sfm_width, info.sfm_height)].append(info)
+        groups[(info.sfm_width, info.sfm_height, info.camera)].append(info)
     ext = pycolmap.FeatureExtractionOptions()
     ext.num_threads = num_threads
     ext.max_image_size = -1  # images are already downscaled by prepare_images
     ext.sift.max_num_features = max_num_features
     ext.sift.first_octave = first_octave
-    for (w, h), members in sorted(groups.items()):
+    for (w, h, cam), members in sorted(groups.items()):
         focals = np.array([m.focal_px for m in members], dtype=float)
         focals = focals[np.isfinite(focals)]
         f0 = float(np.median(focals)) if focals.size else default_focal_factor * max(w, h)
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = camera_model
         reader.camera_params = camera_params(camera_model, f0, w, h)
-        log.info("extracting features of %d images of %dx%d px (focal prior %.1f px)", len(members), w, h, f0)
+        log.info("extracting features of %d images of %dx%d px from %s (focal prior %.1f px)", len(members), w, h,
+                 cam or "an unnamed camera", f0)
         pycolmap.extract_features(
             database,
             image_dir,
