@@ -50,3 +50,18 @@ def test_valid_mini_site_passes_check_inputs(tmp_path):
     results = tmp_path / "results"
     run_snakemake(_site_config(tmp_path, site), results, targets=[str(results / "mini" / "inputs" / "report.json")])
     assert (results / "mini" / "inputs" / "gcp_file.txt").read_text() == site["gcp"].read_text()
+
+
+def test_geographic_site_crs_is_one_line_before_any_job(tmp_path):
+    site = make_site(tmp_path / "site")
+    path = _site_config(tmp_path, site)
+    cfg = yaml.safe_load(path.read_text())
+    cfg["site"]["crs"] = "EPSG:4326"
+    path.write_text(yaml.safe_dump(cfg))
+    proc = run_snakemake(path, tmp_path / "results", extra=["--dry-run"], check=False)
+    assert proc.returncode != 0
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f"Invalid configuration: {path}: site.crs: 'EPSG:4326' is geographic (degrees); give a projected CRS in metres "
+        "such as the site's UTM zone (EPSG:326xx north, EPSG:327xx south)")
+    assert "Traceback" not in proc.stderr and "Snakefile\", line" not in proc.stderr
+    assert not (tmp_path / "results").exists()
