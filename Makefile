@@ -13,6 +13,8 @@ CONFIG_ARG :=
 else
 CONFIG_ARG := --configfile config/sites/$(SITE).yaml
 endif
+# one line naming file and line for a YAML error (Snakemake's own loader names neither)
+CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
 .PHONY: run test report venv clean-venv dryrun benchmark
 
@@ -28,9 +30,11 @@ $(STAMP): pyproject.toml requirements.lock
 venv: $(STAMP)
 
 run: $(STAMP)
+	@$(CONFIG_CHECK)
 	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) $(SNAKE_ARGS)
 
 dryrun: $(STAMP)
+	@$(CONFIG_CHECK)
 	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) --dry-run
 
 report: $(STAMP)

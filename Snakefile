@@ -24,7 +24,11 @@ if not workflow.overwrite_configfiles:
 try:
     config = validate_config(config, sources=workflow.configfiles)
 except InputError as _err:
-    raise WorkflowError(f"Invalid configuration: {_err}") from None
+    # one line, no Snakefile traceback: the message names the file and the key
+    import sys
+
+    print(f"Invalid configuration: {_err}", file=sys.stderr)
+    sys.exit(1)
 
 SITE = config["site"]["name"]
 IS_TWIN = config["site"]["kind"] == "twin"

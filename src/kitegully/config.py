@@ -124,6 +124,7 @@ def validate_config(
     if error is not None:
         names = ", ".join(str(s) for s in sources) or "configuration"
         raise InputError(_format_error(error, names))
+    _check_site_crs(config, sources)
     return copy.deepcopy(dict(config))
 
 
@@ -163,3 +164,37 @@ def config_section(cfg: Any, where: str, keys: Iterable[str], optional: Iterable
     if unknown:
         raise InputError(f"{where}: unknown key '{unknown[0]}' (allowed here: {', '.join(sorted(allowed))})")
     return cfg
+
+def _check_site_crs(config: Mapping[str, Any], sources: Iterable[str | Path]) -> None:
+    """``site.crs`` must be a projected CRS in metres; the error names the file that set it."""
+    from kitegully.inputs.crs import site_crs  # pyproj is only needed once the schema passed
+
+    crs = config.get("site", {}).get("crs")
+    if crs is None:
+        return
+    setters = [str(s) for s in sources if "crs" in (load_yaml(s).get("site") or {})]
+    where = setters[-1] if setters else "configuration"
+    site_crs(crs, f"{where}: site.crs")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m kitegully.config SITE.yaml ...``: validate config files, print one line."""
+    import sys
+
+    files = list(argv if argv is not None else sys.argv[1:])
+    base = Path(__file__).resolve().parents[2] / "config" / "config.yaml"
+    try:
+        merged: dict[str, Any] = load_yaml(base)
+        files = files or [merged["default_site"]]
+        for f in files:
+            merged.update(load_yaml(f))
+        validate_config(merged, sources=files)
+    except InputError as exc:
+        print(f"Invalid configuration: {exc}", file=sys.stderr)
+        return 1
+    print(f"{', '.join(files) or base}: valid")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -192,3 +192,32 @@ def test_params_name_the_bad_key():
         GeorefParams.from_config({**PARAMS, "bundle": {**PARAMS["bundle"], "refine_intrinsics": ["f", "k3"]}})
     p = GeorefParams.from_config(PARAMS)
     assert p.bundle.refine == ("f", "k1", "k2") and p.bundle.sigma_gcp_xy_m == 0.01 and p.qa.min_gcps_trusted == 4
+
+def test_untrusted_verdict_names_the_gcp_and_says_the_file_disagrees_with_the_photos():
+    model, gcps, infos, rows = _setup(displace_survey=(4, np.array([1.5, -1.0, 0.5])))
+    r = georeference(model, gcps, infos, rows, {**PARAMS, "method": "similarity"}, "stored")
+    rep = r.report
+    assert rep["diagnosis"] == "inconsistent_with_photos"
+    t4 = [f for f in rep["flagged_gcps"] if f["gcp_id"] == "T4"]
+    assert t4 and "outlier" in t4[0]["flags"] and t4[0]["misfit_3d_m"] > 1.0
+    assert any(s.startswith("GCP T4 flagged (") and "from the fit of the others" in s for s in rep["trust_reasons"])
+    assert "T4" in rep["diagnosis_text"]
+
+
+def test_metre_grade_coordinates_are_told_apart_from_a_bad_file():
+    # every survey coordinate off by ~0.3 m at random, declared as 0.3 m: the file agrees with the
+    # photos within what it claims, but that misses the 2 GSD requirement
+    model, gcps, infos, rows = _setup()
+    rng = np.random.default_rng(5)
+    for g in gcps:
+        g.xyz = g.xyz + rng.normal(0.0, 0.3, 3)
+    params = {**PARAMS, "sigma_gcp_xy_m": 0.3, "sigma_gcp_z_m": 0.3,
+              "qa": {**PARAMS["qa"], "max_residual_m": 2.0}}
+    r = georeference(model, gcps, infos, rows, params, "stored")
+    rep = r.report
+    assert not rep["trusted"]
+    assert rep["diagnosis"] == "coordinates_metre_grade", rep
+    assert "metre-grade" in rep["diagnosis_text"]
+    assert rep["diagnosis"] != "inconsistent_with_photos"
+    r = georeference(*_setup()[:4], PARAMS, "stored")
+    assert r.report["diagnosis"] == "trusted" and r.report["flagged_gcps"] == []

@@ -4,6 +4,7 @@
 # with an error naming a listed stage whose rule file is missing). A new stage is added here
 # together with its rule file (docs/architecture.md, "Adding a stage").
 STAGES = [
+    "inputs",
     "tether",
     "twin",
     "flight",

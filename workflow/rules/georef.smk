@@ -17,7 +17,7 @@ if "georef" in config and "sfm" in config:
         input:
             model=result("sfm", "model"),
             image_info=result("sfm", "image_info.json"),
-            gcp=georef_gcp_file(),
+            gcp=INPUTS_GCP,  # the checked copy (heights in metres) of georef_gcp_file()
             extra=georef_extra_inputs(),
         output:
             model=directory(result("georef", "model")),

@@ -25,6 +25,7 @@ if "sfm" in config:
         input:
             images=sfm_images_dir(),
             camera_log=sfm_camera_log(),
+            checked=result("inputs", "report.json"),
         output:
             work=directory(result("sfm", "work")),
             model=directory(result("sfm", "model")),

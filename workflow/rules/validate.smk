@@ -19,7 +19,7 @@ if "validate" in config and "dense" in config:
         rule validate_checkpoints:
             input:
                 dsm=result("dense", "dsm.tif"),
-                checkpoints=validate_checkpoints_file(),
+                checkpoints=INPUTS_CHECKPOINTS or validate_checkpoints_file(),  # checked copy (issue 14)
                 **VALIDATE_TWIN_INPUTS,
             output:
                 errors=result("validate", "checkpoint_errors.csv"),

@@ -243,7 +243,8 @@ def georeference_block(
     flag_poor_fits(local, obs, use, X_final, d_final, d_loo, params)
     residuals, loo = residual_tables(local, obs, use, survey_local, d_final, d_loo, rp_loo)
 
-    report.update(_stats(residuals, loo, qa, obs, use))
+    sig_survey = np.array([params.sigma_gcp_xy_m] * 2 + [params.sigma_gcp_z_m])
+    report.update(_stats(residuals, loo, qa, obs, use, sig_survey))
     report["offset_m"] = offset.tolist()
     report["method"] = params.method
     report["gsd_m"] = gsd
@@ -363,7 +364,25 @@ def _rmse(v: np.ndarray) -> float:
     return float(np.sqrt(np.mean(v**2))) if len(v) else float("nan")
 
 
-def _stats(res: pd.DataFrame, loo: pd.DataFrame, qa: GeorefQA, obs: list[GcpObs], use: np.ndarray) -> dict:
+def _stats(
+    res: pd.DataFrame, loo: pd.DataFrame, qa: GeorefQA, obs: list[GcpObs], use: np.ndarray, sig_survey: np.ndarray | None = None,
+) -> dict:
+    """Accuracy figures and the trusted/untrusted verdict with its reasons.
+
+    Besides ``trusted`` and ``trust_reasons`` (one sentence each), ``flagged_gcps`` lists
+    every GCP the QA flagged with its flags, adjusted misfit, leave-one-out misfit and
+    reprojection, and ``diagnosis`` tells apart:
+
+    - ``trusted``: every check passed;
+    - ``too_few_gcps``: fewer usable GCPs than ``qa.min_gcps_trusted`` or no leave-one-out;
+    - ``inconsistent_with_photos``: GCPs whose rays miss each other, that fit no
+      similarity, or whose leave-one-out misfit exceeds 3 sd of what their survey, clicks
+      and the block explain, or a leave-one-out RMSE beyond 3 x the declared survey
+      accuracy: the file disagrees with the photos (pixels, image names, scale or frame);
+    - ``coordinates_metre_grade``: the GCPs agree with the photos within their declared
+      survey accuracy (``sigma_gcp_xy_m``, ``sigma_gcp_z_m``), which is coarser than
+      ``qa.required_accuracy_m``: the coordinates, not the photos, limit the accuracy.
+    """
     u = res[res["used"]]
     out = {
         "n_gcps_in_file": len(obs),
@@ -374,6 +393,14 @@ def _stats(res: pd.DataFrame, loo: pd.DataFrame, qa: GeorefQA, obs: list[GcpObs]
         "loo_rmse_z_m": _rmse(loo["dz_m"].to_numpy(float)),
         "loo_rmse_3d_m": _rmse(loo["d3_m"].to_numpy(float)),
     }
+    loo_d3 = dict(zip(loo["gcp_id"], loo["d3_m"]))
+    flagged_rows = res[res["flag"].str.contains("poor_fit|outlier|ray_miss|inconsistent_coords")]
+    flagged = [
+        {"gcp_id": r.gcp_id, "flags": r.flag, "misfit_3d_m": float(r.d3_m), "loo_misfit_3d_m": float(loo_d3.get(r.gcp_id, np.nan)),
+         "reprojection_px": float(r.reproj_px)}
+        for r in flagged_rows.itertuples()
+    ]
+    out["flagged_gcps"] = flagged
     reasons = []
     if out["n_gcps_used"] < qa.min_gcps_trusted:
         reasons.append(f"only {out['n_gcps_used']} GCPs usable (at least {qa.min_gcps_trusted} wanted)")
@@ -381,11 +408,43 @@ def _stats(res: pd.DataFrame, loo: pd.DataFrame, qa: GeorefQA, obs: list[GcpObs]
         reasons.append("no leave-one-out check was possible")
     elif out["loo_rmse_3d_m"] > qa.required_accuracy_m:
         reasons.append(f"leave-one-out RMSE {out['loo_rmse_3d_m']:.2f} m exceeds the required {qa.required_accuracy_m} m")
-    flagged = res.loc[res["flag"].str.contains("poor_fit|outlier|ray_miss"), "gcp_id"].tolist()
-    if flagged:
-        reasons.append(f"GCPs flagged: {', '.join(flagged)}")
+    for f in flagged:
+        what = []
+        if "ray_miss" in f["flags"]:
+            what.append(f"its rays miss each other by {f['reprojection_px']:.1f} px (limit {qa.max_triangulation_px} px)")
+        if "outlier" in f["flags"]:
+            what.append(f"it lies {f['misfit_3d_m']:.2f} m from the fit of the others (limit {qa.max_residual_m} m)")
+        if "poor_fit" in f["flags"]:
+            what.append(f"left out, the others put it {f['loo_misfit_3d_m']:.2f} m away, beyond 3 sd of what its survey, "
+                        "clicks and the block explain")
+        if "inconsistent_coords" in f["flags"]:
+            what.append("its rows give different coordinates")
+        reasons.append(f"GCP {f['gcp_id']} flagged ({f['flags']}): {'; '.join(what) or 'see the residual table'}")
+    sig3 = float(np.linalg.norm(sig_survey)) if sig_survey is not None else float("nan")
+    loo3 = out["loo_rmse_3d_m"]
+    if not reasons:
+        diagnosis, text = "trusted", "all checks passed"
+    elif any(k in f["flags"] for f in flagged for k in ("ray_miss", "outlier", "poor_fit", "inconsistent_coords")) or (
+        np.isfinite(loo3) and np.isfinite(sig3) and loo3 > 3 * sig3
+    ):
+        names = ", ".join(f["gcp_id"] for f in flagged)
+        text = (f"the GCP file is inconsistent with the photos{' at ' + names if names else ''}"
+                + (f" (leave-one-out RMSE {loo3:.2f} m against a declared survey accuracy of {sig3:.2f} m)"
+                   if np.isfinite(loo3) and np.isfinite(sig3) else "")
+                + ": check those points' coordinates, image names, pixel scale and frame")
+        diagnosis = "inconsistent_with_photos"
+    elif np.isfinite(loo3) and loo3 > qa.required_accuracy_m:
+        diagnosis = "coordinates_metre_grade"
+        text = (f"the GCPs agree with the photos within their declared survey accuracy ({sig3:.2f} m 3-D; leave-one-out "
+                f"RMSE {loo3:.2f} m), but that is coarser than the required {qa.required_accuracy_m} m: the coordinates "
+                "are metre-grade, not the photos at fault; survey the GCPs more precisely")
+    else:
+        diagnosis = "too_few_gcps"
+        text = f"too few GCPs to check the block ({out['n_gcps_used']} usable, at least {qa.min_gcps_trusted} wanted)"
     out["trusted"] = not reasons
     out["trust_reasons"] = reasons
+    out["diagnosis"] = diagnosis
+    out["diagnosis_text"] = text
     return out
 
 

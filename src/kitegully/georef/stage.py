@@ -278,4 +278,5 @@ def georeference(
     Path(out["summary"]).write_text(json.dumps(export.clean_json(summary), indent=2) + "\n", encoding="utf-8")
     verdict = "CAN" if summary["trusted"] else "can NOT"
     log.info("georeferencing %s be trusted: %s", verdict, "; ".join(summary["trust_reasons"]) or "all checks passed")
+    log.info("diagnosis: %s (%s)", summary["diagnosis"], summary["diagnosis_text"])
     return summary

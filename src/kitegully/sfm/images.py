@@ -55,6 +55,9 @@ class ImageInfo:
         EXIF DateTimeOriginal in ISO form, or "" when absent.
     focal_px : float
         Focal length prior in SfM pixels from EXIF, NaN when EXIF lacks it.
+    camera : str
+        EXIF ``Make Model`` ("" when absent): with the pixel size it puts the image in a
+        camera group that SfM calibrates on its own.
     """
 
     name: str
@@ -67,6 +70,7 @@ class ImageInfo:
     scale: float
     capture_time: str
     focal_px: float
+    camera: str = ""
 
     def as_row(self) -> dict:
         return asdict(self)
@@ -121,6 +125,16 @@ def focal_length_px(exif: dict, stored_width: int, stored_height: int) -> float:
     if f35:
         return float(f35) / 36.0 * max(stored_width, stored_height)
     return float("nan")
+
+
+def exif_camera(exif: dict) -> str:
+    """``Make Model`` from EXIF (the make left out when the model repeats it); "" when absent."""
+    zeroth = exif.get("0th", {}) or {}
+    make = zeroth.get(piexif.ImageIFD.Make, b"").decode("ascii", "replace").strip("\x00 ")
+    model = zeroth.get(piexif.ImageIFD.Model, b"").decode("ascii", "replace").strip("\x00 ")
+    if make and model.lower().startswith(make.lower()):
+        make = ""
+    return " ".join(p for p in (make, model) if p)
 
 
 def _capture_time(exif: dict) -> str:
@@ -293,6 +307,7 @@ def prepare_images(
                 scale=scale_eff,
                 capture_time=ctime,
                 focal_px=focal_length_px(exif, w, h) * scale_eff,
+                camera=exif_camera(exif),
             )
         )
         log.info("prepared %s -> %s (%dx%d, orientation %d)", name, sfm_name, im.width, im.height, orient)

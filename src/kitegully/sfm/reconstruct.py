@@ -49,7 +49,10 @@ def extract_features(
     num_threads: int,
     first_octave: int = -1,
 ) -> None:
-    """SIFT features for every prepared image; one shared camera per image shape.
+    """SIFT features for every prepared image; one shared camera per camera group.
+
+    A camera group is one EXIF camera (make and model) at one image shape: a folder with
+    photos of two cameras gets two self-calibrated cameras.
 
     ``first_octave`` -1 doubles the image first (COLMAP's default, most features, about 4x
     the cost); 0 starts at full resolution.
@@ -57,22 +60,23 @@ def extract_features(
     The focal-length prior is the median EXIF focal length of the group (in SfM pixels),
     or ``default_focal_factor`` × the larger image side when EXIF lacks it.
     """
-    groups: dict[tuple[int, int], list[ImageInfo]] = defaultdict(list)
+    groups: dict[tuple[int, int, str], list[ImageInfo]] = defaultdict(list)
     for info in infos:
-        groups[(info.sfm_width, info.sfm_height)].append(info)
+        groups[(info.sfm_width, info.sfm_height, info.camera)].append(info)
     ext = pycolmap.FeatureExtractionOptions()
     ext.num_threads = num_threads
     ext.max_image_size = -1  # images are already downscaled by prepare_images
     ext.sift.max_num_features = max_num_features
     ext.sift.first_octave = first_octave
-    for (w, h), members in sorted(groups.items()):
+    for (w, h, cam), members in sorted(groups.items()):
         focals = np.array([m.focal_px for m in members], dtype=float)
         focals = focals[np.isfinite(focals)]
         f0 = float(np.median(focals)) if focals.size else default_focal_factor * max(w, h)
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = camera_model
         reader.camera_params = camera_params(camera_model, f0, w, h)
-        log.info("extracting features of %d images of %dx%d px (focal prior %.1f px)", len(members), w, h, f0)
+        log.info("extracting features of %d images of %dx%d px from %s (focal prior %.1f px)", len(members), w, h,
+                 cam or "an unnamed camera", f0)
         pycolmap.extract_features(
             database,
             image_dir,
@@ -138,6 +142,34 @@ def match_features(
     return method
 
 
+def why_no_model(database: Path, min_num_matches: int) -> str:
+    """COLMAP's reason for building no model, read from the match database, as a clause.
+
+    Distinguishes photos that share too few verified matches from photos that overlap but
+    were taken from one spot (every verified pair a pure rotation: no baseline to
+    triangulate from). O(number of image pairs).
+    """
+    db = pycolmap.Database.open(str(database))
+    try:
+        n_images = db.num_images()
+        _, geoms = db.read_two_view_geometries()
+    finally:
+        db.close()
+    C = pycolmap.TwoViewGeometryConfiguration
+    inliers = [len(g.inlier_matches) for g in geoms]
+    good = [g for g, n in zip(geoms, inliers) if n >= min_num_matches]
+    if not good:
+        best = max(inliers, default=0)
+        return (f"no pair of the {n_images} photos shares {min_num_matches} verified feature matches (best pair: {best}); "
+                "the photos do not overlap or show too little texture")
+    rotation = {C.PANORAMIC, C.PLANAR_OR_PANORAMIC}
+    if all(g.config in rotation for g in good):
+        return (f"all {len(good)} overlapping photo pair(s) were taken from one spot (pure camera rotation: no baseline), "
+                "so no 3-D point can be triangulated; take the photos from different positions")
+    return (f"{len(good)} photo pair(s) overlap but COLMAP found no starting pair with enough baseline to triangulate; "
+            "take photos from more positions with more overlap")
+
+
 def incremental_map(
     database: Path,
     image_dir: Path,
@@ -146,13 +178,17 @@ def incremental_map(
     min_num_matches: int,
     seed: int,
     num_threads: int,
+    source_dir: str | Path | None = None,
 ) -> pycolmap.Reconstruction:
     """Incremental mapping; returns the model with the most registered images.
+
+    ``source_dir`` is the photo folder the user gave (named in errors instead of the
+    prepared copies' work folder).
 
     Raises
     ------
     InputError
-        When no model could be built (too few matches between the images).
+        When no model could be built, with COLMAP's reason (:func:`why_no_model`).
     """
     opts = pycolmap.IncrementalPipelineOptions()
     opts.min_num_matches = min_num_matches
@@ -169,7 +205,7 @@ def incremental_map(
     tmp.mkdir(parents=True)
     models = pycolmap.incremental_mapping(database, image_dir, tmp, opts)
     if not models:
-        raise InputError(f"{image_dir}: structure from motion built no model (too few matches between images)")
+        raise InputError(f"{source_dir or image_dir}: structure from motion built no model: {why_no_model(database, min_num_matches)}")
     best = max(models.values(), key=lambda r: r.num_reg_images())
     for idx, rec in models.items():
         log.info("model %d: %d images, %d points", idx, rec.num_reg_images(), rec.num_points3D())
@@ -190,6 +226,7 @@ def run_sfm(
     seed: int,
     num_threads: int,
     positions: dict[str, np.ndarray] | None = None,
+    source_dir: str | Path | None = None,
 ) -> tuple[pycolmap.Reconstruction, dict]:
     """Features, matching and mapping; returns the largest model and timings (s).
 
@@ -215,7 +252,8 @@ def run_sfm(
     )
     t2 = time.perf_counter()
     rec = incremental_map(
-        database, image_dir, model_dir, params.refine_principal_point, params.min_num_matches, seed, num_threads
+        database, image_dir, model_dir, params.refine_principal_point, params.min_num_matches, seed, num_threads,
+        source_dir,
     )
     t3 = time.perf_counter()
     timings = {

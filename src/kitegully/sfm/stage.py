@@ -203,7 +203,7 @@ def reconstruct_model(
     if camera_log is not None:
         m = params.matching
         positions = positions_from_log(infos, camera_log, crs, m.log_time_offset_s, m.log_max_gap_s)
-    rec, timings = run_sfm(infos, work_dir / "images", work_dir, model_dir, params, seed, threads, positions)
+    rec, timings = run_sfm(infos, work_dir / "images", work_dir, model_dir, params, seed, threads, positions, images_dir)
     total = time.perf_counter() - t0
     summary = model_summary(rec, infos)
     if summary["images_left_out"]:

@@ -1,0 +1,63 @@
+# Input checks (issue 14): one cheap rule reads every input the site hands in (photographs,
+# GCP file, checkpoints, rasters) and refuses the run with one sentence before structure
+# from motion. It writes inputs/report.md and .json, and the checked GCP and checkpoint
+# files (heights in metres, inputs.z_units) that georef and validate read.
+
+INPUTS_GCP = None  # checked copies, set below when the site has photographs
+INPUTS_CHECKPOINTS = None
+
+if "sfm" in config:
+
+    def inputs_sources():
+        """Files to check: config inputs for real sites, the flight and twin stages' observed files for twins."""
+        if IS_TWIN:
+            src = dict(images=result("flight", "observed/images"), gcp=result("flight", "observed/gcp_list.txt"))
+            if "twin" in config:
+                src["checkpoints"] = result("twin", "observed/checkpoints.csv")
+            return src
+        ins = config["inputs"]
+        src = dict(images=ins["images_dir"], gcp=ins["gcp_file"])
+        if ins["checkpoints"]:
+            src["checkpoints"] = ins["checkpoints"]
+        if ins.get("rasters"):
+            src["rasters"] = [r["path"] for r in ins["rasters"]]
+        if INPUTS_VECTORS:
+            src["vectors"] = list(INPUTS_VECTORS.values())
+        return src
+
+    # vector files a real site hands in (twins make their own), by the config key naming them
+    INPUTS_VECTORS = {} if IS_TWIN or "gully" not in config else {
+        k: v for k, v in {
+            "gully.heads_file": config["gully"]["heads_file"],
+            "gully.reference_network_file": config["gully"]["reference_network_file"],
+            "gully.validation.catchment_file": config["gully"]["validation"]["catchment_file"],
+        }.items() if v
+    }
+
+    INPUTS_SRC = inputs_sources()
+    INPUTS_GCP = result("inputs", "gcp_file" + Path(INPUTS_SRC["gcp"]).suffix)
+    INPUTS_CHECKPOINTS = result("inputs", "checkpoints.csv") if "checkpoints" in INPUTS_SRC else None
+
+    rule check_inputs:
+        input:
+            **INPUTS_SRC,
+        output:
+            report=report(result("inputs", "report.md"), caption=caption("inputs_report"), category="Inputs"),
+            json=result("inputs", "report.json"),
+            gcp=INPUTS_GCP,
+            **({"checkpoints": INPUTS_CHECKPOINTS} if INPUTS_CHECKPOINTS else {}),
+        params:
+            cfg={
+                "crs": config["site"]["crs"],
+                "inputs": {k: v for k, v in config.get("inputs", {}).items() if k in ("z_units", "rasters")},
+                "georef": {k: v for k, v in config.get("georef", {}).items()
+                           if k in ("gcp_format", "csv_crs", "gcp_pixel_frame", "gcp_pixel_scale")},
+                "vectors": INPUTS_VECTORS,
+            },
+            site=SITE,
+        log:
+            logfile("inputs", "check_inputs"),
+        script:
+            "../scripts/inputs_check.py"
+
+    add_targets(result("inputs", "report.json"))
