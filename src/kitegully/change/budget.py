@@ -129,23 +129,28 @@ def unstable_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGrou
 
 @dataclass
 class Variogram:
-    """Nugget + spherical model of standardised dh: γ(h) = c₀ + c₁·sph(h/r)."""
+    """Nugget + sum of sphericals of standardised dh: γ(h) = c₀ + Σ cₖ·sph(h/rₖ) (Hugonnet's multi-range model)."""
 
     nugget: float
-    sill: float
-    range_m: float
+    sills: tuple[float, ...]
+    ranges_m: tuple[float, ...]
     empirical: pd.DataFrame
 
     @property
-    def f_nugget(self) -> float:
-        return self.nugget / max(self.nugget + self.sill, 1e-12)
+    def total(self) -> float:
+        return max(self.nugget + sum(self.sills), 1e-12)
 
     @property
-    def f_spherical(self) -> float:
-        return self.sill / max(self.nugget + self.sill, 1e-12)
+    def f_nugget(self) -> float:
+        return self.nugget / self.total
 
     def model(self, h: np.ndarray) -> np.ndarray:
-        return self.nugget + self.sill * spherical(np.asarray(h, float), self.range_m)
+        h = np.asarray(h, float)
+        return self.nugget + sum(c * spherical(h, r) for c, r in zip(self.sills, self.ranges_m))
+
+    def describe(self) -> str:
+        parts = ", ".join(f"{c:.3f} at {r:.1f} m" for c, r in zip(self.sills, self.ranges_m))
+        return f"nugget {self.nugget:.3f}, spherical {parts}"
 
 
 def spherical(h: np.ndarray, r: float) -> np.ndarray:
@@ -192,30 +197,59 @@ def empirical_variogram(z: np.ndarray, grid: GridSpec, ok: np.ndarray, max_lag_m
 
 
 def fit_variogram(emp: pd.DataFrame, cell: float, max_lag_m: float) -> Variogram:
-    """Least-squares nugget + spherical fit (weights √pairs), range in [cell, max_lag]."""
-    if len(emp) < 3:
+    """Weighted (√pairs) least-squares fit of a nugget plus one and two sphericals; the better one.
+
+    Ranges lie in [cell, max_lag]; the two-range model (short: noise and texture, long:
+    georeferencing and correlated matching errors) is kept when it converges with a lower
+    weighted misfit, as in Hugonnet et al. (2022).
+    """
+    if len(emp) < 4:
         raise ValueError("too few variogram lags to fit a model")
     h, g, w = emp["lag_m"].to_numpy(), emp["semivariance"].to_numpy(), np.sqrt(emp["pairs"].to_numpy())
     top = float(g.max())
+    best: tuple[float, Variogram] | None = None
 
-    def f(hh, c0, c1, r):
-        return c0 + c1 * spherical(hh, r)
+    def f1(hh, c0, c1, r1):
+        return c0 + c1 * spherical(hh, r1)
 
-    p0 = [float(g[0]) * 0.5, max(top - float(g[0]) * 0.5, 1e-9), max_lag_m / 4]
-    (c0, c1, r), _ = optimize.curve_fit(f, h, g, p0=p0, sigma=1 / w, bounds=([0, 0, cell], [2 * top, 2 * top, max_lag_m]),
-                                        maxfev=20000)
-    return Variogram(float(c0), float(c1), float(r), emp)
+    def f2(hh, c0, c1, r1, c2, r2):
+        return c0 + c1 * spherical(hh, r1) + c2 * spherical(hh, r2)
+
+    starts1 = [[g[0] * 0.5, top / 2, r] for r in (2 * cell, max_lag_m / 10, max_lag_m / 3)]
+    starts2 = [[g[0] * 0.3, top / 3, r1, top / 3, r2] for r1, r2 in ((2 * cell, max_lag_m / 5), (5 * cell, max_lag_m / 2))]
+    for fn, starts, k in ((f1, starts1, 1), (f2, starts2, 2)):
+        lo = [0.0] + [0.0, cell] * k
+        hi = [2 * top] + [2 * top, max_lag_m] * k
+        for p0 in starts:
+            try:
+                p, _ = optimize.curve_fit(fn, h, g, p0=np.clip(p0, lo, hi), sigma=1 / w, bounds=(lo, hi), maxfev=20000)
+            except (RuntimeError, ValueError):
+                continue
+            sse = float(np.sum((w * (fn(h, *p) - g)) ** 2))
+            comps = sorted(zip(p[1::2], p[2::2]), key=lambda cr: cr[1])
+            vg = Variogram(float(p[0]), tuple(float(c) for c, _ in comps), tuple(float(r) for _, r in comps), emp)
+            if best is None or sse < best[0] * (0.98 if k == 2 else 1.0):
+                best = (sse, vg)
+    if best is None:
+        raise RuntimeError("variogram fit did not converge")
+    return best[1]
 
 
 def correlation_factor(area_m2: float, cell: float, vg: Variogram) -> float:
-    """Variance of the mean of a unit-σ field over an area, relative to one cell's variance."""
+    """Variance of the mean of a unit-σ field over an area, relative to one cell's variance.
+
+    Nugget share × a/A plus, per spherical, its share × F(A, r) (Rolstad et al. 2009, disc
+    of the same area).
+    """
     if area_m2 <= 0:
         return float("nan")
     a = cell * cell
     L = np.sqrt(area_m2 / np.pi)
-    r = vg.range_m
-    f_sph = r * r / (5 * L * L) if L >= r else 1 - L / r + L**3 / (5 * r**3)
-    return float(vg.f_nugget * min(1.0, a / area_m2) + vg.f_spherical * f_sph)
+    out = vg.f_nugget * min(1.0, a / area_m2)
+    for c, r in zip(vg.sills, vg.ranges_m):
+        f = r * r / (5 * L * L) if L >= r else 1 - L / r + L**3 / (5 * r**3)
+        out += c / vg.total * f
+    return float(out)
 
 
 # ----------------------------------------------------------------------------- budgets

@@ -94,9 +94,8 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         emp = bg.empirical_variogram(zs, grid, ok, params.variogram_max_lag_m, params.variogram_bins,
                                      params.variogram_samples, params.seed)
         vg = bg.fit_variogram(emp, grid.cell, params.variogram_max_lag_m)
-        log.info("variogram of dh/sigma: nugget %.3f, spherical %.3f, range %.1f m", vg.nugget, vg.sill, vg.range_m)
-        write_table(emp.assign(model=vg.model(emp["lag_m"].to_numpy()), nugget=vg.nugget, spherical_sill=vg.sill,
-                               range_m=vg.range_m), out["variogram"])
+        log.info("variogram of dh/sigma: %s", vg.describe())
+        write_table(emp.assign(model=vg.model(emp["lag_m"].to_numpy()), fitted_model=vg.describe()), out["variogram"])
     except (ValueError, RuntimeError) as exc:
         log.warning("variogram not fitted (%s): correlated uncertainty left out", exc)
         write_table(pd.DataFrame(columns=["lag_m", "semivariance", "pairs", "model"]), out["variogram"])
@@ -114,7 +113,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
                                       "incision2_m", "retreat_m", "retreat_upslope_m"])
     write_table(heads, out["headcuts"])
 
-    fig = dict(limit_m=1.0, max_px=1500, **(figure or {}))
+    fig = {"limit_m": 1.0, "max_px": 1500, **(figure or {})}
     plots.plot_dod_map(dod, grid, out["dod_map"], fig["limit_m"], fig["max_px"], attribution=attribution)
     top = [g.name for g in groups if ":" not in g.name]
     plots.plot_budget_bars(budget, out["budget_bars"], masks=top, attribution=attribution)

@@ -84,7 +84,7 @@ def plot_variogram(vg, path: str | Path, attribution: str | None = None) -> None
     e = vg.empirical
     ax.plot(e["lag_m"], e["semivariance"], "o", ms=3, label="empirical (stable ground)")
     h = np.linspace(0, float(e["lag_m"].max()), 300)
-    ax.plot(h, vg.model(h), "-", label=f"nugget {vg.nugget:.2f} + spherical {vg.sill:.2f}, range {vg.range_m:.1f} m")
+    ax.plot(h, vg.model(h), "-", label=vg.describe())
     ax.set_xlabel("lag (m)")
     ax.set_ylabel("semivariance of dh / σ_DoD (-)")
     ax.set_title("Spatial correlation of DoD errors")
