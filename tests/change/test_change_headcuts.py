@@ -27,5 +27,6 @@ def test_retreat_measured(retreat):
     heads = pd.DataFrame(dict(head_id=[1], x=[g.x0 + 42.0], y=[g.y0 - 51.0]))  # digitised 2 m off
     out = measure_headcut_retreat(z1, z2, g, heads, ChangeParams(headcut_search_radius_m=8.0))
     assert out["retreat_m"].iloc[0] == pytest.approx(retreat, abs=0.5)
-    assert out["retreat_upslope_m"].iloc[0] == pytest.approx(retreat, abs=0.5)
+    assert out["retreat_heads_m"].iloc[0] == pytest.approx(retreat, abs=0.5)
+    assert out["retreat_heads_upslope_m"].iloc[0] == pytest.approx(retreat, abs=0.5)
     assert out["x1"].iloc[0] - g.x0 == pytest.approx(40.0, abs=0.75)

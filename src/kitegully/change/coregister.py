@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy import ndimage
 
 from kitegully.change.dod import resample
 from kitegully.change.params import ChangeParams
@@ -75,6 +76,19 @@ class Coregistration:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def above_ground(z: np.ndarray, cell: float, window_m: float, height_m: float) -> np.ndarray:
+    """Cells standing more than ``height_m`` above the surface's grey opening (a ``window_m`` square).
+
+    Shrubs, trees and buildings: not stable ground (vegetation grows and moves, dense
+    matching smooths it), dilated by half a window to catch their edges. O(cells · window).
+    """
+    k = max(3, int(round(window_m / cell)) | 1)
+    zf = np.where(np.isfinite(z), z, np.nanmax(z))
+    h = z - ndimage.grey_opening(zf, size=(k, k))
+    obj = np.isfinite(h) & (h > height_m)
+    return ndimage.binary_dilation(obj, structure=np.ones((k // 2 | 1, k // 2 | 1), bool))
 
 
 def _sample(idx: np.ndarray, n: int) -> np.ndarray:

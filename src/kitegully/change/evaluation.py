@@ -87,6 +87,8 @@ def headcut_table(measured: pd.DataFrame, true1: pd.DataFrame, true2: pd.DataFra
         gid.append(g), dist.append(float(d[i])), tr.append(float(ret.get(g, np.nan)))
     out["true_gully_id"], out["digitising_offset_m"], out["true_retreat_m"] = gid, dist, tr
     out["error_m"] = out["retreat_m"] - out["true_retreat_m"]
+    if "retreat_heads_m" in out:
+        out["error_heads_m"] = out["retreat_heads_m"] - out["true_retreat_m"]
     return out
 
 
@@ -143,6 +145,7 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
         ("headcuts matched", len(hc), "count"),
         ("headcut median |error| (all matched heads)", float(hc["error_m"].abs().median()) if len(hc) else np.nan, "m"),
         ("headcut median |error| (heads that retreated)", float(hc_moving["error_m"].abs().median()) if len(hc_moving) else np.nan, "m"),
+        ("headcut median |error|, head-to-head estimate", float(hc["error_heads_m"].abs().median()) if len(hc) and "error_heads_m" in hc else np.nan, "m"),
         ("target: headcut median |error| <= 0.5 m", float(len(hc) > 0 and hc["error_m"].abs().median() <= 0.5), "1 = met"),
         ("false detection rate on unchanged cells, 95 %", float(prob["false_rate"]) * 100, "%"),
         ("target: false detections <= 5 % at 95 %", float(prob["false_rate"] <= 0.05), "1 = met"),

@@ -74,15 +74,25 @@ def noisy_dem(truth: Raster, nm: NoiseModel) -> np.ndarray:
     return (z + nm.white_sd_m * white + field).astype(np.float32)
 
 
-def export_epoch2(truth_dsm: str | Path, out_dir: str | Path, nm: NoiseModel = NoiseModel()) -> Path:
-    """Write ``epoch2_dsm.tif`` and ``epoch2_noise_model.json`` into ``out_dir``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+def export_epoch(truth_dsm: str | Path, out_path: str | Path, nm: NoiseModel) -> Path:
+    """Write ``truth_dsm`` seen through ``nm`` to ``out_path`` and the model beside it (``.json``)."""
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
     t = Raster.read(truth_dsm)
-    Raster(noisy_dem(t, nm), t.grid).write(out / "epoch2_dsm.tif", tags={
+    Raster(noisy_dem(t, nm), t.grid).write(out, tags={
         "units": "m", "source": f"{truth_dsm} + stated noise model (kitegully.change.example)"})
-    (out / "epoch2_noise_model.json").write_text(json.dumps(asdict(nm), indent=2) + "\n", encoding="utf-8")
-    return out / "epoch2_dsm.tif"
+    out.with_suffix(".json").write_text(json.dumps(asdict(nm), indent=2) + "\n", encoding="utf-8")
+    return out
+
+
+def export_epoch2(truth_dsm: str | Path, out_dir: str | Path, nm: NoiseModel = NoiseModel()) -> Path:
+    """Write ``epoch2_dsm.tif`` (and ``epoch2_dsm.json``, the noise model) into ``out_dir``."""
+    return export_epoch(truth_dsm, Path(out_dir) / "epoch2_dsm.tif", nm)
+
+
+#: Epoch 1 of the controlled check (benchmarks/change_controlled.py): the same noise, no
+#: georeferencing error, another seed; then both epochs' errors follow the stated model.
+CONTROLLED_EPOCH1 = NoiseModel(shift_x_m=0.0, shift_y_m=0.0, bias_m=0.0, tilt_x=0.0, tilt_y=0.0, seed=2017)
 
 
 if __name__ == "__main__":

@@ -31,6 +31,12 @@ class ChangeParams:
         information and are left out of the shift fit ([I] 2°).
     coreg_max_slope_deg : float
         Steeper cells (walls, tree crowns) are left out of stable ground ([I] 60°).
+    stable_max_object_height_m : float or None
+        Cells standing higher than this above the epoch-1 surface's grey opening are above-ground
+        objects (shrubs, trees, buildings) and not stable ground ([I] 0.15 m: grass stays below,
+        shrub crowns rise above; None = keep them).
+    stable_object_window_m : float
+        Side of the opening window (m) ([I] 3 m, wider than a shrub crown).
     coreg_outlier_nmad : float
         Stable cells whose dh lies more than this many NMAD from the median are left out
         of each fit (vegetation growth, undetected change) ([I] 4).
@@ -82,6 +88,8 @@ class ChangeParams:
     coreg_tilt: bool = True
     coreg_min_slope_deg: float = 2.0
     coreg_max_slope_deg: float = 60.0
+    stable_max_object_height_m: float | None = 0.15
+    stable_object_window_m: float = 3.0
     coreg_outlier_nmad: float = 4.0
     coreg_max_samples: int = 500_000
     min_lod_m: float = 0.1
@@ -114,7 +122,9 @@ class ChangeParams:
                 coreg_enabled=bool(c["enabled"]), coreg_max_iterations=int(c["max_iterations"]),
                 coreg_tolerance_m=float(c["tolerance_m"]), coreg_tilt=bool(c["tilt"]),
                 coreg_min_slope_deg=float(c["min_slope_deg"]), coreg_max_slope_deg=float(c["max_slope_deg"]),
-                coreg_outlier_nmad=float(c["outlier_nmad"]), coreg_max_samples=int(c["max_samples"]),
+                coreg_outlier_nmad=float(c["outlier_nmad"]),
+                stable_max_object_height_m=None if c["max_object_height_m"] is None else float(c["max_object_height_m"]),
+                stable_object_window_m=float(c["object_window_m"]), coreg_max_samples=int(c["max_samples"]),
                 min_lod_m=float(t["min_lod_m"]), t_factor=float(t["t_factor"]), confidence=float(t["confidence"]),
                 coherence_window=int(coh["window_cells"]), coherence_n_low=int(coh["n_low"]),
                 coherence_n_high=int(coh["n_high"]), coherence_p_low=float(coh["p_low"]),

@@ -12,7 +12,7 @@ import pandas as pd
 from kitegully import InputError
 from kitegully.change import budget as bg
 from kitegully.change import plots, uncertainty as unc
-from kitegully.change.coregister import coregister, nmad
+from kitegully.change.coregister import above_ground, coregister, nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, on_common_grid
 from kitegully.change.headcuts import measure_headcut_retreat
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
@@ -70,6 +70,11 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     groups = bg.mask_groups(masks, grid)
     unstable = bg.unstable_union(masks, groups, z1.shape)
     stable = np.isfinite(z1) & ~unstable
+    if params.stable_max_object_height_m is not None:
+        objects = above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m)
+        log.info("above-ground objects (> %.2f m): %.1f %% of the grid, left out of stable ground",
+                 params.stable_max_object_height_m, 100.0 * objects.mean())
+        stable &= ~objects
     log.info("stable ground: %.1f %% of the common grid", 100.0 * stable.mean())
     z2, coreg = coregister(z1, e2.dem, grid, stable, params)
     dod = dem_of_difference(z1, z2)
@@ -107,10 +112,11 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     write_table(unc.sigma_table([i1, i2], sigma), out["sigma"])
     write_table(unc.threshold_table(params, sigma), out["thresholds"])
     if heads_path:
-        heads = measure_headcut_retreat(z1, z2, grid, read_heads(heads_path), params)
+        lowering = max(params.headcut_min_incision_m, unc.z_of_confidence(params.confidence) * float(np.nanmedian(sigma)))
+        heads = measure_headcut_retreat(z1, z2, grid, read_heads(heads_path), params, lowering_m=lowering)
     else:
         heads = pd.DataFrame(columns=["head_id", "x_digitised", "y_digitised", "x1", "y1", "incision1_m", "x2", "y2",
-                                      "incision2_m", "retreat_m", "retreat_upslope_m"])
+                                      "incision2_m", "retreat_m", "retreat_heads_m", "retreat_heads_upslope_m"])
     write_table(heads, out["headcuts"])
 
     fig = {"limit_m": 1.0, "max_px": 1500, **(figure or {})}
