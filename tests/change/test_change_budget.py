@@ -76,3 +76,16 @@ def test_vector_masks_by_column(tmp_path):
     b = bg.compute_budgets(dod, sigma, {}, groups, g.cell, None).set_index("mask")
     assert b.loc["gully:1", "net_m3"] == pytest.approx(change.sum() * g.cell**2 * 0 + (change[groups[2].mask].sum() * g.cell**2))
     assert b.loc["gully:1", "net_m3"] < 0 < b.loc["gully:2", "net_m3"]
+
+
+def test_offset_uncertainty_from_stable_cells():
+    """Offset SD of a fit on n scattered cells: ~1/√n for white errors, ~the sill share for long-range ones."""
+    rng = np.random.default_rng(0)
+    rows, cols = rng.integers(0, 1000, 2000), rng.integers(0, 1000, 2000)
+    white = bg.Variogram(1.0, (), (), None)
+    assert bg.mean_correlation(rows, cols, 1.0, white, 2000, 1) == pytest.approx(1 / 2000, rel=0.01)
+    long = bg.Variogram(0.5, (0.5,), (1e6,), None)  # half the variance shared by all cells
+    assert bg.mean_correlation(rows, cols, 1.0, long, 2000, 1) == pytest.approx(0.5, abs=0.01)
+    row = bg.budget_row(np.zeros((10, 10)), np.full((10, 10), 0.1), np.ones((10, 10), bool), 1.0, white, coreg_sd_m=0.01)
+    assert row["net_sd_coregistration_m3"] == pytest.approx(1.0)
+    assert row["net_sd_m3"] == pytest.approx(np.hypot(row["net_sd_correlated_m3"], 1.0))

@@ -13,6 +13,9 @@ Uncertainty of the net volume, side by side:
   σ̄²·[f₀·a/A + f₁·F(A, r)], with f₀, f₁ the nugget and spherical shares of the sill and,
   for a disc of the same area (L = √(A/π)), F = r²/(5L²) when L ≥ r and
   F = 1 − L/r + L³/(5r³) otherwise. σ_V = A·σ_mean.
+* **co-registration**: the vertical offset is fitted on the stable cells only, so its own
+  error (σ̄·√(mean correlation of the stable cells' pairs)) is shared by every cell:
+  A·σ_offset. ``net_sd_m3`` = √(correlated² + co-registration²).
 
 Masks: vector layers (each polygon value of a ``by`` column a budget row, plus their
 union) and class rasters (each class a row), e.g. gully polygons, the bare-soil map,
@@ -252,11 +255,32 @@ def correlation_factor(area_m2: float, cell: float, vg: Variogram) -> float:
     return float(out)
 
 
+def mean_correlation(rows: np.ndarray, cols: np.ndarray, cell: float, vg: Variogram, samples: int, seed: int) -> float:
+    """Mean correlation ρ(h) = 1 − γ(h)/sill over all pairs of the given cells (a random subset).
+
+    Var(mean of n unit-σ cells) ≈ this mean for large n; it is the offset-estimate variance
+    of a co-registration fitted on exactly these (scattered) cells. O(samples²).
+    """
+    if rows.size < 2:
+        return 1.0
+    if rows.size > samples:
+        pick = rng_for(seed, "change", "coreg_sd").choice(rows.size, samples, replace=False)
+        rows, cols = rows[pick], cols[pick]
+    h = pdist(np.stack([cols * cell, rows * cell], axis=1))
+    rho = 1.0 - vg.model(h) / vg.total
+    return float(max(np.mean(rho), 0.0) + 1.0 / rows.size)
+
+
 # ----------------------------------------------------------------------------- budgets
 
 
-def budget_row(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray, cell: float, vg: Variogram | None) -> dict[str, float]:
-    """Volumes and net uncertainties of the cells ``counted`` (valid DoD cells)."""
+def budget_row(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray, cell: float, vg: Variogram | None,
+               coreg_sd_m: float = 0.0) -> dict[str, float]:
+    """Volumes and net uncertainties of the cells ``counted`` (valid DoD cells).
+
+    ``coreg_sd_m``: SD of the co-registration's vertical offset, an error shared by every
+    cell (adds A·σ_offset in quadrature to the correlated SD).
+    """
     a = cell * cell
     c = counted & np.isfinite(dod) & np.isfinite(sigma)
     d, s = dod[c].astype(np.float64), sigma[c].astype(np.float64)
@@ -265,22 +289,29 @@ def budget_row(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray, cell: fl
     area = float(c.sum() * a)
     sd_ind = float(a * np.sqrt(np.sum(s**2)))
     sd_cor = float(area * np.sqrt(np.mean(s**2) * correlation_factor(area, cell, vg))) if (vg is not None and area > 0) else float("nan")
+    sd_reg = float(area * coreg_sd_m)
+    base = sd_cor if np.isfinite(sd_cor) else sd_ind
     return dict(area_m2=area, erosion_m3=ero, deposition_m3=dep, net_m3=dep - ero,
-                net_sd_m3=sd_cor if np.isfinite(sd_cor) else sd_ind, net_sd_independent_m3=sd_ind,
-                net_sd_correlated_m3=sd_cor, mean_dh_m=(dep - ero) / area if area > 0 else float("nan"))
+                net_sd_m3=float(np.hypot(base, sd_reg)), net_sd_independent_m3=sd_ind,
+                net_sd_correlated_m3=sd_cor, net_sd_coregistration_m3=sd_reg,
+                mean_dh_m=(dep - ero) / area if area > 0 else float("nan"))
 
 
 def compute_budgets(dod: np.ndarray, sigma: np.ndarray, detected: Mapping[str, np.ndarray], groups: Sequence[MaskGroup],
-                    cell: float, vg: Variogram | None) -> pd.DataFrame:
-    """One row per (mask, method); method ``raw`` counts every valid cell of the mask."""
+                    cell: float, vg: Variogram | None, coreg_sd_m: float = 0.0) -> pd.DataFrame:
+    """One row per (mask, method); method ``raw`` counts every valid cell of the mask.
+
+    ``net_sd_m3`` = √(correlated² + co-registration²) (the independent-cell SD where no
+    variogram was fitted).
+    """
     valid = np.isfinite(dod)
     rows = []
     for g in groups:
         inside = g.mask & valid
         for method, det in [("raw", valid), *detected.items()]:
             row = dict(mask=g.name, method=method, mask_area_m2=float(inside.sum() * cell * cell))
-            row.update(budget_row(dod, sigma, inside & det, cell, vg))
+            row.update(budget_row(dod, sigma, inside & det, cell, vg, coreg_sd_m))
             rows.append(row)
     cols = ["mask", "method", "erosion_m3", "deposition_m3", "net_m3", "net_sd_m3", "net_sd_independent_m3",
-            "net_sd_correlated_m3", "area_m2", "mask_area_m2", "mean_dh_m"]
+            "net_sd_correlated_m3", "net_sd_coregistration_m3", "area_m2", "mask_area_m2", "mean_dh_m"]
     return pd.DataFrame(rows)[cols]

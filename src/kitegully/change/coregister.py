@@ -45,7 +45,11 @@ def residual_stats(dh: np.ndarray) -> dict[str, float]:
 
 @dataclass
 class Coregistration:
-    """Applied correction and stable-ground residuals (DEM₂ corrected = DEM₂(x + Δ) − plane)."""
+    """Applied correction and stable-ground residuals (DEM₂ corrected = DEM₂(x + Δ) − plane).
+
+    ``offset_sd_m`` is the SD of the vertical offset estimate (set by the pipeline from the
+    stable-ground variogram; NaN when not estimated).
+    """
 
     dx_m: float = 0.0
     dy_m: float = 0.0
@@ -56,6 +60,7 @@ class Coregistration:
     y_centre: float = 0.0
     iterations: int = 0
     converged: bool = False
+    offset_sd_m: float = float("nan")
     before: dict = field(default_factory=dict)
     after: dict = field(default_factory=dict)
 
@@ -69,6 +74,7 @@ class Coregistration:
         """One row per quantity: applied shift/tilt and residuals before/after."""
         rows = [("dx", self.dx_m, "m"), ("dy", self.dy_m, "m"), ("dz_at_centre", self.dz_m, "m"),
                 ("tilt_x", self.tilt_x * 1000, "m/km"), ("tilt_y", self.tilt_y * 1000, "m/km"),
+                ("offset_sd", self.offset_sd_m, "m"),
                 ("iterations", self.iterations, "-"), ("converged", int(self.converged), "-")]
         for when, st in (("before", self.before), ("after", self.after)):
             rows += [(f"stable_{k.removesuffix('_m')}_{when}", v, "m" if k.endswith("_m") else "cells") for k, v in st.items()]

@@ -137,11 +137,14 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
     prob = det.set_index("method").loc["probabilistic"]
     rows = [
         ("site_net_m3", site["net_m3"], "m3"), ("site_true_net_m3", site["true_net_m3"], "m3"),
+        ("site_net_sd_m3 (stated: correlated + co-registration)", site["net_sd_m3"], "m3"),
         ("site_net_sd_m3 (correlated)", site["net_sd_correlated_m3"], "m3"),
+        ("site_net_sd_m3 (co-registration offset)", site.get("net_sd_coregistration_m3", np.nan), "m3"),
         ("site_net_sd_m3 (independent)", site["net_sd_independent_m3"], "m3"),
         ("site_net_error_pct", site["error_pct"], "%"),
         ("target: |net error| <= %g %% of truth" % (100 * cfg["net_tolerance"]), float(abs(site["error_pct"]) <= 100 * cfg["net_tolerance"]), "1 = met"),
         ("target: truth within stated 1 sd", float(site["within_1sd"]), "1 = met"),
+        ("truth within stated 2 sd", float(site["within_2sd"]), "1 = yes"),
         ("headcuts matched", len(hc), "count"),
         ("headcut median |error| (all matched heads)", float(hc["error_m"].abs().median()) if len(hc) else np.nan, "m"),
         ("headcut median |error| (heads that retreated)", float(hc_moving["error_m"].abs().median()) if len(hc_moving) else np.nan, "m"),

@@ -106,7 +106,14 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         write_table(pd.DataFrame(columns=["lag_m", "semivariance", "pairs", "model"]), out["variogram"])
     plots.plot_variogram(vg, out["variogram_png"], attribution)
 
-    budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg)
+    coreg_sd = 0.0
+    if vg is not None and params.coreg_enabled:
+        rr, cc = np.nonzero(ok)
+        rho = bg.mean_correlation(rr, cc, grid.cell, vg, params.variogram_samples, params.seed)
+        coreg_sd = float(np.nanmean(sigma[ok]) * np.sqrt(rho))
+        log.info("co-registration offset SD %.4f m (mean correlation of stable pairs %.4f)", coreg_sd, rho)
+    coreg.offset_sd_m = coreg_sd
+    budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
     write_table(budget, out["budget"])
     write_table(coreg.table(), out["coregistration"])
     write_table(unc.sigma_table([i1, i2], sigma), out["sigma"])

@@ -33,7 +33,7 @@ def plot_dod_map(dod: np.ndarray, grid: GridSpec, path: str | Path, limit_m: flo
 
 def plot_budget_bars(budget: pd.DataFrame, path: str | Path, masks: list[str] | None = None,
                      attribution: str | None = None) -> None:
-    """Net volume per mask and method with ±1σ error bars (correlated; independent as a thin cap)."""
+    """Net volume per mask and method with ±1σ error bars (the stated ``net_sd_m3``)."""
     b = budget if masks is None else budget[budget["mask"].isin(masks)]
     masks_ = list(dict.fromkeys(b["mask"]))
     methods = list(dict.fromkeys(b["method"]))
@@ -43,13 +43,13 @@ def plot_budget_bars(budget: pd.DataFrame, path: str | Path, masks: list[str] | 
     for i, m in enumerate(methods):
         s = b[b["method"] == m].set_index("mask").reindex(masks_)
         ax.bar(x + (i - (len(methods) - 1) / 2) * w, s["net_m3"], w, label=m,
-               yerr=s["net_sd_correlated_m3"].fillna(s["net_sd_independent_m3"]), capsize=2, error_kw=dict(lw=0.8))
+               yerr=s["net_sd_m3"], capsize=2, error_kw=dict(lw=0.8))
     if "true_net_m3" in b.columns:
         t = b[b["method"] == methods[0]].set_index("mask").reindex(masks_)["true_net_m3"]
         ax.scatter(x, t, marker="D", color="k", zorder=5, label="truth")
     ax.axhline(0, color="0.3", lw=0.8)
     ax.set_xticks(x, masks_, rotation=30, ha="right")
-    ax.set_ylabel("net volume change (m³), ±1σ (spatially correlated)")
+    ax.set_ylabel("net volume change (m³), ±1σ (correlated + co-registration)")
     ax.set_title("Sediment budget by mask and threshold")
     ax.legend(ncol=3, fontsize=7)
     save_figure(fig, path, attribution)
