@@ -1,7 +1,7 @@
 """Rule change_detect: two epoch DEMs -> DoD, thresholds, budgets, headcut retreat (issue 17)."""
 
 from kitegully.change.params import ChangeParams
-from kitegully.change.pipeline import detect_change
+from kitegully.change.stage import detect_change
 from kitegully.logs import setup_script_logging
 
 log = setup_script_logging(snakemake.log[0])  # noqa: F821

@@ -47,7 +47,7 @@ def residual_stats(dh: np.ndarray) -> dict[str, float]:
 class Coregistration:
     """Applied correction and stable-ground residuals (DEM₂ corrected = DEM₂(x + Δ) − plane).
 
-    ``offset_sd_m`` is the SD of the vertical offset estimate (set by the pipeline from the
+    ``offset_sd_m`` is the SD of the vertical offset estimate (set by the stage from the
     stable-ground variogram; NaN when not estimated).
     """
 

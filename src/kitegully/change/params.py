@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from kitegully import InputError
+from kitegully.config import config_section
 
 THRESHOLD_METHODS = ("min_lod", "propagated", "probabilistic", "coherence")
 
@@ -115,28 +116,32 @@ class ChangeParams:
         ``cfg`` holds ``coregistration``, ``thresholds``, ``budget`` and ``headcuts``
         sub-sections (see ``config/schema/stages/change.schema.yaml``).
         """
-        try:
-            c, t, b, h = cfg["coregistration"], cfg["thresholds"], cfg["budget"], cfg["headcuts"]
-            coh = t["coherence"]
-            return cls(
-                coreg_enabled=bool(c["enabled"]), coreg_max_iterations=int(c["max_iterations"]),
-                coreg_tolerance_m=float(c["tolerance_m"]), coreg_tilt=bool(c["tilt"]),
-                coreg_min_slope_deg=float(c["min_slope_deg"]), coreg_max_slope_deg=float(c["max_slope_deg"]),
-                coreg_outlier_nmad=float(c["outlier_nmad"]),
-                stable_max_object_height_m=None if c["max_object_height_m"] is None else float(c["max_object_height_m"]),
-                stable_object_window_m=float(c["object_window_m"]), coreg_max_samples=int(c["max_samples"]),
-                min_lod_m=float(t["min_lod_m"]), t_factor=float(t["t_factor"]), confidence=float(t["confidence"]),
-                coherence_window=int(coh["window_cells"]), coherence_n_low=int(coh["n_low"]),
-                coherence_n_high=int(coh["n_high"]), coherence_p_low=float(coh["p_low"]),
-                coherence_p_high=float(coh["p_high"]),
-                variogram_max_lag_m=float(b["variogram_max_lag_m"]), variogram_bins=int(b["variogram_bins"]),
-                variogram_samples=int(b["variogram_samples"]),
-                headcut_search_radius_m=float(h["search_radius_m"]),
-                headcut_incision_sigma_m=float(h["incision_sigma_m"]),
-                headcut_min_incision_m=float(h["min_incision_m"]), seed=int(seed),
-            )
-        except KeyError as exc:
-            raise InputError(f"change: missing key {exc.args[0]!r}") from None
+        sec = config_section(cfg, "change", ("coregistration", "thresholds", "budget", "headcuts"),
+                             optional=("epochs", "masks", "heads_file", "figure", "evaluation"))
+        c = config_section(sec["coregistration"], "change.coregistration", (
+            "enabled", "max_iterations", "tolerance_m", "tilt", "min_slope_deg", "max_slope_deg",
+            "max_object_height_m", "object_window_m", "outlier_nmad", "max_samples"))
+        t = config_section(sec["thresholds"], "change.thresholds", ("min_lod_m", "t_factor", "confidence", "coherence"))
+        coh = config_section(t["coherence"], "change.thresholds.coherence", ("window_cells", "n_low", "n_high", "p_low", "p_high"))
+        b = config_section(sec["budget"], "change.budget", ("variogram_max_lag_m", "variogram_bins", "variogram_samples"))
+        h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"))
+        return cls(
+            coreg_enabled=bool(c["enabled"]), coreg_max_iterations=int(c["max_iterations"]),
+            coreg_tolerance_m=float(c["tolerance_m"]), coreg_tilt=bool(c["tilt"]),
+            coreg_min_slope_deg=float(c["min_slope_deg"]), coreg_max_slope_deg=float(c["max_slope_deg"]),
+            coreg_outlier_nmad=float(c["outlier_nmad"]), coreg_max_samples=int(c["max_samples"]),
+            stable_max_object_height_m=None if c["max_object_height_m"] is None else float(c["max_object_height_m"]),
+            stable_object_window_m=float(c["object_window_m"]),
+            min_lod_m=float(t["min_lod_m"]), t_factor=float(t["t_factor"]), confidence=float(t["confidence"]),
+            coherence_window=int(coh["window_cells"]), coherence_n_low=int(coh["n_low"]),
+            coherence_n_high=int(coh["n_high"]), coherence_p_low=float(coh["p_low"]),
+            coherence_p_high=float(coh["p_high"]),
+            variogram_max_lag_m=float(b["variogram_max_lag_m"]), variogram_bins=int(b["variogram_bins"]),
+            variogram_samples=int(b["variogram_samples"]),
+            headcut_search_radius_m=float(h["search_radius_m"]),
+            headcut_incision_sigma_m=float(h["incision_sigma_m"]),
+            headcut_min_incision_m=float(h["min_incision_m"]), seed=int(seed),
+        )
 
     def __post_init__(self) -> None:
         if not 0.5 <= self.confidence < 1.0:

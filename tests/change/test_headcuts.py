@@ -3,7 +3,7 @@
 import numpy as np
 import pandas as pd
 import pytest
-from change_synth import grid, noise, xy
+from change.change_synth import grid, noise, xy
 
 from kitegully.change.headcuts import measure_headcut_retreat
 from kitegully.change.params import ChangeParams

@@ -3,7 +3,7 @@
 import numpy as np
 import pandas as pd
 import pytest
-from change_synth import grid, noise, terrain, write, xy
+from change.change_synth import grid, noise, terrain, write, xy
 from scipy import stats
 
 from kitegully.change.dod import load_epoch

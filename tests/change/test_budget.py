@@ -3,7 +3,7 @@
 import geopandas as gpd
 import numpy as np
 import pytest
-from change_synth import CRS, grid, pair
+from change.change_synth import CRS, grid, pair
 from scipy import ndimage
 from shapely.geometry import box
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from change_synth import grid, noise, terrain, xy
+from change.change_synth import grid, noise, terrain, xy
 
 from kitegully.change.coregister import coregister
 from kitegully.change.params import ChangeParams

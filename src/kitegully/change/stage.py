@@ -1,4 +1,7 @@
-"""The change stage's entry point: two epoch DEMs in, DoD, thresholds, budgets and headcuts out."""
+"""The change stage: two epoch DEMs in; DoD, thresholds, budgets, headcuts and figures out.
+
+:func:`detect_change` is the entry point; its parameters are :class:`ChangeParams`.
+"""
 
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ from kitegully.change import plots, uncertainty as unc
 from kitegully.change.coregister import above_ground, coregister, nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, on_common_grid
 from kitegully.change.headcuts import measure_headcut_retreat
-from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
+from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
 from kitegully.io.raster import Raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from change_synth import pair, write
+from change.change_synth import pair, write
 
 from kitegully import InputError
 from kitegully.change.dod import load_epoch, on_common_grid
