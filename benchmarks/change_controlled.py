@@ -22,7 +22,7 @@ import yaml
 from kitegully.change.evaluation import evaluate_change
 from kitegully.change.example import CONTROLLED_EPOCH1, export_epoch
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
-from kitegully.change.pipeline import detect_change
+from kitegully.change.stage import detect_change
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "benchmarks" / "out" / "change_controlled"
