@@ -14,6 +14,7 @@ STAGES = [
     "validate",
     "gully",
     "obia",
+    "change",
 ]
 
 RESULTS = Path(config["results_dir"]) / SITE

@@ -1,0 +1,27 @@
+"""Change between epochs (issue 17): co-registration, DEM of difference, uncertainty, budgets.
+
+Entry points (docs/architecture.md): :func:`detect_change` with its parameters
+:class:`ChangeParams` (both from ``stage``), and :func:`evaluate_change` (``evaluation``,
+evaluation only: reads known change). Imported lazily.
+
+Modules: ``stage`` (the stage: files in and out), ``params`` (:class:`ChangeParams`),
+``dod`` (epoch inputs and their checks, common grid, DoD), ``coregister`` (Nuth & Kääb
+shift + plane on stable ground), ``uncertainty`` (σ per epoch, propagation, GCD
+thresholds), ``budget`` (volumes by mask; independent, spatially correlated and
+co-registration uncertainty), ``headcuts`` (retreat per digitised head), ``evaluation``
+(against known change), ``plots`` and ``example`` (inputs of the DEM-site example).
+"""
+
+from importlib import import_module
+
+_EXPORTS = {
+    "detect_change": "stage", "ChangeParams": "params", "THRESHOLD_METHODS": "params",
+    "evaluate_change": "evaluation",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

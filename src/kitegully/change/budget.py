@@ -1,0 +1,317 @@
+"""Erosion, deposition and net volume with two uncertainty estimates, segregated by masks.
+
+Volumes: erosion = Σ max(−DoD, 0)·a and deposition = Σ max(DoD, 0)·a over the counted cells
+(a = cell area), net = deposition − erosion (m³; negative = net loss of soil).
+
+Uncertainty of the net volume, side by side:
+
+* **independent cells** (GCD): σ_V = a·√(Σ σ_DoD,i²), which assumes every cell's error is
+  independent and so shrinks like 1/√n;
+* **spatially correlated** (Rolstad et al. 2009; Hugonnet et al. 2022): the empirical
+  variogram of the co-registered dh on stable ground (standardised by σ_DoD), fitted by a
+  nugget plus a spherical model of range r; the variance of the mean over an area A is
+  σ̄²·[f₀·a/A + f₁·F(A, r)], with f₀, f₁ the nugget and spherical shares of the sill and,
+  for a disc of the same area (L = √(A/π)), F = r²/(5L²) when L ≥ r and
+  F = 1 − L/r + L³/(5r³) otherwise. σ_V = A·σ_mean.
+* **co-registration**: the vertical offset is fitted on the stable cells only, so its own
+  error (σ̄·√(mean correlation of the stable cells' pairs)) is shared by every cell:
+  A·σ_offset. ``net_sd_m3`` = √(correlated² + co-registration²).
+
+Masks: vector layers (each polygon value of a ``by`` column a budget row, plus their
+union) and class rasters (each class a row), e.g. gully polygons, the bare-soil map,
+land-cover classes and user polygons.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from rasterio import features
+from scipy import optimize
+from scipy.spatial.distance import pdist
+
+from kitegully import InputError
+from kitegully.io.raster import GridSpec, Raster
+from kitegully.io.vectors import read_vector
+from kitegully.seeds import rng_for
+
+log = logging.getLogger(__name__)
+
+
+# ----------------------------------------------------------------------------- masks
+
+
+@dataclass
+class MaskGroup:
+    """One budget row's cells: ``name`` (``mask`` or ``mask:value``) and a boolean map."""
+
+    name: str
+    mask: np.ndarray
+    source: str
+
+
+def _vector_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
+    gdf = read_vector(spec["file"], crs=grid.crs)
+    name, by = spec["name"], spec.get("by")
+    gdf = gdf[gdf.geometry.notna() & ~gdf.geometry.is_empty]
+    shape = (grid.height, grid.width)
+    union = features.rasterize(((g, 1) for g in gdf.geometry), out_shape=shape, transform=grid.transform,
+                               fill=0, dtype="uint8").astype(bool) if len(gdf) else np.zeros(shape, bool)
+    out = [MaskGroup(name, union, str(spec["file"]))]
+    if by:
+        if by not in gdf.columns:
+            raise InputError(f"{spec['file']}: mask '{name}' has no column '{by}' (columns: {', '.join(map(str, gdf.columns))})")
+        for value, part in gdf.groupby(by, sort=True):
+            m = features.rasterize(((g, 1) for g in part.geometry), out_shape=shape, transform=grid.transform,
+                                   fill=0, dtype="uint8").astype(bool)
+            out.append(MaskGroup(f"{name}:{value}", m, str(spec["file"])))
+    return out
+
+
+def _raster_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
+    r = Raster.read(spec["file"])
+    if r.crs != grid.crs:
+        from rasterio.crs import CRS
+        if CRS.from_user_input(r.crs) != CRS.from_user_input(grid.crs):
+            raise InputError(f"{spec['file']}: CRS {r.crs} differs from the DEM's {grid.crs}")
+    xs, ys = grid.cell_centres()
+    rows, _ = r.grid.rowcol(np.zeros(1), ys)
+    _, cols = r.grid.rowcol(xs, np.zeros(1))
+    ri, ci = np.rint(rows).astype(int), np.rint(cols).astype(int)
+    inside = (ri[:, None] >= 0) & (ri[:, None] < r.grid.height) & (ci[None, :] >= 0) & (ci[None, :] < r.grid.width)
+    vals = r.data[np.clip(ri, 0, r.grid.height - 1)[:, None], np.clip(ci, 0, r.grid.width - 1)[None, :]]
+    ok = inside & (r.valid[np.clip(ri, 0, r.grid.height - 1)[:, None], np.clip(ci, 0, r.grid.width - 1)[None, :]])
+    names: dict[Any, str] = {}
+    if spec.get("classes"):
+        cls = pd.read_csv(spec["classes"]).rename(columns={"code": "value"})
+        if not {"value", "name"} <= set(cls.columns):
+            raise InputError(f"{spec['classes']}: class table needs columns value (or code),name")
+        names = {int(v): str(n) for v, n in zip(cls["value"], cls["name"])}
+    wanted = spec.get("values")
+    out = []
+    for v in np.unique(vals[ok]):
+        if wanted is not None and int(v) not in wanted and names.get(int(v)) not in wanted:
+            continue
+        out.append(MaskGroup(f"{spec['name']}:{names.get(int(v), int(v))}", ok & (vals == v), str(spec["file"])))
+    union = np.zeros(vals.shape, bool)
+    for g in out:
+        union |= g.mask
+    return [MaskGroup(spec["name"], union, str(spec["file"]))] + out
+
+
+def mask_groups(specs: Sequence[Mapping[str, Any]], grid: GridSpec) -> list[MaskGroup]:
+    """Rasterise every budget mask onto ``grid``; the whole site comes first as ``site``."""
+    out = [MaskGroup("site", np.ones((grid.height, grid.width), bool), "DEM overlap")]
+    for spec in specs:
+        if not Path(spec["file"]).exists():
+            raise InputError(f"{spec['file']}: mask '{spec['name']}' file not found")
+        kind = spec.get("kind") or ("raster" if str(spec["file"]).lower().endswith((".tif", ".tiff")) else "vector")
+        groups = _raster_groups(spec, grid) if kind == "raster" else _vector_groups(spec, grid)
+        log.info("mask %s: %d groups, union %.0f m²", spec["name"], len(groups) - 1, groups[0].mask.sum() * grid.cell**2)
+        out += groups
+    return out
+
+
+def unstable_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGroup], shape: tuple[int, int]) -> np.ndarray:
+    """Union of the masks flagged ``unstable`` (excluded from stable ground)."""
+    flagged = {s["name"] for s in specs if s.get("unstable")}
+    out = np.zeros(shape, bool)
+    for g in groups:
+        if g.name in flagged:
+            out |= g.mask
+    return out
+
+
+# ----------------------------------------------------------------------------- variogram
+
+
+@dataclass
+class Variogram:
+    """Nugget + sum of sphericals of standardised dh: γ(h) = c₀ + Σ cₖ·sph(h/rₖ) (Hugonnet's multi-range model)."""
+
+    nugget: float
+    sills: tuple[float, ...]
+    ranges_m: tuple[float, ...]
+    empirical: pd.DataFrame
+
+    @property
+    def total(self) -> float:
+        return max(self.nugget + sum(self.sills), 1e-12)
+
+    @property
+    def f_nugget(self) -> float:
+        return self.nugget / self.total
+
+    def model(self, h: np.ndarray) -> np.ndarray:
+        h = np.asarray(h, float)
+        return self.nugget + sum(c * spherical(h, r) for c, r in zip(self.sills, self.ranges_m))
+
+    def describe(self) -> str:
+        parts = ", ".join(f"{c:.3f} at {r:.1f} m" for c, r in zip(self.sills, self.ranges_m))
+        return f"nugget {self.nugget:.3f}, spherical {parts}"
+
+
+def spherical(h: np.ndarray, r: float) -> np.ndarray:
+    """Unit-sill spherical variogram."""
+    u = np.clip(h / r, 0.0, 1.0)
+    return 1.5 * u - 0.5 * u**3
+
+
+def empirical_variogram(z: np.ndarray, grid: GridSpec, ok: np.ndarray, max_lag_m: float, bins: int,
+                        samples: int, seed: int) -> pd.DataFrame:
+    """Semivariance of ``z`` on cells ``ok`` by lag.
+
+    Short lags (up to 64 cells, doubling) come from every pair of ``ok`` cells at that row
+    and column offset; longer lags from all pairs of ``samples`` random ``ok`` cells, binned.
+    O(cells · log 64 + samples²).
+    """
+    rows = []
+    k = 1
+    while k <= 64 and k * grid.cell < max_lag_m:
+        d = []
+        for a, b, oa in ((z[:, k:], z[:, :-k], ok[:, k:] & ok[:, :-k]), (z[k:, :], z[:-k, :], ok[k:, :] & ok[:-k, :])):
+            d.append((a - b)[oa])
+        d = np.concatenate(d)
+        d = d[np.isfinite(d)]
+        if d.size > 10:
+            rows.append((k * grid.cell, 0.5 * float(np.mean(d**2)), int(d.size)))
+        k *= 2
+    idx = np.flatnonzero(ok & np.isfinite(z))
+    if idx.size > samples:
+        idx = rng_for(seed, "change", "variogram").choice(idx, samples, replace=False)
+    if idx.size >= 10:
+        r, c = np.unravel_index(idx, z.shape)
+        pts = np.stack([c * grid.cell, r * grid.cell], axis=1)
+        h = pdist(pts)
+        g = 0.5 * pdist(z.ravel()[idx][:, None], "sqeuclidean")
+        start = rows[-1][0] if rows else 0.0
+        edges = np.linspace(start, max_lag_m, bins + 1)
+        which = np.digitize(h, edges) - 1
+        for i in range(bins):
+            sel = which == i
+            if sel.sum() >= 30:
+                rows.append((float(h[sel].mean()), float(g[sel].mean()), int(sel.sum())))
+    return pd.DataFrame(rows, columns=["lag_m", "semivariance", "pairs"])
+
+
+def fit_variogram(emp: pd.DataFrame, cell: float, max_lag_m: float) -> Variogram:
+    """Weighted (√pairs) least-squares fit of a nugget plus one and two sphericals; the better one.
+
+    Ranges lie in [cell, max_lag]; the two-range model (short: noise and texture, long:
+    georeferencing and correlated matching errors) is kept when it converges with a lower
+    weighted misfit, as in Hugonnet et al. (2022).
+    """
+    if len(emp) < 4:
+        raise ValueError("too few variogram lags to fit a model")
+    h, g, w = emp["lag_m"].to_numpy(), emp["semivariance"].to_numpy(), np.sqrt(emp["pairs"].to_numpy())
+    top = float(g.max())
+    best: tuple[float, Variogram] | None = None
+
+    def f1(hh, c0, c1, r1):
+        return c0 + c1 * spherical(hh, r1)
+
+    def f2(hh, c0, c1, r1, c2, r2):
+        return c0 + c1 * spherical(hh, r1) + c2 * spherical(hh, r2)
+
+    starts1 = [[g[0] * 0.5, top / 2, r] for r in (2 * cell, max_lag_m / 10, max_lag_m / 3)]
+    starts2 = [[g[0] * 0.3, top / 3, r1, top / 3, r2] for r1, r2 in ((2 * cell, max_lag_m / 5), (5 * cell, max_lag_m / 2))]
+    for fn, starts, k in ((f1, starts1, 1), (f2, starts2, 2)):
+        lo = [0.0] + [0.0, cell] * k
+        hi = [2 * top] + [2 * top, max_lag_m] * k
+        for p0 in starts:
+            try:
+                p, _ = optimize.curve_fit(fn, h, g, p0=np.clip(p0, lo, hi), sigma=1 / w, bounds=(lo, hi), maxfev=20000)
+            except (RuntimeError, ValueError):
+                continue
+            sse = float(np.sum((w * (fn(h, *p) - g)) ** 2))
+            comps = sorted(zip(p[1::2], p[2::2]), key=lambda cr: cr[1])
+            vg = Variogram(float(p[0]), tuple(float(c) for c, _ in comps), tuple(float(r) for _, r in comps), emp)
+            if best is None or sse < best[0] * (0.98 if k == 2 else 1.0):
+                best = (sse, vg)
+    if best is None:
+        raise RuntimeError("variogram fit did not converge")
+    return best[1]
+
+
+def correlation_factor(area_m2: float, cell: float, vg: Variogram) -> float:
+    """Variance of the mean of a unit-σ field over an area, relative to one cell's variance.
+
+    Nugget share × a/A plus, per spherical, its share × F(A, r) (Rolstad et al. 2009, disc
+    of the same area).
+    """
+    if area_m2 <= 0:
+        return float("nan")
+    a = cell * cell
+    L = np.sqrt(area_m2 / np.pi)
+    out = vg.f_nugget * min(1.0, a / area_m2)
+    for c, r in zip(vg.sills, vg.ranges_m):
+        f = r * r / (5 * L * L) if L >= r else 1 - L / r + L**3 / (5 * r**3)
+        out += c / vg.total * f
+    return float(out)
+
+
+def mean_correlation(rows: np.ndarray, cols: np.ndarray, cell: float, vg: Variogram, samples: int, seed: int) -> float:
+    """Mean correlation ρ(h) = 1 − γ(h)/sill over all pairs of the given cells (a random subset).
+
+    Var(mean of n unit-σ cells) ≈ this mean for large n; it is the offset-estimate variance
+    of a co-registration fitted on exactly these (scattered) cells. O(samples²).
+    """
+    if rows.size < 2:
+        return 1.0
+    if rows.size > samples:
+        pick = rng_for(seed, "change", "coreg_sd").choice(rows.size, samples, replace=False)
+        rows, cols = rows[pick], cols[pick]
+    h = pdist(np.stack([cols * cell, rows * cell], axis=1))
+    rho = 1.0 - vg.model(h) / vg.total
+    return float(max(np.mean(rho), 0.0) + 1.0 / rows.size)
+
+
+# ----------------------------------------------------------------------------- budgets
+
+
+def budget_row(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray, cell: float, vg: Variogram | None,
+               coreg_sd_m: float = 0.0) -> dict[str, float]:
+    """Volumes and net uncertainties of the cells ``counted`` (valid DoD cells).
+
+    ``coreg_sd_m``: SD of the co-registration's vertical offset, an error shared by every
+    cell (adds A·σ_offset in quadrature to the correlated SD).
+    """
+    a = cell * cell
+    c = counted & np.isfinite(dod) & np.isfinite(sigma)
+    d, s = dod[c].astype(np.float64), sigma[c].astype(np.float64)
+    ero = float(np.sum(np.clip(-d, 0, None)) * a)
+    dep = float(np.sum(np.clip(d, 0, None)) * a)
+    area = float(c.sum() * a)
+    sd_ind = float(a * np.sqrt(np.sum(s**2)))
+    sd_cor = float(area * np.sqrt(np.mean(s**2) * correlation_factor(area, cell, vg))) if (vg is not None and area > 0) else float("nan")
+    sd_reg = float(area * coreg_sd_m)
+    base = sd_cor if np.isfinite(sd_cor) else sd_ind
+    return dict(area_m2=area, erosion_m3=ero, deposition_m3=dep, net_m3=dep - ero,
+                net_sd_m3=float(np.hypot(base, sd_reg)), net_sd_independent_m3=sd_ind,
+                net_sd_correlated_m3=sd_cor, net_sd_coregistration_m3=sd_reg,
+                mean_dh_m=(dep - ero) / area if area > 0 else float("nan"))
+
+
+def compute_budgets(dod: np.ndarray, sigma: np.ndarray, detected: Mapping[str, np.ndarray], groups: Sequence[MaskGroup],
+                    cell: float, vg: Variogram | None, coreg_sd_m: float = 0.0) -> pd.DataFrame:
+    """One row per (mask, method); method ``raw`` counts every valid cell of the mask.
+
+    ``net_sd_m3`` = √(correlated² + co-registration²) (the independent-cell SD where no
+    variogram was fitted).
+    """
+    valid = np.isfinite(dod)
+    rows = []
+    for g in groups:
+        inside = g.mask & valid
+        for method, det in [("raw", valid), *detected.items()]:
+            row = dict(mask=g.name, method=method, mask_area_m2=float(inside.sum() * cell * cell))
+            row.update(budget_row(dod, sigma, inside & det, cell, vg, coreg_sd_m))
+            rows.append(row)
+    cols = ["mask", "method", "erosion_m3", "deposition_m3", "net_m3", "net_sd_m3", "net_sd_independent_m3",
+            "net_sd_correlated_m3", "net_sd_coregistration_m3", "area_m2", "mask_area_m2", "mean_dh_m"]
+    return pd.DataFrame(rows)[cols]

@@ -1,0 +1,154 @@
+"""Parameters of the change stage (the ``change:`` config section, issue 17)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from kitegully import InputError
+from kitegully.config import config_section
+
+THRESHOLD_METHODS = ("min_lod", "propagated", "probabilistic", "coherence")
+
+
+@dataclass(frozen=True)
+class ChangeParams:
+    """Method parameters of the change stage.
+
+    Attributes
+    ----------
+    coreg_enabled : bool
+        Co-register epoch 2 onto epoch 1 on stable ground (Nuth & Kääb 2011 shift plus a
+        plane), else take the DEMs as they are.
+    coreg_max_iterations : int
+        Iterations of shift + plane estimation ([I] 10; Nuth & Kääb converge in 3-5).
+    coreg_tolerance_m : float
+        Stop when the horizontal shift increment is below this (m) ([I] 0.01 m, a
+        twentieth of a 0.2 m cell).
+    coreg_tilt : bool
+        Estimate and remove a plane (dz, tilt in x and y) besides the shift.
+    coreg_min_slope_deg : float
+        Nuth & Kääb divide dh by tan(slope): cells flatter than this carry no shift
+        information and are left out of the shift fit ([I] 2°).
+    coreg_max_slope_deg : float
+        Steeper cells (walls, tree crowns) are left out of stable ground ([I] 60°).
+    stable_max_object_height_m : float or None
+        Cells standing higher than this above the epoch-1 surface's grey opening are above-ground
+        objects (shrubs, trees, buildings) and not stable ground ([I] 0.15 m: grass stays below,
+        shrub crowns rise above; None = keep them).
+    stable_object_window_m : float
+        Side of the opening window (m) ([I] 3 m, wider than a shrub crown).
+    coreg_outlier_nmad : float
+        Stable cells whose dh lies more than this many NMAD from the median are left out
+        of each fit (vegetation growth, undetected change) ([I] 4).
+    coreg_max_samples : int
+        Stable cells sub-sampled per fit (deterministic stride) ([I] 500 000).
+    min_lod_m : float
+        (a) fixed minimum level of detection (m): |DoD| below it is set to 0. [I] Set from
+        the surveys' stated accuracy, e.g. ≈ 2 × the larger epoch SD.
+    t_factor : float
+        (b) multiplier t of the propagated error: |DoD| > t·σ_DoD ([I] 1, GCD's
+        "propagated error" default).
+    confidence : float
+        (c) confidence of the probabilistic threshold: |DoD|/σ_DoD > z with
+        z = Φ⁻¹((1 + confidence)/2), 0.95 → 1.96.
+    coherence_window : int
+        (d) side of the spatial-coherence window in cells ([P] GCD: 5 × 5).
+    coherence_n_low, coherence_n_high : int
+        Neighbours of the same sign (of window² − 1) at which the likelihood p(E|A) of the
+        spatial-coherence filter reaches its low and high values. [I] 6 and 18 for a 5 × 5
+        window: symmetric about 12, the expected count for pure noise (random signs, 24/2),
+        so noise alone leaves the prior unchanged on average (with 5 and 15 the false rate
+        of noise at 95 % rose from 5 % to 12 % in our test).
+    coherence_p_low, coherence_p_high : float
+        p(E|A) at and below ``coherence_n_low`` / at and above ``coherence_n_high``
+        ([I] 0.1 and 0.9: bounded away from 0 and 1 so strong evidence can win).
+    variogram_max_lag_m : float
+        Largest lag of the empirical variogram of stable-ground dh (m) ([I] a third of the
+        site's shorter side is typical).
+    variogram_bins : int
+        Lag bins of the empirical variogram ([I] 30).
+    variogram_samples : int
+        Stable cells sampled for the variogram (all pairs, so n² / 2 pairs) ([I] 4000).
+    headcut_search_radius_m : float
+        Around each digitised head, the channel is searched within this radius (m): the
+        digitising error plus the largest retreat expected in one season ([I] 10 m).
+    headcut_incision_sigma_m : float
+        Gaussian σ (m) of the smoothed surface from which the incision depth is measured
+        ([I] 5 m: a few gully widths).
+    headcut_min_incision_m : float
+        Cells incised deeper than this (m) are channel ([I] 0.25 m, the gully stage's
+        depth threshold).
+    seed : int
+        Master seed (variogram sampling).
+    """
+
+    coreg_enabled: bool = True
+    coreg_max_iterations: int = 10
+    coreg_tolerance_m: float = 0.01
+    coreg_tilt: bool = True
+    coreg_min_slope_deg: float = 2.0
+    coreg_max_slope_deg: float = 60.0
+    stable_max_object_height_m: float | None = 0.15
+    stable_object_window_m: float = 3.0
+    coreg_outlier_nmad: float = 4.0
+    coreg_max_samples: int = 500_000
+    min_lod_m: float = 0.1
+    t_factor: float = 1.0
+    confidence: float = 0.95
+    coherence_window: int = 5
+    coherence_n_low: int = 6
+    coherence_n_high: int = 18
+    coherence_p_low: float = 0.1
+    coherence_p_high: float = 0.9
+    variogram_max_lag_m: float = 150.0
+    variogram_bins: int = 30
+    variogram_samples: int = 4000
+    headcut_search_radius_m: float = 10.0
+    headcut_incision_sigma_m: float = 5.0
+    headcut_min_incision_m: float = 0.25
+    seed: int = 0
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any], seed: int = 0) -> "ChangeParams":
+        """Build from the ``change:`` section's method keys.
+
+        ``cfg`` holds ``coregistration``, ``thresholds``, ``budget`` and ``headcuts``
+        sub-sections (see ``config/schema/stages/change.schema.yaml``).
+        """
+        sec = config_section(cfg, "change", ("coregistration", "thresholds", "budget", "headcuts"),
+                             optional=("epochs", "masks", "heads_file", "figure", "evaluation"))
+        c = config_section(sec["coregistration"], "change.coregistration", (
+            "enabled", "max_iterations", "tolerance_m", "tilt", "min_slope_deg", "max_slope_deg",
+            "max_object_height_m", "object_window_m", "outlier_nmad", "max_samples"))
+        t = config_section(sec["thresholds"], "change.thresholds", ("min_lod_m", "t_factor", "confidence", "coherence"))
+        coh = config_section(t["coherence"], "change.thresholds.coherence", ("window_cells", "n_low", "n_high", "p_low", "p_high"))
+        b = config_section(sec["budget"], "change.budget", ("variogram_max_lag_m", "variogram_bins", "variogram_samples"))
+        h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"))
+        return cls(
+            coreg_enabled=bool(c["enabled"]), coreg_max_iterations=int(c["max_iterations"]),
+            coreg_tolerance_m=float(c["tolerance_m"]), coreg_tilt=bool(c["tilt"]),
+            coreg_min_slope_deg=float(c["min_slope_deg"]), coreg_max_slope_deg=float(c["max_slope_deg"]),
+            coreg_outlier_nmad=float(c["outlier_nmad"]), coreg_max_samples=int(c["max_samples"]),
+            stable_max_object_height_m=None if c["max_object_height_m"] is None else float(c["max_object_height_m"]),
+            stable_object_window_m=float(c["object_window_m"]),
+            min_lod_m=float(t["min_lod_m"]), t_factor=float(t["t_factor"]), confidence=float(t["confidence"]),
+            coherence_window=int(coh["window_cells"]), coherence_n_low=int(coh["n_low"]),
+            coherence_n_high=int(coh["n_high"]), coherence_p_low=float(coh["p_low"]),
+            coherence_p_high=float(coh["p_high"]),
+            variogram_max_lag_m=float(b["variogram_max_lag_m"]), variogram_bins=int(b["variogram_bins"]),
+            variogram_samples=int(b["variogram_samples"]),
+            headcut_search_radius_m=float(h["search_radius_m"]),
+            headcut_incision_sigma_m=float(h["incision_sigma_m"]),
+            headcut_min_incision_m=float(h["min_incision_m"]), seed=int(seed),
+        )
+
+    def __post_init__(self) -> None:
+        if not 0.5 <= self.confidence < 1.0:
+            raise InputError(f"change.thresholds.confidence must be in [0.5, 1), got {self.confidence}")
+        if self.coherence_window < 3 or self.coherence_window % 2 == 0:
+            raise InputError(f"change.thresholds.coherence.window_cells must be odd and >= 3, got {self.coherence_window}")
+        if not 0 <= self.coherence_n_low < self.coherence_n_high <= self.coherence_window**2 - 1:
+            raise InputError("change.thresholds.coherence: need 0 <= n_low < n_high <= window_cells² - 1")
+        if not 0.0 < self.coherence_p_low < self.coherence_p_high < 1.0:
+            raise InputError("change.thresholds.coherence: need 0 < p_low < p_high < 1")

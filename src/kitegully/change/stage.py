@@ -1,0 +1,143 @@
+"""The change stage: two epoch DEMs in; DoD, thresholds, budgets, headcuts and figures out.
+
+:func:`detect_change` is the entry point; its parameters are :class:`ChangeParams`.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from kitegully import InputError
+from kitegully.change import budget as bg
+from kitegully.change import plots, uncertainty as unc
+from kitegully.change.coregister import above_ground, coregister, nmad
+from kitegully.change.dod import dem_of_difference, load_epoch, on_common_grid
+from kitegully.change.headcuts import measure_headcut_retreat
+from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
+from kitegully.io.raster import Raster
+from kitegully.io.tables import write_table
+from kitegully.io.vectors import read_vector
+
+log = logging.getLogger(__name__)
+
+#: Keys of ``out`` that :func:`detect_change` writes (plus ``thresholded_<method>``).
+OUTPUTS = ("dod", "sigma_dod", "stable", "coregistration", "sigma", "thresholds", "variogram", "budget",
+           "headcuts", "dod_map", "budget_bars", "histogram", "variogram_png")
+
+
+def read_heads(path: str) -> pd.DataFrame:
+    """Digitised heads (points) as ``head_id, x, y``; ids from a ``head_id``/``id`` column or the row number."""
+    gdf = read_vector(path)
+    if len(gdf) and not (gdf.geom_type == "Point").all():
+        raise InputError(f"{path}: gully heads must be points, got {sorted(set(gdf.geom_type))}")
+    ids = gdf["head_id"] if "head_id" in gdf.columns else gdf["id"] if "id" in gdf.columns else pd.Series(range(1, len(gdf) + 1))
+    return pd.DataFrame({"head_id": np.asarray(ids), "x": gdf.geometry.x.to_numpy(), "y": gdf.geometry.y.to_numpy()})
+
+
+def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str, Any]], heads_path: str | None,
+                  params: ChangeParams, out: Mapping[str, str], site_crs: str | None = None,
+                  figure: Mapping[str, Any] | None = None, attribution: str | None = None) -> dict[str, Any]:
+    """Co-register, difference, threshold and budget two epochs; write every product.
+
+    Parameters
+    ----------
+    epochs
+        Two epoch specs (older first): ``name, dem, nodata, accuracy``.
+    masks
+        Budget mask specs: ``name, file, kind, by, classes, values, unstable``.
+    heads_path
+        GeoPackage of heads digitised at epoch 1, or None.
+    params : ChangeParams
+    out
+        Output paths by key (:data:`OUTPUTS` and ``thresholded_<method>``).
+    site_crs
+        The DEMs must be in this CRS.
+    figure
+        ``limit_m`` (colour/histogram range) and ``max_px``.
+
+    Returns
+    -------
+    dict
+        Summary numbers (co-registration, σ, whole-site raw budget, timings).
+    """
+    t0 = time.perf_counter()
+    if len(epochs) != 2:
+        raise InputError(f"change.epochs: exactly two epochs are needed, got {len(epochs)}")
+    e1, e2 = (load_epoch(s, f"change.epochs[{i}]", site_crs) for i, s in enumerate(epochs))
+    grid, z1, _ = on_common_grid(e1, e2)
+    groups = bg.mask_groups(masks, grid)
+    unstable = bg.unstable_union(masks, groups, z1.shape)
+    stable = np.isfinite(z1) & ~unstable
+    if params.stable_max_object_height_m is not None:
+        objects = above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m)
+        log.info("above-ground objects (> %.2f m): %.1f %% of the grid, left out of stable ground",
+                 params.stable_max_object_height_m, 100.0 * objects.mean())
+        stable &= ~objects
+    log.info("stable ground: %.1f %% of the common grid", 100.0 * stable.mean())
+    z2, coreg = coregister(z1, e2.dem, grid, stable, params)
+    dod = dem_of_difference(z1, z2)
+    stable &= np.isfinite(dod)
+    s1, i1 = unc.epoch_sigma(e1, grid)
+    s2, i2 = unc.epoch_sigma(e2, grid)
+    sigma = unc.propagate(s1, s2, dod.shape)
+    detected = unc.detect(dod, sigma, params)
+
+    Raster(dod, grid).write(out["dod"], tags={"units": "m", "definition": "DEM2 (co-registered) - DEM1"})
+    Raster(sigma, grid).write(out["sigma_dod"], tags={"units": "m", "definition": "sqrt(s1^2 + s2^2)"})
+    Raster(stable.astype(np.uint8), grid, 255).write(out["stable"], tags={"definition": "1 = stable ground used for co-registration"})
+    for m in THRESHOLD_METHODS:
+        Raster(unc.thresholded(dod, detected[m]), grid).write(out[f"thresholded_{m}"], tags={"units": "m", "threshold": m})
+
+    zs = dod / sigma
+    ok = stable & np.isfinite(zs)
+    med, sd = float(np.median(zs[ok])), nmad(zs[ok])
+    ok &= np.abs(zs - med) <= params.coreg_outlier_nmad * sd
+    vg = None
+    try:
+        emp = bg.empirical_variogram(zs, grid, ok, params.variogram_max_lag_m, params.variogram_bins,
+                                     params.variogram_samples, params.seed)
+        vg = bg.fit_variogram(emp, grid.cell, params.variogram_max_lag_m)
+        log.info("variogram of dh/sigma: %s", vg.describe())
+        write_table(emp.assign(model=vg.model(emp["lag_m"].to_numpy()), fitted_model=vg.describe()), out["variogram"])
+    except (ValueError, RuntimeError) as exc:
+        log.warning("variogram not fitted (%s): correlated uncertainty left out", exc)
+        write_table(pd.DataFrame(columns=["lag_m", "semivariance", "pairs", "model"]), out["variogram"])
+    plots.plot_variogram(vg, out["variogram_png"], attribution)
+
+    coreg_sd = 0.0
+    if vg is not None and params.coreg_enabled:
+        rr, cc = np.nonzero(ok)
+        rho = bg.mean_correlation(rr, cc, grid.cell, vg, params.variogram_samples, params.seed)
+        coreg_sd = float(np.nanmean(sigma[ok]) * np.sqrt(rho))
+        log.info("co-registration offset SD %.4f m (mean correlation of stable pairs %.4f)", coreg_sd, rho)
+    coreg.offset_sd_m = coreg_sd
+    budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
+    write_table(budget, out["budget"])
+    write_table(coreg.table(), out["coregistration"])
+    write_table(unc.sigma_table([i1, i2], sigma), out["sigma"])
+    write_table(unc.threshold_table(params, sigma), out["thresholds"])
+    if heads_path:
+        lowering = max(params.headcut_min_incision_m, unc.z_of_confidence(params.confidence) * float(np.nanmedian(sigma)))
+        heads = measure_headcut_retreat(z1, z2, grid, read_heads(heads_path), params, lowering_m=lowering)
+    else:
+        heads = pd.DataFrame(columns=["head_id", "x_digitised", "y_digitised", "x1", "y1", "incision1_m", "x2", "y2",
+                                      "incision2_m", "retreat_m", "retreat_heads_m", "retreat_heads_upslope_m"])
+    write_table(heads, out["headcuts"])
+
+    fig = {"limit_m": 1.0, "max_px": 1500, **(figure or {})}
+    plots.plot_dod_map(dod, grid, out["dod_map"], fig["limit_m"], fig["max_px"], attribution=attribution)
+    top = [g.name for g in groups if ":" not in g.name]
+    plots.plot_budget_bars(budget, out["budget_bars"], masks=top, attribution=attribution)
+    lod95 = unc.z_of_confidence(params.confidence) * float(np.nanmedian(sigma))
+    plots.plot_histogram(dod, stable, out["histogram"], fig["limit_m"], lod95, attribution=attribution)
+    site = budget[(budget["mask"] == "site") & (budget["method"] == "raw")].iloc[0]
+    summary = dict(dx_m=coreg.dx_m, dy_m=coreg.dy_m, dz_m=coreg.dz_m, stable_nmad_before_m=coreg.before["nmad_m"],
+                   stable_nmad_after_m=coreg.after["nmad_m"], sigma_dod_m=float(np.nanmedian(sigma)),
+                   net_m3=float(site["net_m3"]), net_sd_m3=float(site["net_sd_m3"]), seconds=time.perf_counter() - t0)
+    log.info("change detected in %.1f s: whole-site net %.1f ± %.1f m³", summary["seconds"], summary["net_m3"], summary["net_sd_m3"])
+    return summary

@@ -1,0 +1,91 @@
+"""Volumes of a known pit and mound lie within their stated uncertainty; variogram and masks."""
+
+import geopandas as gpd
+import numpy as np
+import pytest
+from change.change_synth import CRS, grid, pair
+from scipy import ndimage
+from shapely.geometry import box
+
+from kitegully.change import budget as bg
+from kitegully.change.params import ChangeParams
+from kitegully.change.uncertainty import detect, propagate
+from kitegully.seeds import rng_for
+
+SD = 0.05
+
+
+def test_pit_and_mound_volumes_within_uncertainty():
+    g, z1, z2, change = pair(SD)
+    dod = z2 - z1
+    sigma = propagate(SD, SD, dod.shape)
+    det = detect(dod, sigma, ChangeParams())
+    groups = [bg.MaskGroup("site", np.ones(dod.shape, bool), "test"), bg.MaskGroup("pit", change < 0, "test"),
+              bg.MaskGroup("mound", change > 0, "test")]
+    b = bg.compute_budgets(dod, sigma, det, groups, g.cell, None).set_index(["mask", "method"])
+    a = g.cell**2
+    for mask, true_net in (("site", change.sum() * a), ("pit", change[change < 0].sum() * a), ("mound", change[change > 0].sum() * a)):
+        raw = b.loc[(mask, "raw")]
+        assert abs(raw["net_m3"] - true_net) <= 2 * raw["net_sd_independent_m3"], mask
+    assert b.loc[("site", "raw"), "net_sd_independent_m3"] == pytest.approx(a * SD * np.sqrt(2) * np.sqrt(dod.size), rel=1e-3)
+    # thresholded at 95 %: the pit's erosion and the mound's deposition, less the thin rims below the LoD
+    assert b.loc[("pit", "probabilistic"), "erosion_m3"] == pytest.approx(-change[change < 0].sum() * a, rel=0.1)
+    assert b.loc[("mound", "probabilistic"), "deposition_m3"] == pytest.approx(change[change > 0].sum() * a, rel=0.1)
+
+
+def test_correlated_noise_needs_the_correlated_estimate():
+    """With spatially correlated errors the independent-cell SD is far too small; the variogram one covers the error."""
+    g = grid(300, cell=1.0)
+    rng = rng_for(7, "test", "corr")
+    f = ndimage.gaussian_filter(rng.standard_normal((g.height, g.width)), 10.0, mode="wrap")
+    err = (0.05 * f / f.std() + 0.03 * rng.standard_normal(f.shape)).astype(np.float32)
+    sigma = np.full(err.shape, np.sqrt(0.05**2 + 0.03**2), np.float32)
+    ok = np.ones(err.shape, bool)
+    emp = bg.empirical_variogram(err / sigma, g, ok, 120.0, 25, 3000, 1)
+    vg = bg.fit_variogram(emp, g.cell, 120.0)
+    assert vg.f_nugget == pytest.approx(0.03**2 / 0.0034, abs=0.1)
+    assert 10.0 < max(vg.ranges_m) < 80.0
+    # volume of pure error over a 60 x 60 m square, SDs from both estimates
+    sub = (slice(100, 160), slice(100, 160))
+    row = bg.budget_row(err[sub], sigma[sub], np.ones((60, 60), bool), g.cell, vg)
+    assert row["net_sd_correlated_m3"] > 10 * row["net_sd_independent_m3"]
+    # across many 60 x 60 squares the correlated SD matches the spread of the error volumes
+    vols = [err[i:i + 60, j:j + 60].sum() for i in range(0, 240, 60) for j in range(0, 240, 60)]
+    assert np.std(vols) == pytest.approx(row["net_sd_correlated_m3"], rel=0.6)
+
+
+def test_correlation_factor_limits():
+    emp = None
+    vg = bg.Variogram(0.5, (0.5,), (10.0,), emp)
+    assert bg.correlation_factor(1.0, 1.0, vg) == pytest.approx(1.0, abs=0.06)   # one cell: its own variance
+    big = bg.correlation_factor(1e6, 1.0, vg)
+    assert big == pytest.approx(0.5 * 1e-6 + 0.5 * 100 / (5 * 1e6 / np.pi), rel=1e-6)
+
+
+def test_vector_masks_by_column(tmp_path):
+    g, z1, z2, change = pair(SD)
+    x0, y0 = g.x0, g.y0
+    polys = gpd.GeoDataFrame({"gully_id": [1, 2]}, geometry=[box(x0 + 20, y0 - 40, x0 + 40, y0 - 20),
+                                                          box(x0 + 60, y0 - 75, x0 + 80, y0 - 55)], crs=CRS)
+    polys.to_file(tmp_path / "m.gpkg")
+    groups = bg.mask_groups([{"name": "gully", "file": str(tmp_path / "m.gpkg"), "by": "gully_id"}], g)
+    assert [x.name for x in groups] == ["site", "gully", "gully:1", "gully:2"]
+    assert groups[2].mask.sum() * g.cell**2 == pytest.approx(400.0)
+    dod = change.astype(np.float32)
+    sigma = propagate(SD, SD, dod.shape)
+    b = bg.compute_budgets(dod, sigma, {}, groups, g.cell, None).set_index("mask")
+    assert b.loc["gully:1", "net_m3"] == pytest.approx(change.sum() * g.cell**2 * 0 + (change[groups[2].mask].sum() * g.cell**2))
+    assert b.loc["gully:1", "net_m3"] < 0 < b.loc["gully:2", "net_m3"]
+
+
+def test_offset_uncertainty_from_stable_cells():
+    """Offset SD of a fit on n scattered cells: ~1/√n for white errors, ~the sill share for long-range ones."""
+    rng = np.random.default_rng(0)
+    rows, cols = rng.integers(0, 1000, 2000), rng.integers(0, 1000, 2000)
+    white = bg.Variogram(1.0, (), (), None)
+    assert bg.mean_correlation(rows, cols, 1.0, white, 2000, 1) == pytest.approx(1 / 2000, rel=0.01)
+    long = bg.Variogram(0.5, (0.5,), (1e6,), None)  # half the variance shared by all cells
+    assert bg.mean_correlation(rows, cols, 1.0, long, 2000, 1) == pytest.approx(0.5, abs=0.01)
+    row = bg.budget_row(np.zeros((10, 10)), np.full((10, 10), 0.1), np.ones((10, 10), bool), 1.0, white, coreg_sd_m=0.01)
+    assert row["net_sd_coregistration_m3"] == pytest.approx(1.0)
+    assert row["net_sd_m3"] == pytest.approx(np.hypot(row["net_sd_correlated_m3"], 1.0))

@@ -1,0 +1,35 @@
+"""ChangeParams: the DEM site's change section builds; a missing or unknown key is named."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+
+from conftest import REPO
+from kitegully import InputError
+from kitegully.change import ChangeParams
+from kitegully.config import load_yaml
+
+CHANGE = load_yaml(REPO / "config/sites/kamech_dem_change.yaml")["change"]
+
+
+def test_site_section_builds():
+    p = ChangeParams.from_config(CHANGE, seed=3)
+    assert p.confidence == CHANGE["thresholds"]["confidence"] and p.coherence_window == 5 and p.seed == 3
+    assert p.stable_max_object_height_m == CHANGE["coregistration"]["max_object_height_m"]
+
+
+def test_bad_keys_are_named():
+    bad = copy.deepcopy(CHANGE)
+    del bad["thresholds"]["coherence"]["p_low"]
+    with pytest.raises(InputError, match=r"change.thresholds.coherence: missing key 'p_low'"):
+        ChangeParams.from_config(bad)
+    bad = copy.deepcopy(CHANGE)
+    bad["budget"]["variogram_range"] = 3
+    with pytest.raises(InputError, match=r"change.budget: unknown key 'variogram_range'"):
+        ChangeParams.from_config(bad)
+    bad = copy.deepcopy(CHANGE)
+    bad["thresholds"]["confidence"] = 1.5
+    with pytest.raises(InputError, match=r"change.thresholds.confidence must be in \[0.5, 1\)"):
+        ChangeParams.from_config(bad)

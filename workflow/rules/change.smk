@@ -1,0 +1,91 @@
+# Change between epochs (issue 17): two epoch DEMs -> co-registration on stable ground, DoD,
+# propagated uncertainty and GCD thresholds, budgets by mask, headcut retreat. A site gives its
+# epochs as DEM GeoTIFFs (change.epochs); the epoch-2 photo chain of twin sites is not wired yet.
+# Only change_evaluate reads truth (change.evaluation).
+
+if "change" in config:
+
+    CHANGE = config["change"]
+    CHANGE_METHODS = ["min_lod", "propagated", "probabilistic", "coherence"]
+    CHANGE_CAT = "Change between epochs"
+
+    def change_inputs(wildcards=None):
+        files = {f"dem{i + 1}": e["dem"] for i, e in enumerate(CHANGE["epochs"])}
+        for i, e in enumerate(CHANGE["epochs"]):
+            for k in ("error_raster", "checkpoints"):
+                if e["accuracy"].get(k):
+                    files[f"{k}{i + 1}"] = e["accuracy"][k]
+        files.update({f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]})
+        if CHANGE["heads_file"]:
+            files["heads"] = CHANGE["heads_file"]
+        return files
+
+    rule change_detect:
+        """Co-registration, DoD, sigma, thresholds, budgets, headcuts and figures."""
+        input:
+            unpack(change_inputs),
+        output:
+            dod=result("change", "dod.tif"),
+            sigma_dod=result("change", "sigma_dod.tif"),
+            stable=result("change", "stable_ground.tif"),
+            **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
+            coregistration=report(result("change", "coregistration.csv"), caption=caption("change_coregistration"), category=CHANGE_CAT),
+            sigma=report(result("change", "sigma.csv"), caption=caption("change_sigma"), category=CHANGE_CAT),
+            thresholds=result("change", "thresholds.csv"),
+            variogram=result("change", "variogram.csv"),
+            budget=report(result("change", "budget.csv"), caption=caption("change_budget"), category=CHANGE_CAT),
+            headcuts=result("change", "headcut_retreat.csv"),
+            dod_map=report(result("change", "dod_map.png"), caption=caption("change_dod_map"), category=CHANGE_CAT),
+            budget_bars=report(result("change", "budget_bars.png"), caption=caption("change_budget_bars"), category=CHANGE_CAT),
+            histogram=report(result("change", "dod_histogram.png"), caption=caption("change_histogram"), category=CHANGE_CAT),
+            variogram_png=report(result("change", "variogram.png"), caption=caption("change_variogram"), category=CHANGE_CAT),
+        params:
+            epochs=CHANGE["epochs"],
+            masks=CHANGE["masks"],
+            heads_file=CHANGE["heads_file"],
+            methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts")},
+            figure=CHANGE["figure"],
+            seed=config["seed"],
+            crs=config["site"]["crs"],
+            attribution=config["site"].get("attribution"),
+        log:
+            logfile("change", "detect"),
+        benchmark:
+            benchfile("change", "detect")
+        threads: 1
+        script:
+            "../scripts/change_detect.py"
+
+    add_targets(rules.change_detect.output.budget, rules.change_detect.output.dod_map)
+
+    if CHANGE["evaluation"]:
+
+        CHANGE_EVAL = CHANGE["evaluation"]
+
+        rule change_evaluate:
+            """Evaluation only: reads the known change (truth surfaces and heads)."""
+            input:
+                dod=rules.change_detect.output.dod,
+                sigma_dod=rules.change_detect.output.sigma_dod,
+                budget=rules.change_detect.output.budget,
+                headcuts=rules.change_detect.output.headcuts,
+                **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
+                truth1=CHANGE_EVAL["dem1_truth"],
+                truth2=CHANGE_EVAL["dem2_truth"],
+                **{k: CHANGE_EVAL[k] for k in ("heads1_truth", "heads2_truth") if CHANGE_EVAL[k]},
+                **{f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]},
+            output:
+                detection=report(result("change", "detection.csv"), caption=caption("change_detection"), category=CHANGE_CAT),
+                budget_vs_truth=report(result("change", "budget_vs_truth.csv"), caption=caption("change_budget_vs_truth"), category=CHANGE_CAT),
+                headcuts_vs_truth=report(result("change", "headcut_retreat_vs_truth.csv"), caption=caption("change_headcuts"), category=CHANGE_CAT),
+                moritani_plots=result("change", "moritani_plots.csv"),
+                summary=report(result("change", "evaluation_summary.csv"), caption=caption("change_evaluation"), category=CHANGE_CAT),
+            params:
+                masks=CHANGE["masks"],
+                evaluation={k: CHANGE_EVAL[k] for k in ("plot_m", "min_lowering_m", "head_match_m", "net_tolerance")},
+            log:
+                logfile("change", "evaluate"),
+            script:
+                "../scripts/change_evaluate.py"
+
+        add_targets(rules.change_evaluate.output.summary)
