@@ -14,7 +14,7 @@ else
 CONFIG_ARG := --configfile config/sites/$(SITE).yaml
 endif
 
-.PHONY: run test report venv clean-venv dryrun benchmark
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -41,3 +41,8 @@ test: $(STAMP)
 
 clean-venv:
 	rm -rf $(VENV)
+
+# One-node SLURM cluster on this machine (needs root): tiny twin through workflow/profiles/slurm,
+# jobs checked in sacct, tables compared with a local run. Not part of `make test`.
+slurm-test: $(STAMP)
+	bash tests/cluster/run_slurm.sh
