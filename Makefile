@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -45,3 +45,8 @@ test: $(STAMP)
 
 clean-venv:
 	rm -rf $(VENV)
+
+# One-node SLURM cluster on this machine (needs root): tiny twin through workflow/profiles/slurm,
+# jobs checked in sacct, tables compared with a local run. Not part of `make test`.
+slurm-test: $(STAMP)
+	bash tests/cluster/run_slurm.sh
