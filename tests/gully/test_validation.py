@@ -103,3 +103,18 @@ def test_input_checks_name_the_file():
     with pytest.raises(InputError, match="^cat.gpkg: the catchment must hold polygons$"):
         catchment_outline(lines, "cat.gpkg")
     assert catchment_outline(polys, "cat.gpkg").area == pytest.approx(1.0)
+
+
+def test_score_gully_areas_leaves_cells_off_the_dem_out():
+    from shapely import box as sbox
+
+    from kitegully.gully.validation import score_gully_areas
+
+    grid = GridSpec(0.0, 10.0, 1.0, 10, 10, CRS)
+    truth = gpd.GeoDataFrame(geometry=[sbox(0, 0, 4, 10)], crs=CRS)  # columns 0-3
+    gully = np.zeros((10, 10), dtype=np.uint8)
+    gully[:, 2:6] = 1  # columns 2-5: half right
+    gully[:5, 0] = 255  # off the DEM: neither truth nor map there
+    t = score_gully_areas(truth, {"a": (gully, grid)}).set_index("map_variant")
+    assert t.loc["a", "truth_area_m2"] == 35.0 and t.loc["a", "predicted_area_m2"] == 40.0
+    assert t.loc["a", "precision"] == pytest.approx(20 / 40) and t.loc["a", "recall"] == pytest.approx(20 / 35)

@@ -42,3 +42,28 @@ def test_plan_flights_reads_only_its_keys():
     # a reachable height needs a line at least as long as the height
     ok = lengths[lengths["reachable"]]
     assert np.all(ok["line_length_m"] >= ok["flying_height_m"])
+
+
+def test_synthetic_logs_give_back_their_flight_angles(tmp_path):
+    from kitegully.tether.gps import write_gpx
+    from kitegully.tether.products import observed_flight_angles, synthetic_gps_logs
+
+    cfg = _keys(("lines", "kites", "kite_model", "atmosphere", "segment_length_m", "observed", "simulation_kite", "sweep"))
+    crs = load_yaml(REPO / "config" / "sites" / "tiny_twin.yaml")["site"]["crs"]
+    logs = synthetic_gps_logs(cfg, seed=3)
+    again = synthetic_gps_logs(cfg, seed=3)
+    assert [n for n, _, _ in logs] == [f["name"] for f in cfg["observed"]["flights"]]
+    assert all(a[1].equals(b[1]) for a, b in zip(logs, again))
+    cams, ops = [], []
+    for name, cam, op in logs:
+        cams.append(tmp_path / f"{name}_camera.gpx")
+        ops.append(tmp_path / f"{name}_operator.gpx")
+        write_gpx(cam, cams[-1], crs, name)
+        write_gpx(op, ops[-1], crs, name)
+    res = observed_flight_angles(cfg, cams, ops, crs)
+    assert set(res.fixes["flight"]) == set(res.summary["flight"]) == {n for n, _, _ in logs}
+    assert res.fixes["time"].str.endswith("Z").all()
+    assert res.fixes["flight_angle_deg"].between(0, 90).all()
+    assert res.simulated is not None and set(res.simulated["wind_m_s"]) == {
+        f["wind_m_s"] for f in cfg["observed"]["flights"] if "wind_m_s" in f
+    }

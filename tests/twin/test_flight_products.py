@@ -54,3 +54,19 @@ def test_image_footprints_of_a_nadir_camera_over_flat_ground():
     assert sorted(sides) == pytest.approx(sorted(camera.footprint(h)), rel=1e-6)
     # the camera sees the ground below it (the principal point may be off the image centre)
     assert shapely.Polygon(poly).contains(shapely.Point(X0, Y0))
+
+
+def test_flight_summary_rows():
+    from kitegully.twin.flight_products import flight_summary
+
+    poses = pd.DataFrame({"image": ["a", "b", "c"], "strip": [0, 0, 1]})
+    stats = pd.DataFrame({"gsd_m": [0.02, 0.03, 0.04], "blur_px": [0.1, 0.5, 0.2]})
+    overlap = pd.DataFrame({"forward_overlap": [0.7, 0.8]})
+    obs = pd.DataFrame({"gcp_id": ["G1", "G1", "G2"]})
+    per_target = pd.Series({"G1": 2, "G2": 1, "G3": 0})
+    t = flight_summary(poses, stats, overlap, np.array([2, 3, 4, 5]), obs, per_target, 3, 6.0, 9.0, 2).set_index("quantity")
+    assert t.loc["images", "value"] == 3 and t.loc["strips", "value"] == 2
+    assert t.loc["gsd_median", "value"] == pytest.approx(0.03) and t.loc["gsd_median", "unit"] == "m"
+    assert t.loc["core_share_with_3_or_more", "value"] == pytest.approx(0.75)
+    assert t.loc["gcp_targets_digitised", "value"] == 2 and t.loc["gcp_targets_min_images", "value"] == 0
+    assert t.loc["render_time_per_image", "value"] == pytest.approx(2.0)

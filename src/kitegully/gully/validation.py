@@ -20,7 +20,14 @@ import pandas as pd
 from shapely.geometry.base import BaseGeometry
 
 from kitegully import InputError
-from kitegully.evaluate.network import NetworkScorer, footprint, scored_reference, validation_geometries
+from kitegully.evaluate.network import (
+    NetworkScorer,
+    area_scores,
+    footprint,
+    rasterize_polygons,
+    scored_reference,
+    validation_geometries,
+)
 from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
@@ -215,3 +222,28 @@ def score_network(
         validation_geometries([scored], extracted, params.tolerance_m, domain, reference_all=reference) if geometries else {}
     )
     return NetworkValidation(table, tolerances, scored, not_scored, counts, domain, extracted, pieces)
+
+
+def score_gully_areas(truth_polygons: gpd.GeoDataFrame, maps: Mapping[str, tuple[np.ndarray, GridSpec]]) -> pd.DataFrame:
+    """Cell-wise precision, recall and IoU of gully maps against the truth polygons (twins, evaluation).
+
+    Parameters
+    ----------
+    truth_polygons : GeoDataFrame
+        The twin's true gully polygons.
+    maps : mapping
+        Map variant name → (gully map, grid); the map holds 1 gully, 0 not, 255 off the DEM
+        (cells off the DEM are left out of the truth too).
+
+    Returns
+    -------
+    DataFrame
+        ``map_variant`` and the :func:`kitegully.evaluate.network.area_scores` columns, one row per map.
+    """
+    rows = []
+    for name, (gully, grid) in maps.items():
+        truth = rasterize_polygons(truth_polygons, grid) & (gully != 255)
+        s = area_scores(gully == 1, truth, grid.cell)
+        rows.append({"map_variant": name, **s})
+        log.info("area scores (%s): %s", name, s)
+    return pd.DataFrame(rows)

@@ -22,10 +22,14 @@ from kitegully.tether.config import (
     camera_from_config,
     kites_from_config,
     materials_from_config,
+    schedule_from_config,
     sweep_lengths,
+    synthetic_flights_from_config,
 )
+from kitegully.tether.gps import flight_angles, read_track, simulate_flight_logs, summarise_flight_angles
 from kitegully.tether.line import KiteModel, solve_line
 from kitegully.tether.planning import plan_flight
+from kitegully.seeds import rng_for
 
 log = logging.getLogger(__name__)
 
@@ -169,3 +173,84 @@ def plan_flights(cfg: Mapping[str, Any]) -> tuple[pd.DataFrame, pd.DataFrame]:
         log.warning("%s at %g m/s cannot reach %g m within %g m of line", row.material, row.wind_m_s, row.flying_height_m,
                     plan_cfg["model_max_line_length_m"])
     return plan, lengths
+
+
+def synthetic_gps_logs(cfg: Mapping[str, Any], seed: int) -> list[tuple[str, pd.DataFrame, pd.DataFrame]]:
+    """Camera and operator GPS logs of the synthetic flights of ``observed.synthetic`` (rule ``tether_synthetic_logs``).
+
+    Parameters
+    ----------
+    cfg : mapping
+        The ``tether:`` line-model keys and ``observed``.
+    seed : int
+        The run's seed (one stream per flight, ``rng_for(seed, "tether", "gps", name)``).
+
+    Returns
+    -------
+    list of (flight name, camera log, operator log)
+    """
+    flights, settings = synthetic_flights_from_config(cfg)
+    atm = atmosphere_from_config(cfg)
+    logs = []
+    for flight in flights:
+        rng = rng_for(seed, "tether", "gps", flight.name)
+        camera, operator = simulate_flight_logs(flight, settings, atm, rng)
+        log.info("%s: %d operator fixes, %d camera fixes (kite %s, %s, %.1f m/s)", flight.name, len(operator), len(camera),
+                 flight.kite.name, flight.material.name, flight.mean_wind_m_s)
+        logs.append((flight.name, camera, operator))
+    return logs
+
+
+@dataclass
+class ObservedAngles:
+    """Products of :func:`observed_flight_angles`."""
+
+    fixes: pd.DataFrame
+    summary: pd.DataFrame
+    simulated: pd.DataFrame | None
+
+
+def observed_flight_angles(
+    cfg: Mapping[str, Any], camera_logs: list[str], operator_logs: list[str], crs: str
+) -> ObservedAngles:
+    """Effective flight angles from paired GPS logs, and the model curves for the flights' winds (rule ``tether_observed_angles``).
+
+    Parameters
+    ----------
+    cfg : mapping
+        The ``tether:`` line-model keys, ``observed``, ``simulation_kite`` and ``sweep``.
+    camera_logs, operator_logs : lists of paths
+        GPX logs, one pair per flight of ``observed.flights`` (same order).
+    crs : str
+        Site CRS (m) the fixes are projected to.
+
+    Returns
+    -------
+    ObservedAngles
+        Paired fixes (``time`` as ISO text), their summary per flight, and the model's flight
+        angles for the flights' winds and materials with the survey kite (``None`` without winds).
+    """
+    obs = cfg["observed"]
+    frames = []
+    for flight, cam_path, op_path in zip(obs["flights"], camera_logs, operator_logs):
+        angles = flight_angles(read_track(cam_path, crs), read_track(op_path, crs),
+                               schedule_from_config(flight, obs["settle_s"]))
+        angles.insert(0, "kite", flight["kite"])
+        angles.insert(0, "flight", flight["name"])
+        frames.append(angles)
+        log.info("%s: %d paired fixes, angle %.1f-%.1f°", flight["name"], len(angles), angles["flight_angle_deg"].min(),
+                 angles["flight_angle_deg"].max())
+    fixes = pd.concat(frames, ignore_index=True)
+    fixes["time"] = fixes["time"].dt.strftime("%Y-%m-%dT%H:%M:%SZ")
+    summary = summarise_flight_angles(fixes)
+    # Model curves for the flights' winds and line material, with the survey kite.
+    winds = sorted({f["wind_m_s"] for f in obs["flights"] if "wind_m_s" in f})
+    simulated = None
+    if winds:
+        material_names = {f["material"] for f in obs["flights"]}
+        materials = {k: v for k, v in materials_from_config(cfg).items() if k in material_names}
+        simulated = flight_angle_table(
+            materials, kites_from_config(cfg)[cfg["simulation_kite"]], winds, sweep_lengths(cfg),
+            atmosphere_from_config(cfg), cfg["segment_length_m"],
+        )
+    return ObservedAngles(fixes, summary, simulated)

@@ -206,7 +206,33 @@ def photograph_flight(
     cov_grid = GridSpec(extent[0], extent[3], ccfg["cell_m"], len(xs), len(ys), crs)
     stats = stats.merge(poses[["image", "strip", "z_m"]], on="image")
     core_counts = counts[core] if core.any() else counts.ravel()
-    summary = pd.DataFrame(
+    summary = flight_summary(poses, stats, overlap, core_counts, obs, per_target, ccfg["min_images"], render_s,
+                             render_cpu_s, threads)
+    log.info("summary:\n%s", summary.to_string(index=False))
+    if core_counts.min() < ccfg["min_images"]:
+        log.warning("some core ground points are seen by fewer than %d images (min %d): SfM may leave gaps",
+                    ccfg["min_images"], int(core_counts.min()))
+    return FlightPhotos(camera, truth, obs, survey, counts.astype(np.float32), cov_grid, stats, summary)
+
+
+def flight_summary(
+    poses: pd.DataFrame,
+    stats: pd.DataFrame,
+    overlap: pd.DataFrame,
+    core_counts: np.ndarray,
+    obs: pd.DataFrame,
+    per_target: pd.Series,
+    min_images: int,
+    render_s: float,
+    render_cpu_s: float,
+    threads: int,
+) -> pd.DataFrame:
+    """The ``flight_summary.csv`` table (``quantity, value, unit``) of :func:`photograph_flight`.
+
+    ``core_counts``: images per ground point in the site's core; ``per_target``: GCP
+    observations per target; ``min_images``: ``flight.coverage.min_images``.
+    """
+    return pd.DataFrame(
         [
             ("images", len(poses), "count"),
             ("strips", poses["strip"].nunique(), "count"),
@@ -217,8 +243,7 @@ def photograph_flight(
             ("forward_overlap_min", overlap["forward_overlap"].min() if len(overlap) else np.nan, "fraction"),
             ("core_images_per_point_min", int(core_counts.min()), "count"),
             ("core_images_per_point_median", float(np.median(core_counts)), "count"),
-            (f"core_share_with_{ccfg['min_images']}_or_more", float(np.mean(core_counts >= ccfg["min_images"])),
-             "fraction"),
+            (f"core_share_with_{min_images}_or_more", float(np.mean(core_counts >= min_images)), "fraction"),
             ("motion_blur_max", stats["blur_px"].max(), "px"),
             ("gcp_observations", len(obs), "count"),
             ("gcp_targets_digitised", int((per_target > 0).sum()), "count"),
@@ -230,11 +255,6 @@ def photograph_flight(
         ],
         columns=["quantity", "value", "unit"],
     )
-    log.info("summary:\n%s", summary.to_string(index=False))
-    if core_counts.min() < ccfg["min_images"]:
-        log.warning("some core ground points are seen by fewer than %d images (min %d): SfM may leave gaps",
-                    ccfg["min_images"], int(core_counts.min()))
-    return FlightPhotos(camera, truth, obs, survey, counts.astype(np.float32), cov_grid, stats, summary)
 
 
 # --------------------------------------------------------------------------- flight_figures
