@@ -118,7 +118,7 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     """Whole gully mapping chain as the gully_map rule runs it, with the default site's
     ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
     sys.path.insert(0, str(REPO / "src"))
-    from kitegully.gully.pipeline import GullyParams, map_gullies
+    from kitegully.gully.pipeline import GullyParams, map_gullies, map_raster
     from kitegully.io.raster import read_raster, write_raster
     from kitegully.io.vectors import write_vector
 
@@ -130,9 +130,7 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     t1 = time.perf_counter()
     out = Path(out_dir)
     write_raster(out / "depth.tif", res.depth, grid)
-    gm = res.gully.astype(np.uint8)
-    gm[~np.isfinite(dem)] = 255
-    write_raster(out / "gully_map.tif", gm, grid, nodata=255)
+    write_raster(out / "gully_map.tif", map_raster(res.gully, np.isfinite(dem)), grid, nodata=255)
     write_vector(res.lines, out / "gully_network.gpkg")
     write_vector(res.extracted_lines, out / "gully_network_mapped.gpkg")
     write_vector(res.polygons, out / "gully_polygons.gpkg")
