@@ -13,4 +13,6 @@ Modules, one job each:
                  area errors.
 ``scene``        the whole chain for one orthophoto + DEM.
 ``kite``         the chain in tiles for a site-wide orthophoto + DSM.
+``products``     one function per rule: classified scene, scene evaluation and figure,
+                 summary over scenes, kite-scale map figure and accuracy.
 """

@@ -2,5 +2,7 @@
 
 Modules: ``line`` (quasi-static line shape and kite position), ``planning`` (camera,
 GSD, footprints, overlap, stereo precision), ``gps`` (flight angles from paired GPS logs,
-synthetic logs), ``config`` (building the model objects from a site config), ``plots``.
+synthetic logs), ``config`` (building the model objects from a site config), ``plots``,
+``products`` (one function per rule: ``simulate_tether``, ``plan_flights``,
+``synthetic_gps_logs``, ``observed_flight_angles``).
 """
