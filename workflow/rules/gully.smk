@@ -1,5 +1,5 @@
 # Gully network mapping and its validation (Feurer et al. 2018 sect. 2.5-2.6.2, Figs 3, 4, 9b;
-# METHODS.md 1.5-1.6). Library: kitegully.terrain, kitegully.gully, kitegully.evaluate.network.
+# METHODS.md 1.5-1.6). Library: kitegully.terrain, kitegully.gully (validation.score_network: the scoring protocol), kitegully.evaluate.network.
 
 from kitegully.gully.pipeline import GullyParams as _GullyParams
 
