@@ -86,6 +86,10 @@ def test_validation_params_from_config_and_checks():
         {"tolerance_m": 5, "extra_tolerances_m": [15, 2], "reference_join_m": 3, "catchment_file": None}
     )
     assert p == ValidationParams(5.0, (15.0, 2.0), 3.0) and p.tolerances_m == [2.0, 5.0, 15.0]
+    with pytest.raises(InputError, match="^gully.validation: .*reference_join_m"):
+        ValidationParams.from_config({"tolerance_m": 5, "extra_tolerances_m": []})
+    with pytest.raises(InputError, match="^gully.validation: .*tolerance"):
+        ValidationParams.from_config({"tolerance_m": 5, "extra_tolerances_m": [], "reference_join_m": 3, "tolerance": 1})
     with pytest.raises(ValueError, match="tolerances must be >= 0"):
         ValidationParams(-1.0, (), 3.0)
     with pytest.raises(ValueError, match="reference_join_m must be >= 0"):

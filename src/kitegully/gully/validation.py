@@ -20,6 +20,7 @@ import pandas as pd
 from shapely.geometry.base import BaseGeometry
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.evaluate.network import (
     NetworkScorer,
     area_scores,
@@ -59,7 +60,12 @@ class ValidationParams:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "ValidationParams":
-        """Build from the ``gully.validation`` section (``catchment_file`` is an input, not read here)."""
+        """Build from the ``gully.validation`` section (``catchment_file`` is an input, not read here).
+
+        Raises :class:`kitegully.InputError` naming the first missing or unknown key.
+        """
+        config_section(cfg, "gully.validation", ("tolerance_m", "extra_tolerances_m", "reference_join_m"),
+                       optional=("catchment_file",))
         return cls(
             tolerance_m=float(cfg["tolerance_m"]),
             extra_tolerances_m=tuple(float(t) for t in cfg["extra_tolerances_m"]),

@@ -7,7 +7,7 @@ reflectance), ``targets`` (GCP placement and painting), ``survey`` (RTK points, 
 network, digitised heads), ``epochs`` (second-epoch erosion), ``site`` (configuration,
 planning and the tiled generator) and ``figures`` (report figures). The flight stage's
 library is here too: ``flight`` (strips, kite and camera motion, GPS), ``render_flight``,
-``flight_gcps`` and ``flight_products`` (one function per flight rule).
+``flight_gcps`` and ``flight_stage`` (one function per flight rule).
 
 Entry points of the twin stage (docs/architecture.md): :func:`build_site` (the plan),
 :func:`generate_epoch` (truth and observed files of one epoch) and :func:`write_site_json`,

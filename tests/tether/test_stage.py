@@ -1,4 +1,4 @@
-"""The tether stage's products (kitegully.tether.products) on the tiny site's tether section."""
+"""The tether stage's products (kitegully.tether.stage) on the tiny site's tether section."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from kitegully.config import load_yaml
 from kitegully.tether.analysis import flight_angle_table
 from kitegully.tether.config import atmosphere_from_config, kites_from_config, materials_from_config, sweep_lengths
-from kitegully.tether.products import PLAN_KEYS, SIMULATION_KEYS, plan_flights, simulate_tether
+from kitegully.tether.stage import PLAN_KEYS, SIMULATION_KEYS, plan_flights, simulate_tether
 from snakemake_utils import REPO
 
 TETHER = load_yaml(REPO / "config" / "sites" / "tiny_twin.yaml")["tether"]
@@ -46,7 +46,7 @@ def test_plan_flights_reads_only_its_keys():
 
 def test_synthetic_logs_give_back_their_flight_angles(tmp_path):
     from kitegully.tether.gps import write_gpx
-    from kitegully.tether.products import observed_flight_angles, synthetic_gps_logs
+    from kitegully.tether.stage import observed_flight_angles, synthetic_gps_logs
 
     cfg = _keys(("lines", "kites", "kite_model", "atmosphere", "segment_length_m", "observed", "simulation_kite", "sweep"))
     crs = load_yaml(REPO / "config" / "sites" / "tiny_twin.yaml")["site"]["crs"]

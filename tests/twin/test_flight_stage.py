@@ -1,4 +1,4 @@
-"""The flight stage's products (kitegully.twin.flight_products) on a flat constructed twin."""
+"""The flight stage's products (kitegully.twin.flight_stage) on a flat constructed twin."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import shapely
 from kitegully.config import load_yaml
 from kitegully.io.raster import GridSpec
 from kitegully.twin.camera import camera_from_config
-from kitegully.twin.flight_products import fly_kite, image_footprints
+from kitegully.twin.flight_stage import fly_kite, image_footprints
 from snakemake_utils import REPO
 
 SITE = load_yaml(REPO / "config" / "sites" / "tiny_twin.yaml")
@@ -57,7 +57,7 @@ def test_image_footprints_of_a_nadir_camera_over_flat_ground():
 
 
 def test_flight_summary_rows():
-    from kitegully.twin.flight_products import flight_summary
+    from kitegully.twin.flight_stage import flight_summary
 
     poses = pd.DataFrame({"image": ["a", "b", "c"], "strip": [0, 0, 1]})
     stats = pd.DataFrame({"gsd_m": [0.02, 0.03, 0.04], "blur_px": [0.1, 0.5, 0.2]})

@@ -1,4 +1,4 @@
-"""The obia stage's products (kitegully.obia.products) on constructed masks and tables."""
+"""The obia stage's products (kitegully.obia.stage) on constructed masks and tables."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 from kitegully import InputError
 from kitegully.io.raster import GridSpec, write_raster
-from kitegully.obia.products import classify_scene_products, evaluate_scene, kite_accuracy, summarise_scenes
+from kitegully.obia.stage import classify_scene_products, evaluate_scene, kite_accuracy, summarise_scenes
 
 CRS = "EPSG:32632"
 INFO = {"valley": 0.1, "otsu": 0.12, "bimodal": True, "reason": ""}
