@@ -5,7 +5,7 @@
 # Kite-scale application: bare-soil map of the site's dense orthophoto; only built when
 # obia.kite_scale.enabled is true (needs the dense stage's orthophoto.tif and dsm.tif).
 
-from kitegully.obia.products import METHOD_KEYS as _OBIA_METHOD_KEYS
+from kitegully.obia.stage import METHOD_KEYS as _OBIA_METHOD_KEYS
 from kitegully.twin.closerange import scene_names as _obia_scene_names
 
 if "obia" in config:

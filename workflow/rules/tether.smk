@@ -1,7 +1,7 @@
 # Kite line model, observed flight angles and flight plan (Feurer et al. 2018 sect. 2.2-2.3).
 
 from kitegully.tether.config import check_tether_config
-from kitegully.tether.products import PLAN_KEYS as _TETHER_PLAN_KEYS, SIMULATION_KEYS as _TETHER_SIMULATION_KEYS
+from kitegully.tether.stage import PLAN_KEYS as _TETHER_PLAN_KEYS, SIMULATION_KEYS as _TETHER_SIMULATION_KEYS
 
 if "tether" in config:
 

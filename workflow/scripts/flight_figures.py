@@ -7,7 +7,7 @@ from kitegully.logs import setup_script_logging
 from kitegully.twin.camera import Camera
 from kitegully.twin.flight import read_extent
 from kitegully.twin.flight_gcps import read_odm_gcp_list
-from kitegully.twin.flight_products import flight_map, sample_images
+from kitegully.twin import flight_map, sample_images
 
 log = setup_script_logging(snakemake.log[0])
 inp, cfg = snakemake.input, snakemake.params.flight

@@ -5,7 +5,7 @@ from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
 from kitegully.twin.flight import read_extent
 from kitegully.twin.flight_gcps import write_odm_gcp_list
-from kitegully.twin.flight_products import photograph_flight
+from kitegully.twin import photograph_flight
 
 log = setup_script_logging(snakemake.log[0])
 inp, out, crs = snakemake.input, snakemake.output, snakemake.params.crs

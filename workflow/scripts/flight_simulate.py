@@ -4,7 +4,7 @@ from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
 from kitegully.twin.flight import read_extent, write_gpx
-from kitegully.twin.flight_products import fly_kite
+from kitegully.twin import fly_kite
 
 log = setup_script_logging(snakemake.log[0])
 out, crs = snakemake.output, snakemake.params.crs

@@ -1,6 +1,6 @@
 """Rule gully_area_scores (twin only, evaluation): gully map vs truth polygons, cell by cell."""
 
-from kitegully.gully.validation import score_gully_areas
+from kitegully.gully import score_gully_areas
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector

@@ -3,7 +3,7 @@
 import numpy as np
 
 from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads
-from kitegully.gully.pipeline import GullyParams, gully_summary, map_gullies, map_raster
+from kitegully.gully import GullyParams, gully_summary, map_gullies, map_raster
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector

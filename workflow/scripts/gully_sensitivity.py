@@ -4,8 +4,8 @@ import numpy as np
 
 from kitegully.evaluate.network import rasterize_polygons
 from kitegully.gully.network import GullyNetwork
-from kitegully.gully.pipeline import GullyParams
-from kitegully.gully.sensitivity import gully_sensitivity
+from kitegully.gully import GullyParams
+from kitegully.gully import gully_sensitivity
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector

@@ -6,7 +6,7 @@ unfiltered numbers are reported beside them.
 """
 
 from kitegully.gully.plots import validation_map
-from kitegully.gully.validation import ValidationParams, catchment_outline, check_reference, score_network
+from kitegully.gully import ValidationParams, catchment_outline, check_reference, score_network
 from kitegully.io.figures import save_figure
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table

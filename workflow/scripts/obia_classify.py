@@ -7,7 +7,7 @@ import pandas as pd
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.io.vectors import write_vector
 from kitegully.logs import setup_script_logging
-from kitegully.obia.products import classify_scene_products
+from kitegully.obia import classify_scene_products
 
 log = setup_script_logging(snakemake.log[0])
 inp, out = snakemake.input, snakemake.output

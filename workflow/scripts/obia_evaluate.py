@@ -9,7 +9,7 @@ from kitegully.io.figures import save_figure
 from kitegully.io.raster import read_raster
 from kitegully.logs import setup_script_logging
 from kitegully.obia.accuracy import accuracies
-from kitegully.obia.products import evaluate_scene, scene_figure
+from kitegully.obia import evaluate_scene, scene_figure
 
 log = setup_script_logging(snakemake.log[0])
 inp, out, scene = snakemake.input, snakemake.output, snakemake.wildcards.scene

@@ -1,6 +1,6 @@
 """Rule obia_kite_accuracy: the kite-scale bare-soil map against the twin's land-cover truth (evaluation rule).
 
-Reference classes and the per-class table: :func:`kitegully.obia.products.kite_accuracy`.
+Reference classes and the per-class table: :func:`kitegully.obia.stage.kite_accuracy`.
 """
 
 import pandas as pd
@@ -8,7 +8,7 @@ import pandas as pd
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
-from kitegully.obia.products import kite_accuracy
+from kitegully.obia import kite_accuracy
 
 log = setup_script_logging(snakemake.log[0])
 inp, par, out = snakemake.input, snakemake.params, snakemake.output

@@ -8,7 +8,7 @@ from kitegully.io.vectors import write_vector
 from kitegully.logs import setup_script_logging
 from kitegully.obia.classify import eroded_polygons
 from kitegully.obia.kite import bare_soil_map
-from kitegully.obia.products import kite_map_figure
+from kitegully.obia import kite_map_figure
 from kitegully.obia.scene import ObiaParams
 
 log = setup_script_logging(snakemake.log[0])

@@ -5,7 +5,7 @@ import json
 from kitegully.io.figures import save_figure
 from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
-from kitegully.obia.products import summarise_scenes, summary_figure
+from kitegully.obia import summarise_scenes, summary_figure
 
 log = setup_script_logging(snakemake.log[0])
 out = snakemake.output

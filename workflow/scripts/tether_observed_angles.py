@@ -3,7 +3,7 @@
 from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
 from kitegully.tether.plots import plot_observed_flight_angles
-from kitegully.tether.products import observed_flight_angles
+from kitegully.tether import observed_flight_angles
 
 log = setup_script_logging(snakemake.log[0])
 res = observed_flight_angles(snakemake.params.cfg, snakemake.input.camera, snakemake.input.operator, snakemake.params.crs)

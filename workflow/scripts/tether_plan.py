@@ -2,7 +2,7 @@
 
 from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
-from kitegully.tether.products import plan_flights
+from kitegully.tether import plan_flights
 
 log = setup_script_logging(snakemake.log[0])
 plan, lengths = plan_flights(snakemake.params.tether)

@@ -3,7 +3,7 @@
 from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
 from kitegully.tether.plots import plot_flight_angle_vs_length, plot_line_shapes
-from kitegully.tether.products import simulate_tether
+from kitegully.tether import simulate_tether
 
 log = setup_script_logging(snakemake.log[0])
 cfg = snakemake.params.tether

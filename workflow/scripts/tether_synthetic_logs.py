@@ -2,7 +2,7 @@
 
 from kitegully.logs import setup_script_logging
 from kitegully.tether.gps import write_gpx
-from kitegully.tether.products import synthetic_gps_logs
+from kitegully.tether import synthetic_gps_logs
 
 log = setup_script_logging(snakemake.log[0])
 crs = snakemake.params.crs

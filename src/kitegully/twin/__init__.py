@@ -18,7 +18,9 @@ importing a submodule stays light.
 from importlib import import_module
 
 _EXPORTS = {"TwinParams": "site", "build_site": "site", "generate_epoch": "site", "write_site_json": "site",
-            "PLAN_KEYS": "site", "EPOCH_KEYS": "site", "EPOCH2_KEYS": "site"}
+            "PLAN_KEYS": "site", "EPOCH_KEYS": "site", "EPOCH2_KEYS": "site",
+            "fly_kite": "flight_stage", "photograph_flight": "flight_stage", "flight_map": "flight_stage",
+            "sample_images": "flight_stage"}
 __all__ = sorted(_EXPORTS)
 
 
