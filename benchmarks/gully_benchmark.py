@@ -118,7 +118,7 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     """Whole gully mapping chain as the gully_map rule runs it, with the default site's
     ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
     sys.path.insert(0, str(REPO / "src"))
-    from kitegully.gully.pipeline import GullyParams, map_gullies
+    from kitegully.gully.pipeline import GullyParams, map_gullies, map_raster
     from kitegully.io.raster import read_raster, write_raster
     from kitegully.io.vectors import write_vector
 
@@ -130,9 +130,7 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     t1 = time.perf_counter()
     out = Path(out_dir)
     write_raster(out / "depth.tif", res.depth, grid)
-    gm = res.gully.astype(np.uint8)
-    gm[~np.isfinite(dem)] = 255
-    write_raster(out / "gully_map.tif", gm, grid, nodata=255)
+    write_raster(out / "gully_map.tif", map_raster(res.gully, np.isfinite(dem)), grid, nodata=255)
     write_vector(res.lines, out / "gully_network.gpkg")
     write_vector(res.extracted_lines, out / "gully_network_mapped.gpkg")
     write_vector(res.polygons, out / "gully_polygons.gpkg")
@@ -146,11 +144,11 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
 
 
 def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
-    """The gully_sensitivity rule's work (3 sigmas x 3 thresholds, network scores), in a child process."""
+    """The gully_sensitivity rule's work (its library function with the default site's settings), in a child process."""
     sys.path.insert(0, str(REPO / "src"))
-    from kitegully.evaluate.network import footprint
-    from kitegully.gully.network import GullyNetwork, network_lines
-    from kitegully.gully.sensitivity import sensitivity_table
+    from kitegully.gully.network import GullyNetwork
+    from kitegully.gully.pipeline import GullyParams
+    from kitegully.gully.sensitivity import gully_sensitivity
     from kitegully.io.raster import read_raster
     from kitegully.io.vectors import read_vector
 
@@ -159,20 +157,19 @@ def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
     depth, _ = read_raster(Path(out_dir) / "depth.tif")
     net = GullyNetwork.load(Path(out_dir) / "network.npz")
     reference = read_vector(Path(out_dir) / "reference.gpkg")
-    domain = footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(net, grid).geometry])
     g = site_gully_config()
-    sensitivity_table(dem, grid, net, g["sensitivity"]["sigmas_m"], g["sensitivity"]["depth_thresholds_m"],
-                      g["min_patch_volume_m3"], g["buffer_m"], g["connectivity"], g["truncate_sigmas"],
-                      reference=reference, tolerance_m=g["validation"]["tolerance_m"], domain=domain,
-                      workers=threads, known_depths={g["sigma_m"]: depth})
+    gully_sensitivity(dem, grid, net, depth, GullyParams.from_config(g), g["sensitivity"]["sigmas_m"],
+                      g["sensitivity"]["depth_thresholds_m"], g["validation"]["tolerance_m"], reference=reference,
+                      workers=threads)
     print(json.dumps({"sensitivity_s": time.perf_counter() - t0}))
 
 
 def run_validation(dem_path: str, out_dir: str) -> None:
-    """The gully_validate rule's work (as workflow/scripts/gully_validate.py), in a child process."""
+    """The gully_validate rule's work (:func:`kitegully.gully.validation.score_network` with the default
+    site's ``gully.validation`` settings, then the Fig. 9b map), in a child process."""
     sys.path.insert(0, str(REPO / "src"))
-    from kitegully.evaluate.network import NetworkScorer, footprint, scored_reference, validation_geometries
     from kitegully.gully.plots import validation_map
+    from kitegully.gully.validation import UNFILTERED, ValidationParams, score_network
     from kitegully.io.figures import save_figure
     from kitegully.io.raster import read_raster
     from kitegully.io.vectors import read_vector
@@ -180,29 +177,20 @@ def run_validation(dem_path: str, out_dir: str) -> None:
     t = {}
     t0 = time.perf_counter()
     out = Path(out_dir)
+    params = ValidationParams.from_config(site_gully_config()["validation"])
     reference = read_vector(out / "reference.gpkg")
     extracted = read_vector(out / "gully_network_mapped.gpkg")
     gully, grid = read_raster(out / "gully_map.tif")
-    domain = footprint(gully != 255, grid, near=[*reference.geometry, *extracted.geometry])
-    scored, _ns, _c = scored_reference(reference, domain, 3.0)
-    t["footprint_and_filter_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    scorers = [NetworkScorer([scored], domain, reference_all=reference), NetworkScorer(reference, domain)]
-    clipped = scorers[1].clip(extracted)
-    good = {}
-    for tol in (2.0, 5.0, 15.0):
-        ebuf = NetworkScorer.buffer(clipped, tol)
-        for sc in scorers:
-            v = sc.score(extracted, tol, clipped, ebuf)
-        good[tol] = float(v["percent"].iloc[1])
-    t["scores_s"] = time.perf_counter() - t0
+    res = score_network(reference, extracted, gully != 255, grid, params)
+    t["score_network_s"] = time.perf_counter() - t0
+    tol = res.tolerances[(res.tolerances["reference_lines"] == UNFILTERED) & (res.tolerances["category"] == "good_fit")]
+    good = dict(zip(tol["tolerance_m"], tol["percent"]))
     t0 = time.perf_counter()
     dem, _ = read_raster(dem_path)
-    pieces = validation_geometries([scored], extracted, 5.0, domain, reference_all=reference)
-    fig = validation_map(dem, gully == 1, grid, pieces, 5.0)
+    fig = validation_map(dem, gully == 1, grid, res.pieces, params.tolerance_m)
     save_figure(fig, out / "validation_map.png")
     t["figure_s"] = time.perf_counter() - t0
-    print(json.dumps({**t, "good_fit_percent": good}))
+    print(json.dumps({**t, "tolerances_m": params.tolerances_m, "good_fit_percent": good}))
 
 
 # --------------------------------------------------------------------------- GRASS and pysheds
@@ -364,7 +352,9 @@ def main() -> None:
         if p.returncode != 0:
             raise SystemExit(f"sensitivity run failed:\n{p.stderr[-3000:]}")
         wall_s = time.perf_counter() - t0
-        say(f"- sensitivity table (3 sigmas x 3 thresholds, depth at 10 m reused, network scored at 5 m): "
+        g = site_gully_config()
+        say(f"- sensitivity table ({len(g['sensitivity']['sigmas_m'])} sigmas x {len(g['sensitivity']['depth_thresholds_m'])} "
+            f"thresholds, depth at {g['sigma_m']:g} m reused, network scored at {g['validation']['tolerance_m']:g} m): "
             f"wall time {wall_s:.1f} s, peak memory of any child so far {peak_rss_children_gb():.2f} GB")
         t0 = time.perf_counter()
         p = subprocess.run([sys.executable, __file__, "--val-child", str(dem_tif), str(tmp / "out")],
@@ -373,9 +363,11 @@ def main() -> None:
             raise SystemExit(f"validation run failed:\n{p.stderr[-3000:]}")
         wall_v = time.perf_counter() - t0
         vinfo = json.loads(p.stdout.strip().splitlines()[-1])
-        say(f"- network validation (footprint, reference filter, 3 tolerances x 2 reference sets, Fig. 9b map): "
+        say(f"- network validation (score_network: footprint, reference filter, {len(vinfo['tolerances_m'])} tolerances "
+            "x 2 reference sets; Fig. 9b map): "
             f"wall time {wall_v:.1f} s (" + ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in vinfo.items() if k.endswith("_s"))
-            + f"); good fit against the constructed centrelines at 2/5/15 m: "
+            + "); good fit against all the constructed centrelines at "
+            + "/".join(f"{t:g}" for t in vinfo["tolerances_m"]) + " m: "
             + " / ".join(f"{v:.1f} %" for v in vinfo["good_fit_percent"].values()))
         total = wall + wall_s + wall_v
         say(f"- **whole stage: {total:.1f} s** (target < 180 s), peak memory of any rule {peak_rss_children_gb():.2f} GB "

@@ -46,10 +46,7 @@ from kitegully.io.raster import write_raster  # noqa: E402
 from kitegully.io.tables import write_table  # noqa: E402
 from kitegully.obia.accuracy import accuracies, confusion_matrix  # noqa: E402
 from kitegully.obia.classify import classify_segments, segment_means  # noqa: E402
-from kitegully.obia.features import normalise_features  # noqa: E402
-from kitegully.obia.scene import ObiaParams, classify_scene, marker_mask  # noqa: E402
-from kitegully.obia.seeds import generate_seeds  # noqa: E402
-from kitegully.obia.slope import wood_slope  # noqa: E402
+from kitegully.obia.scene import ObiaParams, classify_scene, marker_mask, segment  # noqa: E402
 from kitegully.obia.srg import seeded_region_growing  # noqa: E402
 from kitegully.twin.closerange import generate_scene, scene_names, scene_origin  # noqa: E402
 
@@ -219,14 +216,10 @@ def main() -> None:
         })
         print({k: v for k, v in rows[-1].items()}, flush=True)
 
-    t0 = time.perf_counter()
-    slope = wood_slope(scene.dem, scene.grid.cell, params.slope_window_cells)
-    feats = normalise_features([rgb[0], rgb[1], rgb[2], slope], valid)
-    seeds = generate_seeds(feats, valid, params.seed_bandwidth_cells)
-    t_seeds = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    labels, _ = seeded_region_growing(feats, seeds, valid, params.position_weight, params.growing_reference)
-    t_grow = time.perf_counter() - t0
+    seg = segment(rgb[0], rgb[1], rgb[2], scene.dem, scene.grid.cell, valid, params)  # classify_scene's first phase
+    feats, seeds, labels = seg.features, seg.seeds, seg.segments
+    t_seeds = seg.timings_s["features"] + seg.timings_s["seeds"]
+    t_grow = seg.timings_s["growing"]
     add(f"kitegully SRG (seeds + numba growing, reference={params.growing_reference})", labels, t_seeds + t_grow, int(seeds.max()),
         f"features+seeds {t_seeds:.2f} s, growing {t_grow:.2f} s")
 

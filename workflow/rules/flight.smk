@@ -2,7 +2,17 @@
 # the GCP measurements and the GPS logs. Twin sites only; reads the twin's truth because it
 # *creates* the observations (it is the simulated camera), never to evaluate anything.
 
-FLIGHT_TWIN_READY = Path("workflow/rules/twin.smk").exists()
+FLIGHT = config.get("flight", {})
+# Each rule gets only the flight keys it reads (the params rerun trigger): rendering, GCP
+# digitising, coverage and figure settings do not rerun the flight simulation.
+FLIGHT_RENDER_KEYS = ("camera", "render", "gcps", "coverage")
+FLIGHT_FIGURE_KEYS = ("wind_from_deg", "wind_speed_m_s", "line_lengths_m", "figures")
+FLIGHT_SIMULATE = {k: v for k, v in FLIGHT.items() if k not in ("render", "gcps", "coverage", "figures", "threads")}
+# the line model of the tether section, for the kite's offset from the operator
+FLIGHT_TETHER = {
+    k: config["tether"][k] for k in ("lines", "kites", "kite_model", "atmosphere", "segment_length_m")
+    if k in config.get("tether", {})
+}
 
 
 rule flight_simulate:
@@ -19,8 +29,8 @@ rule flight_simulate:
         operator_gps_csv=result("flight", "observed/operator_gps.csv"),
         strips=result("flight", "flight_strips.csv"),
     params:
-        flight=config.get("flight"),
-        tether=config.get("tether"),
+        flight=FLIGHT_SIMULATE,
+        tether=FLIGHT_TETHER,
         seed=config["seed"],
         crs=config["site"]["crs"],
     log:
@@ -50,10 +60,10 @@ rule flight_render:
             category="Flight",
         ),
     params:
-        flight=config.get("flight"),
+        flight={k: FLIGHT[k] for k in FLIGHT_RENDER_KEYS if k in FLIGHT},
         seed=config["seed"],
         crs=config["site"]["crs"],
-    threads: config.get("flight", {}).get("threads", 2)
+    threads: FLIGHT.get("threads", 2)
     log:
         logfile("flight", "flight_render"),
     benchmark:
@@ -76,14 +86,14 @@ rule flight_figures:
         flight_map=report(result("flight", "flight_map.png"), caption=caption("flight_map"), category="Flight"),
         samples=report(result("flight", "sample_images.png"), caption=caption("flight_samples"), category="Flight"),
     params:
-        flight=config.get("flight"),
+        flight={k: FLIGHT[k] for k in FLIGHT_FIGURE_KEYS if k in FLIGHT},
     log:
         logfile("flight", "flight_figures"),
     script:
         "../scripts/flight_figures.py"
 
 
-if IS_TWIN and FLIGHT_TWIN_READY and "flight" in config:
+if IS_TWIN and "flight" in config:
     add_targets(
         result("flight", "observed/gcp_list.txt"),
         result("flight", "observed/camera_gps.gpx"),

@@ -1,9 +1,15 @@
 # Gully network mapping and its validation (Feurer et al. 2018 sect. 2.5-2.6.2, Figs 3, 4, 9b;
-# METHODS.md 1.5-1.6). Library: kitegully.terrain, kitegully.gully, kitegully.evaluate.network.
+# METHODS.md 1.5-1.6). Library: kitegully.terrain, kitegully.gully (validation.score_network: the scoring protocol), kitegully.evaluate.network.
+
+from kitegully.gully.pipeline import GullyParams as _GullyParams
 
 if "gully" in config:
 
     GULLY = config["gully"]
+    # Each rule gets only the keys it reads (the params rerun trigger): the mapping keys are
+    # exactly the fields of GullyParams, so a change to gully.validation.* or
+    # gully.sensitivity.* does not rerun gully_map.
+    GULLY_MAPPING = {k: GULLY[k] for k in _GullyParams.__dataclass_fields__}
     GULLY_CAT = "Gully network"
     GULLY_ATTRIBUTION = config["site"].get("attribution")
     if GULLY["dem"] == "truth_plus_noise" and not IS_TWIN:
@@ -15,7 +21,7 @@ if "gully" in config:
         """The DEM the gullies are mapped on, chosen by gully.dem."""
         if GULLY["dem"] == "dense":
             return result("dense", "dsm.tif")
-        # Evaluation stand-in until the dense DSM exists (issue 6): NOT photogrammetric.
+        # gully.dem: truth_plus_noise, an evaluation stand-in (twins only): NOT photogrammetric.
         return result("gully", "standin_dem_truth_plus_noise.tif")
 
     GULLY_HEADS = GULLY["heads_file"] or result("twin", "observed/gully_heads.gpkg")
@@ -58,7 +64,7 @@ if "gully" in config:
             patches=result("gully", "depth_patches.csv"),
             summary=report(result("gully", "gully_summary.csv"), caption=caption("gully_summary"), category=GULLY_CAT),
         params:
-            cfg=GULLY,
+            mapping=GULLY_MAPPING,
             dem_source=GULLY["dem"],
             crs=config["site"]["crs"],
         threads: GULLY["threads"]
@@ -79,7 +85,9 @@ if "gully" in config:
         output:
             figure=report(result("gully", "gully_section.png"), caption=caption("gully_section"), category=GULLY_CAT),
         params:
-            cfg=GULLY,
+            half_length_m=GULLY["section_half_length_m"],
+            sigma_m=GULLY["sigma_m"],
+            depth_threshold_m=GULLY["depth_threshold_m"],
             attribution=GULLY_ATTRIBUTION,
         log:
             logfile("gully", "section"),
@@ -110,7 +118,7 @@ if "gully" in config:
                     result("gully", "gully_validation_map.png"), caption=caption("gully_validation_map"), category=GULLY_CAT
                 ),
             params:
-                cfg=GULLY,
+                validation={k: v for k, v in GULLY["validation"].items() if k != "catchment_file"},
                 crs=config["site"]["crs"],
                 attribution=GULLY_ATTRIBUTION,
             log:
@@ -150,7 +158,9 @@ if "gully" in config:
         output:
             table=report(result("gully", "gully_sensitivity.csv"), caption=caption("gully_sensitivity"), category=GULLY_CAT),
         params:
-            cfg=GULLY,
+            sensitivity=GULLY["sensitivity"],
+            mapping=GULLY_MAPPING,
+            tolerance_m=GULLY["validation"]["tolerance_m"],
             crs=config["site"]["crs"],
         threads: GULLY["threads"]
         log:
@@ -161,13 +171,4 @@ if "gully" in config:
             "../scripts/gully_sensitivity.py"
 
     GULLY_TARGETS.append(rules.gully_sensitivity.output.table)
-    # The gully stage needs the twin (truth DTM, heads, field network) or the dense DSM.
-    # Until the stage that makes them has a rule file, leave the gully outputs out of `all`
-    # (they can still be requested explicitly when the inputs exist).
-    _gully_needs = ["twin"] if IS_TWIN and GULLY["heads_file"] is None else []
-    _gully_needs += ["dense"] if GULLY["dem"] == "dense" else ["twin"]
-    _gully_missing = sorted({s for s in _gully_needs if not Path(f"workflow/rules/{s}.smk").exists()})
-    if _gully_missing:
-        logger.warning(f"gully stage left out of `all`: no rule file for stage(s) {', '.join(_gully_missing)} yet")
-    else:
-        add_targets(*GULLY_TARGETS)
+    add_targets(*GULLY_TARGETS)

@@ -5,12 +5,16 @@
 # Kite-scale application: bare-soil map of the site's dense orthophoto; only built when
 # obia.kite_scale.enabled is true (needs the dense stage's orthophoto.tif and dsm.tif).
 
+from kitegully.obia.stage import METHOD_KEYS as _OBIA_METHOD_KEYS
 from kitegully.twin.closerange import scene_names as _obia_scene_names
 
 if "obia" in config:
 
     OBIA = config["obia"]
     OBIA_SCENES = _obia_scene_names(len(OBIA["scenes"]["list"])) if IS_TWIN else []
+    # the method sub-sections only (ObiaParams.from_config): a change to obia.scenes or
+    # obia.kite_scale does not rerun the classification of the other products
+    OBIA_METHOD = {k: OBIA[k] for k in _OBIA_METHOD_KEYS}
 
 
     def _obia_scene(name):
@@ -58,7 +62,7 @@ if "obia" in config:
             histogram=_obia_scene("exg_histogram.csv"),
             info=_obia_scene("threshold.json"),
         params:
-            obia=OBIA,
+            obia=OBIA_METHOD,
         log:
             logfile("obia", "classify_{scene}"),
         benchmark:
@@ -122,7 +126,9 @@ if "obia" in config:
             info=result("obia", "kite/threshold.json"),
             figure=report(result("obia", "kite/bare_soil_map.png"), caption=caption("obia_kite_map"), category="Bare soil (OBIA)", subcategory="Kite scale"),
         params:
-            obia=OBIA,
+            obia=OBIA_METHOD,
+            tile_cells=OBIA["kite_scale"]["tile_cells"],
+            figure_max_px=OBIA["kite_scale"]["figure_max_px"],
             attribution=config["site"].get("attribution"),
         log:
             logfile("obia", "kite_scale"),

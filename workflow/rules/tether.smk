@@ -1,6 +1,7 @@
 # Kite line model, observed flight angles and flight plan (Feurer et al. 2018 sect. 2.2-2.3).
 
 from kitegully.tether.config import check_tether_config
+from kitegully.tether.stage import PLAN_KEYS as _TETHER_PLAN_KEYS, SIMULATION_KEYS as _TETHER_SIMULATION_KEYS
 
 if "tether" in config:
 
@@ -10,6 +11,13 @@ if "tether" in config:
     except InputError as _err:
         raise WorkflowError(f"Invalid configuration: {_err}") from None
     TETHER_FLIGHTS = [f["name"] for f in TETHER["observed"]["flights"]]
+
+    def tether_keys(*keys):
+        """The ``tether:`` keys a rule reads, and only those (the params rerun trigger)."""
+        return {k: TETHER[k] for k in keys}
+
+    # line model: materials, kites, atmosphere, discretisation (read by every tether rule)
+    TETHER_MODEL_KEYS = ("lines", "kites", "kite_model", "atmosphere", "segment_length_m")
 
     rule tether_simulation:
         output:
@@ -22,7 +30,7 @@ if "tether" in config:
             ),
             table2=report(result("tether", "table2_comparison.csv"), caption=caption("tether_table2"), category="1 Tether"),
         params:
-            cfg=TETHER,
+            tether=tether_keys(*_TETHER_SIMULATION_KEYS),
         log:
             logfile("tether", "simulation"),
         script:
@@ -37,7 +45,7 @@ if "tether" in config:
                 category="1 Tether",
             ),
         params:
-            cfg=TETHER,
+            tether=tether_keys(*_TETHER_PLAN_KEYS),
         log:
             logfile("tether", "plan"),
         script:
@@ -50,7 +58,7 @@ if "tether" in config:
                 camera=expand(result("tether", "gps_logs/{flight}_camera.gpx"), flight=TETHER_FLIGHTS),
                 operator=expand(result("tether", "gps_logs/{flight}_operator.gpx"), flight=TETHER_FLIGHTS),
             params:
-                cfg=TETHER,
+                cfg=tether_keys(*TETHER_MODEL_KEYS, "observed"),
                 crs=config["site"]["crs"],
                 seed=config["seed"],
             log:
@@ -81,7 +89,7 @@ if "tether" in config:
                 category="1 Tether",
             ),
         params:
-            cfg=TETHER,
+            cfg=tether_keys(*TETHER_MODEL_KEYS, "observed", "simulation_kite", "sweep"),
             crs=config["site"]["crs"],
         log:
             logfile("tether", "observed_angles"),

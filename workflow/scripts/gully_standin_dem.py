@@ -16,6 +16,6 @@ write_raster(
 )
 log.warning(
     "gully stand-in DEM = twin truth DTM + correlated noise (SD %.3g m, correlation %.3g m): this is an evaluation "
-    "stand-in, NOT the photogrammetric DSM; set gully.dem: dense once the dense DSM exists",
+    "stand-in, NOT the photogrammetric DSM; gully.dem: dense maps the dense-matching DSM",
     noise["noise_sd_m"], noise["noise_correlation_m"],
 )

@@ -250,16 +250,58 @@ def scored_reference(
     if join_m < 0:
         raise ValueError(f"join distance must be >= 0, got {join_m}")
     lines = _line_parts(reference)
-    n = len(lines)
     empty = shapely.MultiLineString()
-    if n == 0:
+    if not lines:
         return empty, empty, {"heads": 0, "heads_on_dem": 0, "pieces": 0, "pieces_scored": 0}
+    lengths = np.array([ln.length for ln in lines])
+    near_end = 1e-6 * max(1.0, float(lengths.max()))
+    joins, splits = reference_joins(lines, join_m, near_end)
+    pieces, piece_of, start_of = split_at_junctions(lines, splits, near_end)
+    down, has_in = piece_graph(piece_of, start_of, joins, len(pieces), near_end)
+    heads = np.flatnonzero(~has_in)
+    head_pts = [shapely.Point(pieces[h].coords[0]) for h in heads]
+    inside = np.array([dem_domain.covers(p) for p in head_pts], dtype=bool) if len(heads) else np.zeros(0, bool)
+    scored = downstream_of(heads[inside], down)
+    sc = shapely.union_all([pieces[k] for k in np.flatnonzero(scored)]) if scored.any() else empty
+    ns = shapely.union_all([pieces[k] for k in np.flatnonzero(~scored)]) if (~scored).any() else empty
+    if catchment is not None:
+        outside = sc.difference(catchment)
+        sc = sc.intersection(catchment)
+        ns = shapely.union_all([ns, outside])
+    counts = {
+        "heads": int(len(heads)), "heads_on_dem": int(inside.sum()), "pieces": len(pieces), "pieces_scored": int(scored.sum())
+    }
+    return sc, ns, counts
+
+
+def reference_joins(
+    lines: list[shapely.LineString], join_m: float, near_end: float
+) -> tuple[list[tuple[int, int, float]], list[list[float]]]:
+    """Where every reference line flows into another (first phase of :func:`scored_reference`).
+
+    Parameters
+    ----------
+    lines : list of LineString
+        Reference lines, head first.
+    join_m : float
+        Largest gap (m) between a line's downstream end and the line it flows into.
+    near_end : float
+        Distances (m) this small count as "at the end" of a line.
+
+    Returns
+    -------
+    joins : list of (from line, into line, distance along it)
+        The nearest line within ``join_m`` of each downstream end, unless that end lies at
+        the downstream end of the other line (then the other line is not downstream).
+    splits : list of list of float
+        Per line, the distances along it where tributaries join (cut points).
+    """
+    n = len(lines)
     lengths = np.array([ln.length for ln in lines])
     tree = shapely.STRtree(lines)
     ends = [shapely.Point(ln.coords[-1]) for ln in lines]
     joins: list[tuple[int, int, float]] = []  # (from line, into line, distance along it)
     splits: list[list[float]] = [[] for _ in range(n)]
-    near_end = 1e-6 * max(1.0, float(lengths.max()))
     for i, e in enumerate(ends):
         best = None
         for j in tree.query(e, predicate="dwithin", distance=join_m):
@@ -276,26 +318,63 @@ def scored_reference(
             joins.append((i, best[1], best[2]))
             if best[2] > near_end:
                 splits[best[1]].append(best[2])
-    # pieces of every line between its split points
-    piece_of: list[np.ndarray] = []  # piece ids of every line, upstream first
-    start_of: list[np.ndarray] = []  # distance of every piece's start along its line
+    return joins, splits
+
+
+def split_at_junctions(
+    lines: list[shapely.LineString], splits: list[list[float]], near_end: float
+) -> tuple[list[BaseGeometry], list[np.ndarray], list[np.ndarray]]:
+    """Cut every line at its junctions (second phase of :func:`scored_reference`).
+
+    Returns
+    -------
+    pieces : list of LineString
+        All pieces, line by line, upstream first; pieces shorter than ``near_end`` are dropped.
+    piece_of : list of ndarray of int
+        Piece ids of every line, upstream first.
+    start_of : list of ndarray of float
+        Distance of every piece's start along its line.
+    """
+    piece_of: list[np.ndarray] = []
+    start_of: list[np.ndarray] = []
     pieces: list[BaseGeometry] = []
-    for j in range(n):
-        cuts = np.unique(np.concatenate([[0.0], np.asarray(splits[j], dtype=float), [lengths[j]]]))
+    for j, line in enumerate(lines):
+        length = line.length
+        cuts = np.unique(np.concatenate([[0.0], np.asarray(splits[j], dtype=float), [length]]))
         ids, st = [], []
         for a, b in zip(cuts[:-1], cuts[1:]):
             if b - a <= near_end:
                 continue
             ids.append(len(pieces))
             st.append(a)
-            pieces.append(substring(lines[j], a, b))
+            pieces.append(substring(line, a, b))
         piece_of.append(np.asarray(ids, dtype=np.int64))
         start_of.append(np.asarray(st, dtype=float))
-    m = len(pieces)
-    down: list[list[int]] = [[] for _ in range(m)]
-    has_in = np.zeros(m, dtype=bool)
-    for j in range(n):
-        p = piece_of[j]
+    return pieces, piece_of, start_of
+
+
+def piece_graph(
+    piece_of: list[np.ndarray],
+    start_of: list[np.ndarray],
+    joins: list[tuple[int, int, float]],
+    n_pieces: int,
+    near_end: float,
+) -> tuple[list[list[int]], np.ndarray]:
+    """Downstream links between pieces (third phase of :func:`scored_reference`).
+
+    Each piece flows into the next piece of its line; the last piece of a line that joins
+    another flows into the piece of that line starting at (or containing) the junction.
+
+    Returns
+    -------
+    down : list of list of int
+        Pieces directly downstream of every piece.
+    has_in : ndarray of bool
+        Whether anything flows into a piece (pieces without inflow start at a head).
+    """
+    down: list[list[int]] = [[] for _ in range(n_pieces)]
+    has_in = np.zeros(n_pieces, dtype=bool)
+    for p in piece_of:
         for a, b in zip(p[:-1], p[1:]):
             down[a].append(int(b))
             has_in[b] = True
@@ -306,27 +385,22 @@ def scored_reference(
         k = int(piece_of[j][max(0, int(np.searchsorted(start_of[j], d_along + near_end, side="right")) - 1)])
         down[int(piece_of[i][-1])].append(k)
         has_in[k] = True
-    heads = np.flatnonzero(~has_in)
-    head_pts = [shapely.Point(pieces[h].coords[0]) for h in heads]
-    inside = np.array([dem_domain.covers(p) for p in head_pts], dtype=bool) if len(heads) else np.zeros(0, bool)
-    scored = np.zeros(m, dtype=bool)
-    stack = [int(h) for h in heads[inside]]
+    return down, has_in
+
+
+def downstream_of(start: np.ndarray, down: list[list[int]]) -> np.ndarray:
+    """Boolean mask of the pieces reached from ``start`` (included) along ``down`` (last phase). O(pieces + links)."""
+    reached = np.zeros(len(down), dtype=bool)
+    stack = [int(h) for h in start]
     for h in stack:
-        scored[h] = True
+        reached[h] = True
     while stack:
         a = stack.pop()
         for b in down[a]:
-            if not scored[b]:
-                scored[b] = True
+            if not reached[b]:
+                reached[b] = True
                 stack.append(b)
-    sc = shapely.union_all([pieces[k] for k in np.flatnonzero(scored)]) if scored.any() else empty
-    ns = shapely.union_all([pieces[k] for k in np.flatnonzero(~scored)]) if (~scored).any() else empty
-    if catchment is not None:
-        outside = sc.difference(catchment)
-        sc = sc.intersection(catchment)
-        ns = shapely.union_all([ns, outside])
-    counts = {"heads": int(len(heads)), "heads_on_dem": int(inside.sum()), "pieces": m, "pieces_scored": int(scored.sum())}
-    return sc, ns, counts
+    return reached
 
 
 def rasterize_polygons(polygons: gpd.GeoDataFrame | Iterable[BaseGeometry], grid: GridSpec) -> np.ndarray:

@@ -209,3 +209,54 @@ def map_gullies(
         smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised,
         n_flat, t,
     )
+
+
+def map_raster(mask: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """A gully mask as written to ``gully_map.tif``: uint8 1 gully, 0 not, 255 off the DEM."""
+    m = mask.astype(np.uint8)
+    m[~valid] = 255
+    return m
+
+
+def gully_summary(res: GullyResult, grid: GridSpec, params: GullyParams, dem_source: str, n_heads: int) -> pd.DataFrame:
+    """The ``gully_summary.csv`` table of a :func:`map_gullies` run: ``quantity, value`` (text).
+
+    Parameters
+    ----------
+    res : GullyResult
+        The mapping run.
+    grid : GridSpec
+        Grid of the mapping DEM.
+    params : GullyParams
+        Its parameters (the settings worth reporting beside the numbers).
+    dem_source : str
+        ``gully.dem``: which DEM was mapped.
+    n_heads : int
+        Number of digitised gully heads given.
+    """
+    rows = [
+        ("DEM source", dem_source),
+        ("DEM cells", grid.width * grid.height),
+        ("cell size (m)", grid.cell),
+        ("gully heads", int(n_heads)),
+        ("heads on the DEM", int(res.heads_inside.sum())),
+        ("head snapping", f"{params.head_snap} cell within {params.head_snap_radius_m} m"),
+        ("tracing DEM smoothing sigma (m)", params.trace_smoothing_m),
+        ("paths ending at an outlet", res.network.n_paths_to_outlet()),
+        ("paths ending in a pit", res.network.n_paths_not_at_outlet()),
+        ("traced network length (m)", round(float(res.lines["length_m"].sum()), 1)),
+        ("mapped network length (m)", round(float(res.extracted_lines["length_m"].sum()), 1)),
+        ("network segments", res.network.n_segments),
+        ("max Strahler order", int(res.network.seg_order.max()) if res.network.n_segments else 0),
+        ("depth patches kept", int(res.patch_table["kept"].sum())),
+        ("gullies (polygons)", len(res.polygons)),
+        ("gully area (m2)", round(float(res.polygons["area_m2"].sum()), 1)),
+        ("gully volume (m3)", round(float(res.polygons["volume_m3"].sum()), 1)),
+        ("gully area, whole-patch variant (m2)", round(float(res.gully_whole_patches.sum()) * grid.cell**2, 1)),
+        ("interpolated hole cells", res.n_hole_cells),
+        ("holes kept as open water from (m2)", params.water_min_area_m2),
+        ("cells raised by filling", res.n_raised),
+        ("flow routing across flats", params.flat_routing),
+        ("flat cells routed by the flat mask", res.n_flat_routed),
+    ] + [(f"time {k[:-2]} (s)", round(v, 2)) for k, v in res.timings_s.items()]
+    return pd.DataFrame(rows, columns=["quantity", "value"]).astype({"value": str})

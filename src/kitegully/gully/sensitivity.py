@@ -1,4 +1,12 @@
-"""Sensitivity of the gully map to the smoothing σ and the depth threshold."""
+"""Sensitivity of the gully map to the smoothing σ and the depth threshold.
+
+The network scores of this table are NOT the paper protocol of ``network_validation.csv``
+(:func:`kitegully.gully.validation.score_network`): they compare the extracted network
+with the whole reference (every reference line, as the ``all (unfiltered)`` rows of
+``network_validation_tolerances.csv``), at ``gully.validation.tolerance_m``, within the DEM
+footprint, without a catchment clip. They show how the scores move with σ and the
+threshold, not the paper's number.
+"""
 
 from __future__ import annotations
 
@@ -8,11 +16,12 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from kitegully.evaluate.network import NetworkScorer, area_scores
+from kitegully.evaluate.network import NetworkScorer, area_scores, footprint
 from kitegully.gully.depth import depth_map
 from kitegully.gully.mapping import buffer_mask, final_map
 from kitegully.gully.network import GullyNetwork, network_lines
 from kitegully.gully.patches import depth_patches
+from kitegully.gully.pipeline import GullyParams
 from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
@@ -82,3 +91,55 @@ def sensitivity_table(
             rows.append(row)
         del depth
     return pd.DataFrame(rows)
+
+
+def gully_sensitivity(
+    dem: np.ndarray,
+    grid: GridSpec,
+    network: GullyNetwork,
+    depth: np.ndarray,
+    mapping: GullyParams,
+    sigmas_m: Sequence[float],
+    thresholds_m: Sequence[float],
+    tolerance_m: float,
+    reference=None,
+    truth_mask: np.ndarray | None = None,
+    workers: int = 1,
+) -> pd.DataFrame:
+    """The ``gully_sensitivity.csv`` table: :func:`sensitivity_table` with the stage's settings.
+
+    Parameters
+    ----------
+    dem, grid : the mapping DEM and its grid.
+    network : GullyNetwork
+        The traced network of the ``gully_map`` run (independent of σ and the threshold).
+    depth : ndarray
+        The stage's own depth map at ``mapping.sigma_m`` (reused, not recomputed).
+    mapping : GullyParams
+        The mapping parameters (patch volume, buffer, connectivity, kernel truncation).
+    sigmas_m, thresholds_m : sequences of float
+        The σ and depth thresholds to try (``gully.sensitivity``).
+    tolerance_m : float
+        Matching tolerance of the network scores (``gully.validation.tolerance_m``).
+    reference : GeoDataFrame, optional
+        Reference network: network scores against all of it (see the module notes for
+        how this differs from the paper protocol).
+    truth_mask : ndarray of bool, optional
+        Truth gully cells (twins): area scores.
+    workers : int
+        Threads of the FFT smoothing.
+
+    Returns
+    -------
+    DataFrame
+        As :func:`sensitivity_table`.
+    """
+    domain = None
+    if reference is not None:
+        # DEM footprint near the lines only: same clipping as the whole footprint, far cheaper
+        domain = footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(network, grid).geometry])
+    return sensitivity_table(
+        dem, grid, network, sigmas_m, thresholds_m, mapping.min_patch_volume_m3, mapping.buffer_m, mapping.connectivity,
+        mapping.truncate_sigmas, reference=reference, tolerance_m=tolerance_m, domain=domain, truth_mask=truth_mask,
+        workers=workers, known_depths={float(mapping.sigma_m): depth},
+    )

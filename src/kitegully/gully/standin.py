@@ -1,6 +1,6 @@
 """Evaluation stand-in for the photogrammetric DSM: the twin's truth DTM plus noise.
 
-Used only until the dense-matching DSM exists; it is NOT a photogrammetric product.
+Twins only (gully.dem: truth_plus_noise), to evaluate the mapping apart from the DSM errors; it is NOT a photogrammetric product.
 The noise is Gaussian white noise smoothed with a Gaussian of ``correlation_m`` and
 rescaled to the requested standard deviation.
 """

@@ -13,4 +13,20 @@ Modules, one job each:
                  area errors.
 ``scene``        the whole chain for one orthophoto + DEM.
 ``kite``         the chain in tiles for a site-wide orthophoto + DSM.
+``stage``        the entry points, one per rule (exported here lazily): classified scene,
+                 scene evaluation and figure, summary over scenes, kite-scale map figure
+                 and accuracy; the parameters are ``scene.ObiaParams``.
 """
+
+from importlib import import_module
+
+_EXPORTS = {"ObiaParams": "scene", "classify_scene_products": "stage", "evaluate_scene": "stage",
+            "scene_figure": "stage", "summarise_scenes": "stage", "summary_figure": "stage",
+            "bare_soil_map": "kite", "kite_map_figure": "stage", "kite_accuracy": "stage"}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

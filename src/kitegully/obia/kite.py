@@ -19,12 +19,8 @@ from rasterio.warp import reproject
 from kitegully import InputError
 from kitegully.io.raster import GridSpec, _profile, iter_tiles
 from kitegully.obia.classify import NODATA, classify_segments, remove_small_eroded, segment_means
-from kitegully.obia.features import normalise_features
-from kitegully.obia.indices import EXG_RANGE, excess_green, gaussian_blur
-from kitegully.obia.scene import ObiaParams
-from kitegully.obia.seeds import generate_seeds
-from kitegully.obia.slope import wood_slope
-from kitegully.obia.srg import seeded_region_growing
+from kitegully.obia.indices import EXG_RANGE
+from kitegully.obia.scene import ObiaParams, blurred_exg, segment
 from kitegully.obia.threshold import ThresholdResult, find_thresholds
 
 log = logging.getLogger("kitegully.obia.kite")
@@ -97,9 +93,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         tiles = list(iter_tiles(grid, tile_cells, halo))
         for i, (read, core) in enumerate(tiles):
             rgb, dem, valid = _read_tile(ortho, dsm, read, grid)
-            exg = excess_green(*rgb)
-            exg[~valid] = np.nan
-            blur = gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells)
+            _, blur = blurred_exg(*rgb, valid, params)
             r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
             inner = blur[r0:r0 + core.height, c0:c0 + core.width]
             counts += np.histogram(inner[np.isfinite(inner)], bins=edges)[0]
@@ -113,15 +107,12 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         with rasterio.open(out_path, "w", **profile) as dst:
             for i, (read, core) in enumerate(tiles):
                 rgb, dem, valid = _read_tile(ortho, dsm, read, grid)
-                slope = wood_slope(dem, grid.cell, params.slope_window_cells)
                 out = np.full(valid.shape, NODATA, dtype=np.uint8)
                 if valid.any():
-                    feats = normalise_features([rgb[0], rgb[1], rgb[2], slope], valid)
-                    seeds = generate_seeds(feats, valid, params.seed_bandwidth_cells)
-                    segments, nseg = seeded_region_growing(feats, seeds, valid, params.position_weight, params.growing_reference)
-                    exg = excess_green(*rgb)
-                    exg[~valid] = np.nan
-                    feature = gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells) if params.segment_feature == "blurred" else exg
+                    seg = segment(rgb[0], rgb[1], rgb[2], dem, grid.cell, valid, params)
+                    segments, nseg = seg.segments, seg.n_segments
+                    exg, exg_blur = blurred_exg(*rgb, valid, params)
+                    feature = exg_blur if params.segment_feature == "blurred" else exg
                     means = segment_means(feature, segments, nseg)
                     out = remove_small_eroded(classify_segments(means, segments, thr.valley, unimodal), grid.cell, params.min_area_m2)
                     out[~valid] = NODATA

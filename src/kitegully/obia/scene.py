@@ -94,6 +94,55 @@ def marker_mask(shape: tuple[int, int], grid, markers, factor: float) -> np.ndar
     return mask
 
 
+@dataclass
+class Segmentation:
+    """Products of :func:`segment`."""
+
+    slope_deg: np.ndarray
+    features: np.ndarray
+    seeds: np.ndarray
+    segments: np.ndarray
+    n_segments: int
+    timings_s: dict
+
+
+def segment(
+    red: np.ndarray,
+    green: np.ndarray,
+    blue: np.ndarray,
+    dem: np.ndarray,
+    cell: float,
+    valid: np.ndarray,
+    params: ObiaParams,
+    t_start: float | None = None,
+) -> Segmentation:
+    """Segments of a scene or tile: Wood slope, normalised R, G, B, slope features, seeds, seeded region growing.
+
+    The first phase of :func:`classify_scene` and of every tile of
+    :func:`kitegully.obia.kite.bare_soil_map`. ``t_start`` (``time.perf_counter()``) lets
+    the ``features`` timing include the caller's band preparation. O(N log N) for N cells.
+    """
+    t = {}
+    t0 = time.perf_counter() if t_start is None else t_start
+    slope = wood_slope(dem, cell, params.slope_window_cells)
+    feats = normalise_features([red, green, blue, slope], valid)
+    t["features"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    seeds = generate_seeds(feats, valid, params.seed_bandwidth_cells)
+    t["seeds"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    segments, nseg = seeded_region_growing(feats, seeds, valid, params.position_weight, params.growing_reference)
+    t["growing"] = time.perf_counter() - t0
+    return Segmentation(slope, feats, seeds, segments, nseg, t)
+
+
+def blurred_exg(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.ndarray, params: ObiaParams):
+    """ExG (NaN off ``valid``) and its Gaussian blur (``exg_blur`` parameters). O(N)."""
+    exg = excess_green(red, green, blue)
+    exg[~valid] = np.nan
+    return exg, gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells)
+
+
 def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaParams, valid: np.ndarray | None = None, source: str = "scene") -> SceneResult:
     """Run the OBIA chain on one scene.
 
@@ -127,19 +176,11 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
         ok &= valid
     if not ok.any():
         raise InputError(f"{source}: no valid cells (DEM all nodata or everything masked)")
-    slope = wood_slope(dem, cell, params.slope_window_cells)
-    feats = normalise_features([red, green, blue, slope], ok)
-    t["features"] = time.perf_counter() - t0
+    seg = segment(red, green, blue, dem, cell, ok, params, t0)
+    slope, seeds, segments, nseg = seg.slope_deg, seg.seeds, seg.segments, seg.n_segments
+    t.update(seg.timings_s)
     t0 = time.perf_counter()
-    seeds = generate_seeds(feats, ok, params.seed_bandwidth_cells)
-    t["seeds"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    segments, nseg = seeded_region_growing(feats, seeds, ok, params.position_weight, params.growing_reference)
-    t["growing"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    exg = excess_green(red, green, blue)
-    exg[~ok] = np.nan
-    exg_blur = gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells)
+    exg, exg_blur = blurred_exg(red, green, blue, ok, params)
     counts, centres = histogram(exg_blur, params.hist_bins)
     thr = find_thresholds(counts, centres, params.min_class_fraction, params.max_valley_ratio)
     feature = exg_blur if params.segment_feature == "blurred" else exg
@@ -156,4 +197,4 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
     return SceneResult(exg, exg_blur, slope, seeds, segments, nseg, means, thr, classes, classes_otsu, t)
 
 
-__all__ = ["ObiaParams", "SceneResult", "classify_scene", "marker_mask", "EXG_RANGE"]
+__all__ = ["ObiaParams", "SceneResult", "Segmentation", "blurred_exg", "classify_scene", "marker_mask", "segment", "EXG_RANGE"]

@@ -155,3 +155,41 @@ def test_footprint_near_lines_clips_like_the_whole_footprint_and_scorer_matches(
         a = network_validation(ref, ext, tol, whole)
         b = scorer.score(ext, tol)
         assert np.allclose(a["length_m"], b["length_m"], atol=1e-9)
+
+
+# --- the phases of scored_reference -------------------------------------------------------
+
+
+def test_reference_joins_finds_the_nearest_line_and_ignores_shared_ends():
+    from kitegully.evaluate.network import reference_joins
+
+    main = LineString([(0, 0), (100, 0)])
+    trib = LineString([(50, 40), (50, 1)])  # ends 1 m from main, 50 m along it
+    other = LineString([(120, 30), (100, 0)])  # ends at main's downstream end: not a junction
+    joins, splits = reference_joins([main, trib, other], join_m=3.0, near_end=1e-6)
+    assert joins == [(1, 0, pytest.approx(50.0))]
+    assert splits[0] == [pytest.approx(50.0)] and splits[1] == [] and splits[2] == []
+    joins, _ = reference_joins([main, trib, other], join_m=0.5, near_end=1e-6)
+    assert joins == []
+
+
+def test_split_at_junctions_cuts_lines_and_drops_slivers():
+    from kitegully.evaluate.network import split_at_junctions
+
+    main = LineString([(0, 0), (100, 0)])
+    pieces, piece_of, start_of = split_at_junctions([main], [[30.0, 70.0, 100.0 - 1e-9]], near_end=1e-6)
+    assert [p.length for p in pieces] == pytest.approx([30.0, 40.0, 30.0])
+    assert list(piece_of[0]) == [0, 1, 2] and list(start_of[0]) == pytest.approx([0.0, 30.0, 70.0])
+
+
+def test_piece_graph_and_downstream_of():
+    from kitegully.evaluate.network import downstream_of, piece_graph
+
+    # line 0 cut into pieces 0, 1; line 1 (piece 2) joins line 0 at 50 m (start of piece 1)
+    piece_of = [np.array([0, 1]), np.array([2])]
+    start_of = [np.array([0.0, 50.0]), np.array([0.0])]
+    down, has_in = piece_graph(piece_of, start_of, [(1, 0, 50.0)], 3, near_end=1e-6)
+    assert down == [[1], [], [1]] and list(has_in) == [False, True, False]
+    assert list(downstream_of(np.array([2]), down)) == [False, True, True]
+    assert list(downstream_of(np.array([0]), down)) == [True, True, False]
+    assert not downstream_of(np.array([], dtype=int), down).any()

@@ -1,0 +1,68 @@
+"""The gully stage's table and raster helpers beside map_gullies (kitegully.gully.pipeline), and
+the sensitivity entry point (kitegully.gully.sensitivity.gully_sensitivity)."""
+
+from __future__ import annotations
+
+import geopandas as gpd
+import numpy as np
+import pytest
+from shapely import LineString
+
+from kitegully.evaluate.network import footprint
+from kitegully.gully.network import network_lines
+from kitegully.gully.pipeline import GullyParams, gully_summary, map_gullies, map_raster
+from kitegully.gully.sensitivity import gully_sensitivity, sensitivity_table
+from kitegully.io.raster import GridSpec
+
+CRS = "EPSG:32632"
+
+
+@pytest.fixture(scope="module")
+def mapped():
+    """A plane cut by a straight 1.5 m deep V gully (E-W), head at its upstream end; a nodata corner."""
+    grid = GridSpec(500000.0, 4000000.0, 0.5, 300, 200, CRS)
+    xs, ys = grid.cell_centres()
+    yc = ys[grid.height // 2]
+    notch = 1.5 * np.clip(1 - np.abs(ys - yc) / 3.0, 0, None)
+    z = (100 - 0.02 * (xs[None, :] - xs[0]) - 0.005 * (ys[:, None] - ys[-1]) - notch[:, None]).astype(np.float32)
+    z[:20, :20] = np.nan
+    params = GullyParams(sigma_m=5.0, head_snap_radius_m=2.0)
+    res = map_gullies(z, grid, np.array([xs[30]]), np.array([yc]), params, workers=1)
+    return grid, z, params, res
+
+
+def test_map_raster_codes():
+    valid = np.array([[True, True, False]])
+    out = map_raster(np.array([[True, False, True]]), valid)
+    assert out.dtype == np.uint8 and out.tolist() == [[1, 0, 255]]
+
+
+def test_gully_summary_reports_the_run(mapped):
+    grid, _, params, res = mapped
+    table = gully_summary(res, grid, params, "dense", n_heads=3)
+    assert list(table.columns) == ["quantity", "value"] and table["value"].map(type).eq(str).all()
+    v = dict(table.values)
+    assert v["DEM source"] == "dense" and v["gully heads"] == "3" and v["heads on the DEM"] == "1"
+    assert v["DEM cells"] == str(300 * 200) and v["cell size (m)"] == "0.5"
+    assert v["head snapping"] == "lowest cell within 2.0 m"
+    assert float(v["gully area (m2)"]) == pytest.approx(round(float(res.polygons["area_m2"].sum()), 1))
+    assert float(v["traced network length (m)"]) > 100  # the gully runs ~135 m to the east edge
+    assert v["paths ending in a pit"] == "0"
+    assert [q for q in v if q.startswith("time ")] == [f"time {k[:-2]} (s)" for k in res.timings_s]
+
+
+def test_gully_sensitivity_is_the_table_with_the_stage_settings(mapped):
+    grid, z, params, res = mapped
+    xs, ys = grid.cell_centres()
+    yc = ys[grid.height // 2]
+    reference = gpd.GeoDataFrame(geometry=[LineString([(xs[30], yc + 0.4), (xs[-1], yc + 0.4)])], crs=CRS)
+    got = gully_sensitivity(z, grid, res.network, res.depth, params, [5.0, 8.0], [0.25], 5.0, reference=reference)
+    domain = footprint(np.isfinite(z), grid, near=[*reference.geometry, *network_lines(res.network, grid).geometry])
+    expected = sensitivity_table(z, grid, res.network, [5.0, 8.0], [0.25], params.min_patch_volume_m3, params.buffer_m,
+                                 params.connectivity, params.truncate_sigmas, reference=reference, tolerance_m=5.0,
+                                 domain=domain)
+    assert got.equals(expected)
+    # the stage's own depth map is reused at sigma_m: same row as recomputing it
+    row = got[got["sigma_m"] == 5.0].iloc[0]
+    assert row["gully_area_m2"] == pytest.approx(float(res.gully.sum()) * grid.cell**2)
+    assert row["good_fit_percent"] > 90
