@@ -1,0 +1,176 @@
+"""Breaklines: convex upper gully edges from Wood's bivariate quadratic (Höfle et al. 2013 sect. 4.1).
+
+The surface in an n × n window is fitted by least squares with
+``z = a x² + b y² + c xy + d x + e y + f`` (x east, y north, metres, origin at the
+window centre). On a regular grid the design matrix is the same for every window, so
+each coefficient is a fixed linear combination of the window's values: a correlation
+kernel, applied as a sum of separable 1-D passes (SVD of the kernel, rank ≤ 3).
+
+Curvatures, signed so that **positive = convex** (the surface bends down, as at the upper
+edge of a gully or on a ridge; a valley floor is negative or zero):
+
+``maximum``
+    Wood's maximum (convex) curvature ``-a - b + sqrt((a - b)² + c²)`` (1/m), the
+    largest downward bending in any direction (GRASS ``r.param.scale method=maxic``).
+``plan``
+    Plan (contour) curvature ``-2 (b d² + a e² - c d e) / (d² + e²)^1.5`` (1/m); GRASS
+    ``r.param.scale method=planc`` has the opposite sign (negative on ridges). Plan
+    curvature is identically zero across a *straight* edge, where the contours run
+    parallel to it (shown in the tests), and it grows without bound where the slope
+    goes to zero; it only picks up edges that bend in plan.
+``profile``
+    Profile curvature ``-2 (a d² + b e² + c d e) / ((d² + e²)(1 + d² + e²)^1.5)`` (1/m),
+    the bending along the slope line (GRASS ``profc``).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import scipy.ndimage as ndi
+from skimage.morphology import remove_small_objects, skeletonize
+
+from kitegully import InputError
+
+log = logging.getLogger(__name__)
+
+#: Curvature types (``polygons.breaklines.curvature``).
+CURVATURES = ("maximum", "plan", "profile")
+
+
+def quadratic_kernels(window: int, cell: float) -> np.ndarray:
+    """Least-squares correlation kernels of the coefficients (a, b, c, d, e, f).
+
+    Parameters
+    ----------
+    window : int
+        Odd window side in cells (≥ 3).
+    cell : float
+        Cell size (m).
+
+    Returns
+    -------
+    ndarray (6, window, window)
+        ``coef_k = Σ kernel_k · z_window`` (row 0 of the window is its north edge).
+    """
+    if window < 3 or window % 2 == 0:
+        raise ValueError(f"window must be odd and >= 3, got {window}")
+    h = window // 2
+    off = np.arange(-h, h + 1) * cell
+    y, x = np.meshgrid(-off, off, indexing="ij")  # rows go south: y = -row offset
+    x, y = x.ravel(), y.ravel()
+    X = np.column_stack([x * x, y * y, x * y, x, y, np.ones_like(x)])
+    K = np.linalg.pinv(X)  # (6, n²)
+    return K.reshape(6, window, window)
+
+
+def _correlate_separable(z: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    u, s, vt = np.linalg.svd(kernel)
+    out = np.zeros_like(z)
+    for i in range(len(s)):
+        if s[i] <= 1e-10 * s[0]:
+            break
+        tmp = ndi.correlate1d(z, u[:, i] * s[i], axis=0, mode="nearest")
+        out += ndi.correlate1d(tmp, vt[i], axis=1, mode="nearest")
+    return out
+
+
+def quadratic_coefficients(z: np.ndarray, cell: float, window: int) -> tuple[np.ndarray, ...]:
+    """Coefficients (a, b, c, d, e) of the windowed quadratic at every cell.
+
+    NaN cells are filled with the nearest valid value for the fit and every coefficient
+    is NaN where the window holds a NaN cell. O(H·W·window·rank).
+    """
+    z = np.asarray(z, dtype=np.float64)
+    nan = ~np.isfinite(z)
+    if nan.all():
+        raise InputError("polygons: the DEM is all nodata")
+    zf = z
+    if nan.any():
+        idx = ndi.distance_transform_edt(nan, return_distances=False, return_indices=True)
+        zf = z[idx[0], idx[1]]
+    # centre on the mean for numerical accuracy of the constant term
+    zf = zf - np.nanmean(z)
+    kernels = quadratic_kernels(window, cell)
+    bad = ndi.maximum_filter(nan, size=window, mode="nearest") if nan.any() else None
+    out = []
+    for k in range(5):
+        c = _correlate_separable(zf, kernels[k])
+        if bad is not None:
+            c[bad] = np.nan
+        out.append(c)
+    return tuple(out)
+
+
+def convexity(z: np.ndarray, cell: float, window: int, kind: str = "maximum", min_slope: float = 1e-3) -> np.ndarray:
+    """Curvature (1/m) of the windowed quadratic, positive where the surface is convex.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell : float
+        Cell size (m).
+    window : int
+        Odd window side (cells); 9 in the paper.
+    kind : str
+        One of :data:`CURVATURES`.
+    min_slope : float
+        Plan and profile curvature are set to 0 where the fitted slope is below this
+        (undefined on a level surface).
+    """
+    if kind not in CURVATURES:
+        raise ValueError(f"curvature must be one of {CURVATURES}, got {kind!r}")
+    a, b, c, d, e = quadratic_coefficients(z, cell, window)
+    if kind == "maximum":
+        return -a - b + np.sqrt((a - b) ** 2 + c**2)
+    g2 = d * d + e * e
+    flat = g2 < min_slope**2
+    g2s = np.where(flat, 1.0, g2)
+    if kind == "plan":
+        k = -2.0 * (b * d * d + a * e * e - c * d * e) / g2s**1.5
+    else:
+        k = -2.0 * (a * d * d + b * e * e + c * d * e) / (g2s * (1.0 + g2s) ** 1.5)
+    return np.where(flat, 0.0, k)
+
+
+def detect_breaklines(
+    z: np.ndarray, cell: float, window: int, threshold: float, kind: str = "maximum", min_length_m: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Breakline raster: skeleton of the mask ``convexity > threshold``.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m).
+    cell : float
+        Cell size (m).
+    window : int
+        Window side (cells).
+    threshold : float
+        Curvature threshold (1/m); 0.2 in the paper.
+    kind : str
+        Curvature type (:data:`CURVATURES`).
+    min_length_m : float
+        Skeleton pieces shorter than this (counted in cells × cell) are dropped.
+
+    Returns
+    -------
+    skeleton : ndarray bool
+        One-cell-wide breaklines.
+    curvature : ndarray float32
+        The convexity raster (1/m).
+    """
+    h, w = z.shape
+    if h < window or w < window:
+        raise InputError(f"polygons.breaklines.window_cells: the DEM ({h} x {w} cells) is smaller than the {window} x {window} window")
+    k = convexity(z, cell, window, kind)
+    mask = np.nan_to_num(k, nan=0.0) > threshold
+    skel = skeletonize(mask)
+    n_min = int(np.ceil(min_length_m / cell))
+    if n_min > 1:
+        skel = remove_small_objects(skel, min_size=n_min, connectivity=2)
+    log.info("breaklines: %.2f %% of cells above %.3g 1/m (%s curvature, %d x %d window), %d skeleton cells",
+             100.0 * mask.mean(), threshold, kind, window, window, int(skel.sum()))
+    return skel, k.astype(np.float32)
