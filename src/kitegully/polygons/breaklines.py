@@ -170,7 +170,7 @@ def detect_breaklines(
     skel = skeletonize(mask)
     n_min = int(np.ceil(min_length_m / cell))
     if n_min > 1:
-        skel = remove_small_objects(skel, min_size=n_min, connectivity=2)
+        skel = remove_small_objects(skel, max_size=n_min - 1, connectivity=2)
     log.info("breaklines: %.2f %% of cells above %.3g 1/m (%s curvature, %d x %d window), %d skeleton cells",
              100.0 * mask.mean(), threshold, kind, window, window, int(skel.sum()))
     return skel, k.astype(np.float32)

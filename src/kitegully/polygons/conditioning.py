@@ -53,7 +53,8 @@ def fill_depth(dem: np.ndarray, barriers: np.ndarray, raise_m: float) -> tuple[n
 
 
 def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2: float, cell: float,
-               seeds: np.ndarray | None = None, bridgeable: np.ndarray | None = None) -> np.ndarray:
+               seeds: np.ndarray | None = None, bridgeable: np.ndarray | None = None,
+               edge_band: np.ndarray | None = None, edge_cells: int = 0) -> np.ndarray:
     """Label raster of the gully polygons at one fill-depth threshold.
 
     ``FD ≥ threshold``, closed with a ``closing_cells`` square (bridges barriers narrower
@@ -65,6 +66,8 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     Returns int32 labels (0 = not gully), numbered 1..n.
     """
     m = np.nan_to_num(fd, nan=0.0) >= threshold
+    if edge_band is not None and edge_cells > 0:
+        m |= ndi.binary_dilation(m, structure=np.ones((3, 3), bool), iterations=edge_cells) & edge_band
     if closing_cells > 1:
         se = np.ones((closing_cells, closing_cells), bool)
         pad = closing_cells

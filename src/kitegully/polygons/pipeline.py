@@ -238,15 +238,16 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     t = time.perf_counter()
     tr_cells = rasterize_lines(tr_clip, grid)
     barriers = barrier_mask(bl_cells, tr_cells, p.grow_cells)
+    bl_band = barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells) & ~bl_cells
     bridgeable = None
     if p.bridge == "transects":
-        bridgeable = barrier_mask(tr_cells, np.zeros_like(tr_cells), p.grow_cells) & ~barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells)
+        bridgeable = barrier_mask(tr_cells, np.zeros_like(tr_cells), p.grow_cells) & ~bl_band & ~bl_cells
     fd, cond = fill_depth(dem, barriers, p.raise_m)
     level = cond + fd
     seeds = th_cells if p.keep_on_thalweg else None
     labels, polys = {}, {}
     for thr in p.thresholds_m:
-        lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable)
+        lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable, bl_band, p.grow_cells)
         labels[thr] = lab
         polys[thr] = polygons_from_labels(lab, grid, thr, fd=fd)
         log.info("t = %.2f m: %d polygons, %.0f m2", thr, len(polys[thr]), polys[thr]["area_m2"].sum() if len(polys[thr]) else 0.0)
