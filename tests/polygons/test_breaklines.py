@@ -63,3 +63,17 @@ def test_window_larger_than_dem_is_one_clear_sentence():
     z = np.zeros((6, 6), np.float32)
     with pytest.raises(InputError, match=r"^polygons.breaklines.window_cells: the DEM \(6 x 6 cells\) is smaller than the 9 x 9 window$"):
         detect_breaklines(z, 0.5, 9, 0.2)
+
+
+def test_upper_edges_only_drops_a_hedge_but_keeps_gully_rims():
+    dem, grid, xc = notch_dem("V", width=8.0, depth=2.0, cross_slope=0.05)
+    xs, _ = grid.cell_centres()
+    hedge = np.maximum(0.0, 1.0 - np.abs(xs - (xc + 20.0)) / 1.5) * 3.0  # a 3 m high, 3 m wide crown row
+    dsm = (dem + hedge[None, :]).astype(np.float32)
+    all_, _ = detect_breaklines(dsm, grid.cell, 9, 0.2)
+    edges, _ = detect_breaklines(dsm, grid.cell, 9, 0.2, upper_edges_only=True)
+    near_hedge = np.abs(xs - (xc + 20.0)) < 3.0
+    near_rims = np.abs(np.abs(xs - xc) - 4.0) <= 1.0
+    assert all_[:, near_hedge].sum() > 100
+    assert edges[:, near_hedge].sum() == 0
+    assert edges[:, near_rims].sum() == all_[:, near_rims].sum()

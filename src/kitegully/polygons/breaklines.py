@@ -103,6 +103,48 @@ def quadratic_coefficients(z: np.ndarray, cell: float, window: int) -> tuple[np.
     return tuple(out)
 
 
+def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, candidates: np.ndarray) -> np.ndarray:
+    """Which candidate cells are upper edges (level ground on one side) rather than ridges.
+
+    Across the direction of strongest convex bending (eigenvector of the fitted quadratic's
+    Hessian with the most negative eigenvalue) the DEM is sampled at ± r, r = half the
+    window (and at ± r/2). An upper edge has level ground on one side, within
+    ``δ = threshold · r² / 2`` of the cell at r/2 and r (the drop of a surface bending at the threshold curvature over r), and
+    drops by more than δ on the other; a ridge, such as the crown of a hedge or a tree in
+    a DSM, drops by more than δ on both sides, and its flanks rise by more than δ to it.
+
+    Returns a boolean mask (subset of ``candidates``). O(candidates).
+    """
+    a, b, c, _, _ = quadratic_coefficients(z, cell, window)
+    rr, cc = np.nonzero(candidates)
+    a, b, c = a[rr, cc], b[rr, cc], c[rr, cc]
+    # Hessian [[2a, c], [c, 2b]] in (x east, y north); eigenvector of the smaller eigenvalue
+    lam = (a + b) - np.sqrt((a - b) ** 2 + c**2)
+    vx, vy = c, lam - 2 * a
+    small = np.hypot(vx, vy) < 1e-12
+    vx, vy = np.where(small, lam - 2 * b, vx), np.where(small, c, vy)
+    small = np.hypot(vx, vy) < 1e-12
+    vx, vy = np.where(small, 1.0, vx), np.where(small, 0.0, vy)
+    n = np.hypot(vx, vy)
+    vx, vy = vx / n, vy / n
+    r = (window // 2) * cell
+    delta = threshold * r * r / 2.0
+    zf = np.where(np.isfinite(z), z, np.nanmin(z))
+    # rows go south: a step vy north is -vy / cell rows
+    def side(sign, dist):
+        return ndi.map_coordinates(zf, [rr - sign * dist * vy / cell, cc + sign * dist * vx / cell], order=1, mode="nearest")
+
+    z0 = zf[rr, cc]
+    near_p, far_p, near_m, far_m = side(1, 0.5 * r), side(1, r), side(-1, 0.5 * r), side(-1, r)
+    plus_high = near_p + far_p >= near_m + far_m
+    hi_near, hi_far = np.where(plus_high, near_p, near_m), np.where(plus_high, far_p, far_m)
+    lo_far = np.where(plus_high, far_m, far_p)
+    keep = (np.abs(hi_near - z0) <= delta) & (np.abs(hi_far - z0) <= delta) & (lo_far < z0 - delta)
+    out = np.zeros_like(candidates, dtype=bool)
+    out[rr[keep], cc[keep]] = True
+    return out
+
+
 def convexity(z: np.ndarray, cell: float, window: int, kind: str = "maximum", min_slope: float = 1e-3) -> np.ndarray:
     """Curvature (1/m) of the windowed quadratic, positive where the surface is convex.
 
@@ -136,7 +178,8 @@ def convexity(z: np.ndarray, cell: float, window: int, kind: str = "maximum", mi
 
 
 def detect_breaklines(
-    z: np.ndarray, cell: float, window: int, threshold: float, kind: str = "maximum", min_length_m: float = 0.0
+    z: np.ndarray, cell: float, window: int, threshold: float, kind: str = "maximum", min_length_m: float = 0.0,
+    upper_edges_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Breakline raster: skeleton of the mask ``convexity > threshold``.
 
@@ -154,6 +197,8 @@ def detect_breaklines(
         Curvature type (:data:`CURVATURES`).
     min_length_m : float
         Skeleton pieces shorter than this (counted in cells × cell) are dropped.
+    upper_edges_only : bool
+        Drop ridge cells (:func:`upper_edge_mask`) before skeletonising.
 
     Returns
     -------
@@ -167,10 +212,14 @@ def detect_breaklines(
         raise InputError(f"polygons.breaklines.window_cells: the DEM ({h} x {w} cells) is smaller than the {window} x {window} window")
     k = convexity(z, cell, window, kind)
     mask = np.nan_to_num(k, nan=0.0) > threshold
+    n_conv = int(mask.sum())
+    if upper_edges_only:
+        mask = upper_edge_mask(z, cell, window, threshold, mask)
+        log.info("breaklines: %d of %d convex cells are upper edges (the rest ridges)", int(mask.sum()), n_conv)
     skel = skeletonize(mask)
     n_min = int(np.ceil(min_length_m / cell))
     if n_min > 1:
         skel = remove_small_objects(skel, max_size=n_min - 1, connectivity=2)
-    log.info("breaklines: %.2f %% of cells above %.3g 1/m (%s curvature, %d x %d window), %d skeleton cells",
+    log.info("breaklines: %.2f %% of cells kept above %.3g 1/m (%s curvature, %d x %d window), %d skeleton cells",
              100.0 * mask.mean(), threshold, kind, window, window, int(skel.sum()))
     return skel, k.astype(np.float32)

@@ -46,6 +46,9 @@ class PolygonParams:
         Breakline threshold on the convexity (1/m) [P 0.2].
     breakline_min_length_m : float
         Breakline skeleton pieces shorter than this are dropped [I].
+    upper_edges_only : bool
+        Keep only convex cells with level ground on one side, not ridges (hedge and tree
+        crowns of a DSM) [I] (:func:`kitegully.polygons.breaklines.upper_edge_mask`).
     tci_threshold : float
         Thalweg mask TCI > this [P 9, a in m²/m].
     mfd_exponent : float
@@ -98,6 +101,7 @@ class PolygonParams:
     curvature: str = "maximum"
     curvature_threshold_per_m: float = 0.2
     breakline_min_length_m: float = 2.0
+    upper_edges_only: bool = False
     tci_threshold: float = 9.0
     mfd_exponent: float = 1.1
     min_tan_slope: float = 0.001
@@ -128,7 +132,7 @@ class PolygonParams:
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
-            breakline_min_length_m=b["min_length_m"],
+            breakline_min_length_m=b["min_length_m"], upper_edges_only=b["upper_edges_only"],
             tci_threshold=t["tci_threshold"], mfd_exponent=t["mfd_exponent"], min_tan_slope=t["min_tan_slope"],
             thalweg_min_length_m=t["min_length_m"], smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
             snakes_beta=t["snakes_beta"],
@@ -216,7 +220,8 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     T["dem_prep_s"] = time.perf_counter() - t0
 
     t = time.perf_counter()
-    bl_cells, curv = detect_breaklines(dem, grid.cell, p.window_cells, p.curvature_threshold_per_m, p.curvature, p.breakline_min_length_m)
+    bl_cells, curv = detect_breaklines(dem, grid.cell, p.window_cells, p.curvature_threshold_per_m, p.curvature, p.breakline_min_length_m,
+                                         p.upper_edges_only)
     bl_lines = _lines_gdf(skeleton_paths(bl_cells, min_cells=2), grid)
     T["breaklines_s"] = time.perf_counter() - t
 
