@@ -54,7 +54,7 @@ def fill_depth(dem: np.ndarray, barriers: np.ndarray, raise_m: float) -> tuple[n
 
 def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2: float, cell: float,
                seeds: np.ndarray | None = None, bridgeable: np.ndarray | None = None,
-               edge_band: np.ndarray | None = None, edge_cells: int = 0) -> np.ndarray:
+               edge_band: np.ndarray | None = None, edge_cells: int = 0, held: np.ndarray | None = None) -> np.ndarray:
     """Label raster of the gully polygons at one fill-depth threshold.
 
     ``FD ≥ threshold``, closed with a ``closing_cells`` square (bridges barriers narrower
@@ -66,6 +66,12 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     Returns int32 labels (0 = not gully), numbered 1..n.
     """
     m = np.nan_to_num(fd, nan=0.0) >= threshold
+    if held is not None:
+        pools, npool = ndi.label(m, structure=np.ones((3, 3), bool))
+        ok = np.zeros(npool + 1, bool)
+        ok[np.unique(pools[(np.nan_to_num(held, nan=0.0) >= threshold) & (pools > 0)])] = True
+        ok[0] = False
+        m = ok[pools]
     if edge_band is not None and edge_cells > 0:
         m |= ndi.binary_dilation(m, structure=np.ones((3, 3), bool), iterations=edge_cells) & edge_band
     if closing_cells > 1:

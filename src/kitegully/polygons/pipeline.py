@@ -86,6 +86,9 @@ class PolygonParams:
         Smallest polygon (m²) [P 10].
     keep_on_thalweg : bool
         Keep only polygons touching the thalweg [I].
+    terrain_held : bool
+        Keep only pools where the DEM with the dams alone (no breakline walls) holds water
+        at least t deep [I] (:func:`kitegully.polygons.conditioning.gully_mask`).
     morph_threshold_m : float
         Fill-depth threshold of the polygons that get medial axes and sections [P 0.5].
     section_spacing_m : float
@@ -121,6 +124,7 @@ class PolygonParams:
     bridge: str = "all"
     min_area_m2: float = 10.0
     keep_on_thalweg: bool = True
+    terrain_held: bool = False
     morph_threshold_m: float = 0.5
     section_spacing_m: float = 10.0
     reference: str = "lower_end"
@@ -141,6 +145,7 @@ class PolygonParams:
             raise_m=c["raise_m"], grow_cells=c["grow_cells"], thresholds_m=tuple(c["thresholds_m"]), closing_cells=c["closing_cells"],
             bridge=c["bridge"],
             min_area_m2=c["min_area_m2"], keep_on_thalweg=c["keep_on_thalweg"],
+            terrain_held=c["terrain_held"],
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
         )
 
@@ -249,10 +254,11 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         bridgeable = barrier_mask(tr_cells, np.zeros_like(tr_cells), p.grow_cells) & ~bl_band & ~bl_cells
     fd, cond = fill_depth(dem, barriers, p.raise_m)
     level = cond + fd
+    held = fill_depth(dem, barrier_mask(np.zeros_like(tr_cells), tr_cells, p.grow_cells), p.raise_m)[0] if p.terrain_held else None
     seeds = th_cells if p.keep_on_thalweg else None
     labels, polys = {}, {}
     for thr in p.thresholds_m:
-        lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable, bl_band, p.grow_cells)
+        lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable, bl_band, p.grow_cells, held)
         labels[thr] = lab
         polys[thr] = polygons_from_labels(lab, grid, thr, fd=fd)
         log.info("t = %.2f m: %d polygons, %.0f m2", thr, len(polys[thr]), polys[thr]["area_m2"].sum() if len(polys[thr]) else 0.0)
