@@ -46,3 +46,21 @@ def test_dams_make_pools_on_a_sloping_channel():
     # each pool fills to the channel rim at its downstream dam
     assert np.nanmax(fd) >= 0.99
     assert fd[37, 10] > 0.5 and fd[32, 10] < 0.5
+
+
+def test_pools_below_the_rims_kept_compartments_beyond_them_dropped():
+    from kitegully.polygons.breaklines import detect_breaklines, low_sides
+    from polygon_synthetic import notch_dem
+
+    dem, grid, xc = notch_dem("V", width=8.0, depth=2.0, cross_slope=0.05)
+    xs, _ = grid.cell_centres()
+    rims_cells, _ = detect_breaklines(dem, grid.cell, 9, 0.2, upper_edges_only=True)
+    rims = low_sides(dem, grid.cell, 9, rims_cells)
+    fd = np.zeros(dem.shape, np.float32)
+    inside = np.abs(xs - xc) <= 3.0  # the incision up to the grown breakline band (rims at +-4 m)
+    beyond = (xs - xc >= 5.0) & (xs - xc < 15.0)  # terrain beyond the right rim's band
+    fd[100:140, inside] = 1.5
+    fd[100:140, beyond] = 1.5
+    lab = gully_mask(fd, 0.5, 1, 10.0, grid.cell, edge_cells=1, rims=rims)
+    assert (lab[100:140][:, inside] > 0).all()
+    assert (lab[100:140][:, beyond] == 0).all()

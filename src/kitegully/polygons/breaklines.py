@@ -103,20 +103,14 @@ def quadratic_coefficients(z: np.ndarray, cell: float, window: int) -> tuple[np.
     return tuple(out)
 
 
-def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, candidates: np.ndarray) -> np.ndarray:
-    """Which candidate cells are upper edges (level ground on one side) rather than ridges.
+def _edge_profiles(z: np.ndarray, cell: float, window: int, rr: np.ndarray, cc: np.ndarray):
+    """Direction of strongest convex bending at cells (rr, cc) and the DEM sampled across it.
 
-    Across the direction of strongest convex bending (eigenvector of the fitted quadratic's
-    Hessian with the most negative eigenvalue) the DEM is sampled at ± r, r = half the
-    window (and at ± r/2). An upper edge has level ground on one side, within
-    ``δ = threshold · r² / 2`` of the cell at r/2 and r (the drop of a surface bending at the threshold curvature over r), and
-    drops by more than δ on the other; a ridge, such as the crown of a hedge or a tree in
-    a DSM, drops by more than δ on both sides, and its flanks rise by more than δ to it.
-
-    Returns a boolean mask (subset of ``candidates``). O(candidates).
+    Returns (vx, vy, z0, near_p, far_p, near_m, far_m): unit vector (x east, y north) of
+    the eigenvector of the quadratic's Hessian with the most negative eigenvalue, the cell
+    elevation, and bilinear samples at +r/2, +r, -r/2, -r along it (r = half the window).
     """
     a, b, c, _, _ = quadratic_coefficients(z, cell, window)
-    rr, cc = np.nonzero(candidates)
     a, b, c = a[rr, cc], b[rr, cc], c[rr, cc]
     # Hessian [[2a, c], [c, 2b]] in (x east, y north); eigenvector of the smaller eigenvalue
     lam = (a + b) - np.sqrt((a - b) ** 2 + c**2)
@@ -128,14 +122,31 @@ def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, c
     n = np.hypot(vx, vy)
     vx, vy = vx / n, vy / n
     r = (window // 2) * cell
-    delta = threshold * r * r / 2.0
     zf = np.where(np.isfinite(z), z, np.nanmin(z))
-    # rows go south: a step vy north is -vy / cell rows
-    def side(sign, dist):
+
+    def side(sign, dist):  # rows go south: a step vy north is -vy / cell rows
         return ndi.map_coordinates(zf, [rr - sign * dist * vy / cell, cc + sign * dist * vx / cell], order=1, mode="nearest")
 
-    z0 = zf[rr, cc]
-    near_p, far_p, near_m, far_m = side(1, 0.5 * r), side(1, r), side(-1, 0.5 * r), side(-1, r)
+    return vx, vy, zf[rr, cc], side(1, 0.5 * r), side(1, r), side(-1, 0.5 * r), side(-1, r)
+
+
+def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, candidates: np.ndarray) -> np.ndarray:
+    """Which candidate cells are upper edges (level ground on one side) rather than ridges.
+
+    Across the direction of strongest convex bending (eigenvector of the fitted quadratic's
+    Hessian with the most negative eigenvalue) the DEM is sampled at ± r/2 and ± r, r = half
+    the window. An upper edge has level ground on one side, within ``δ = threshold · r² / 2``
+    of the cell at r/2 and r (the drop of a surface bending at the threshold curvature over
+    r), and drops by more than δ on the other; a ridge, such as the crown of a hedge or a
+    tree in a DSM, drops by more than δ on both sides, and its flanks rise by more than δ
+    to it.
+
+    Returns a boolean mask (subset of ``candidates``). O(candidates).
+    """
+    rr, cc = np.nonzero(candidates)
+    _, _, z0, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc)
+    r = (window // 2) * cell
+    delta = threshold * r * r / 2.0
     plus_high = near_p + far_p >= near_m + far_m
     hi_near, hi_far = np.where(plus_high, near_p, near_m), np.where(plus_high, far_p, far_m)
     lo_far = np.where(plus_high, far_m, far_p)
@@ -143,6 +154,18 @@ def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, c
     out = np.zeros_like(candidates, dtype=bool)
     out[rr[keep], cc[keep]] = True
     return out
+
+
+def low_sides(z: np.ndarray, cell: float, window: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Breakline cells and the unit step (rows, cols) towards their lower side.
+
+    Returns (rows, cols, d_row, d_col): for each cell of ``edges``, the direction across
+    the edge in which the DEM falls (the incision side of an upper edge).
+    """
+    rr, cc = np.nonzero(edges)
+    vx, vy, _, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc)
+    sign = np.where(near_p + far_p >= near_m + far_m, -1.0, 1.0)  # towards the lower side
+    return rr, cc, -sign * vy, sign * vx
 
 
 def convexity(z: np.ndarray, cell: float, window: int, kind: str = "maximum", min_slope: float = 1e-3) -> np.ndarray:

@@ -54,7 +54,8 @@ def fill_depth(dem: np.ndarray, barriers: np.ndarray, raise_m: float) -> tuple[n
 
 def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2: float, cell: float,
                seeds: np.ndarray | None = None, bridgeable: np.ndarray | None = None,
-               edge_band: np.ndarray | None = None, edge_cells: int = 0, held: np.ndarray | None = None) -> np.ndarray:
+               edge_band: np.ndarray | None = None, edge_cells: int = 0, held: np.ndarray | None = None,
+               rims: tuple | None = None) -> np.ndarray:
     """Label raster of the gully polygons at one fill-depth threshold.
 
     ``FD ≥ threshold``, closed with a ``closing_cells`` square (bridges barriers narrower
@@ -72,6 +73,8 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
         ok[np.unique(pools[(np.nan_to_num(held, nan=0.0) >= threshold) & (pools > 0)])] = True
         ok[0] = False
         m = ok[pools]
+    if rims is not None:
+        m = _pools_below_rims(m, rims, edge_cells + 2)
     if edge_band is not None and edge_cells > 0:
         m |= ndi.binary_dilation(m, structure=np.ones((3, 3), bool), iterations=edge_cells) & edge_band
     if closing_cells > 1:
@@ -92,6 +95,32 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     new = np.zeros(n + 1, np.int32)
     new[keep] = np.arange(1, keep.sum() + 1, dtype=np.int32)
     return new[lab]
+
+
+def _pools_below_rims(m: np.ndarray, rims: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], reach: int) -> np.ndarray:
+    """Keep pools that lie on the lower side of most of the breakline cells they touch.
+
+    ``rims`` = (rows, cols, d_row, d_col) from :func:`kitegully.polygons.breaklines.low_sides`.
+    Each breakline cell looks ``reach`` cells to its lower and to its higher side; a pool
+    seen more often from above (it is the incision below those upper edges) than from
+    below (it is terrain beyond them) is kept; pools no breakline sees are kept (open pools).
+    """
+    pools, n = ndi.label(m, structure=np.ones((3, 3), bool))
+    rr, cc, dr, dc = rims
+    if n == 0 or rr.size == 0:
+        return m
+    h, w = m.shape
+
+    def look(sign):
+        r = np.clip(np.round(rr + sign * reach * dr).astype(int), 0, h - 1)
+        c = np.clip(np.round(cc + sign * reach * dc).astype(int), 0, w - 1)
+        return pools[r, c]
+
+    below = np.bincount(look(1.0), minlength=n + 1)
+    above = np.bincount(look(-1.0), minlength=n + 1)
+    keep = below >= above
+    keep[0] = False
+    return keep[pools]
 
 
 def polygons_from_labels(labels: np.ndarray, grid: GridSpec, threshold: float, dem: np.ndarray | None = None,

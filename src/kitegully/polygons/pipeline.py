@@ -14,7 +14,7 @@ import shapely
 
 from kitegully import InputError
 from kitegully.io.raster import GridSpec
-from kitegully.polygons.breaklines import CURVATURES, detect_breaklines
+from kitegully.polygons.breaklines import CURVATURES, detect_breaklines, low_sides
 from kitegully.polygons.conditioning import barrier_mask, fill_depth, gully_mask, polygons_from_labels, rasterize_lines
 from kitegully.polygons.dem_prep import prepare_dem
 from kitegully.polygons.morphometry import REFERENCES, measure_sections
@@ -57,6 +57,9 @@ class PolygonParams:
         Lower bound of tan β in the TCI [I].
     thalweg_min_length_m : float
         Shorter thalweg pieces are dropped [I].
+    min_incision_m : float or None
+        Thalweg cells must lie this far below the mean DEM within ± the transect half
+        length [I]; None = no check.
     smooth_step_m : float
         Vertex spacing of the snakes smoothing of thalweg and medial axes (m) [I].
     snakes_alpha, snakes_beta : float
@@ -89,6 +92,8 @@ class PolygonParams:
     terrain_held : bool
         Keep only pools where the DEM with the dams alone (no breakline walls) holds water
         at least t deep [I] (:func:`kitegully.polygons.conditioning.gully_mask`).
+    below_rims : bool
+        Keep only pools on the lower side of the upper edges (breaklines) they touch [I].
     morph_threshold_m : float
         Fill-depth threshold of the polygons that get medial axes and sections [P 0.5].
     section_spacing_m : float
@@ -109,6 +114,7 @@ class PolygonParams:
     mfd_exponent: float = 1.1
     min_tan_slope: float = 0.001
     thalweg_min_length_m: float = 10.0
+    min_incision_m: float | None = None
     smooth_step_m: float = 2.0
     snakes_alpha: float = 1.0
     snakes_beta: float = 1.0
@@ -125,6 +131,7 @@ class PolygonParams:
     min_area_m2: float = 10.0
     keep_on_thalweg: bool = True
     terrain_held: bool = False
+    below_rims: bool = False
     morph_threshold_m: float = 0.5
     section_spacing_m: float = 10.0
     reference: str = "lower_end"
@@ -138,14 +145,14 @@ class PolygonParams:
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
             breakline_min_length_m=b["min_length_m"], upper_edges_only=b["upper_edges_only"],
             tci_threshold=t["tci_threshold"], mfd_exponent=t["mfd_exponent"], min_tan_slope=t["min_tan_slope"],
-            thalweg_min_length_m=t["min_length_m"], smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
+            thalweg_min_length_m=t["min_length_m"], min_incision_m=t["min_incision_m"], smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
             snakes_beta=t["snakes_beta"],
             transect_spacing_m=tr["spacing_m"], transect_half_length_m=tr["half_length_m"], transect_max_drop_m=tr["max_drop_m"],
             transect_min_spacing_m=tr["min_spacing_m"], transect_tangent_half_window_m=tr["tangent_half_window_m"],
             raise_m=c["raise_m"], grow_cells=c["grow_cells"], thresholds_m=tuple(c["thresholds_m"]), closing_cells=c["closing_cells"],
             bridge=c["bridge"],
             min_area_m2=c["min_area_m2"], keep_on_thalweg=c["keep_on_thalweg"],
-            terrain_held=c["terrain_held"],
+            terrain_held=c["terrain_held"], below_rims=c["below_rims"],
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
         )
 
@@ -232,7 +239,8 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
 
     t = time.perf_counter()
     tci, _ = topographic_convergence_index(dem, grid.cell, p.mfd_exponent, p.min_tan_slope)
-    th_lines, th_cells = thalweg_lines(tci, grid, p.tci_threshold, p.thalweg_min_length_m, p.smooth_step_m, p.snakes_alpha, p.snakes_beta)
+    th_lines, th_cells = thalweg_lines(tci, grid, p.tci_threshold, p.thalweg_min_length_m, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
+                                       dem, p.min_incision_m, 2.0 * p.transect_half_length_m)
     T["thalweg_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -254,11 +262,13 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         bridgeable = barrier_mask(tr_cells, np.zeros_like(tr_cells), p.grow_cells) & ~bl_band & ~bl_cells
     fd, cond = fill_depth(dem, barriers, p.raise_m)
     level = cond + fd
+    rims = low_sides(dem, grid.cell, p.window_cells, bl_cells) if p.below_rims else None
     held = fill_depth(dem, barrier_mask(np.zeros_like(tr_cells), tr_cells, p.grow_cells), p.raise_m)[0] if p.terrain_held else None
     seeds = th_cells if p.keep_on_thalweg else None
     labels, polys = {}, {}
     for thr in p.thresholds_m:
-        lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable, bl_band, p.grow_cells, held)
+        lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable, bl_band, p.grow_cells, held,
+                         rims)
         labels[thr] = lab
         polys[thr] = polygons_from_labels(lab, grid, thr, fd=fd)
         log.info("t = %.2f m: %d polygons, %.0f m2", thr, len(polys[thr]), polys[thr]["area_m2"].sum() if len(polys[thr]) else 0.0)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+import scipy.ndimage as ndi
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import shapely
@@ -159,13 +160,28 @@ def thalweg_lines(
     smooth_step_m: float,
     alpha: float,
     beta: float,
+    dem: np.ndarray | None = None,
+    min_incision_m: float | None = None,
+    incision_window_m: float = 30.0,
 ) -> tuple[list[shapely.LineString], np.ndarray]:
     """Mask TCI > threshold, skeletonise, vectorise, drop short pieces, smooth with snakes.
+
+    With ``min_incision_m``, only cells at least that far below the mean of the DEM in a
+    square of side ``incision_window_m`` around them stay in the mask: a channel is incised,
+    a flat valley floor (high TCI because tan β is small) is not.
 
     Returns the smoothed lines (map coordinates) and the raster of their skeleton cells.
     Raises :class:`InputError` when no line is left.
     """
     mask = np.nan_to_num(tci, nan=-np.inf) > threshold
+    if min_incision_m is not None and dem is not None:
+        zf = np.where(np.isfinite(dem), dem, np.nanmean(dem)).astype(np.float64)
+        size = max(3, int(round(incision_window_m / grid.cell)) | 1)
+        relief = zf - ndi.uniform_filter(zf, size=size, mode="nearest")
+        n_before = int(mask.sum())
+        mask &= relief <= -min_incision_m
+        log.info("thalweg: %d of %d cells with TCI > %.3g are incised >= %.2f m below the %.0f m mean", int(mask.sum()), n_before,
+                 threshold, min_incision_m, incision_window_m)
     n_min = max(2, int(np.ceil(min_length_m / grid.cell)))
     mask = remove_short_components(mask, n_min)
     skel = skeletonize(mask)
