@@ -63,6 +63,14 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     ``seeds`` is given, only components touching a seed cell (the thalweg) kept. With
     ``bridgeable``, the closing may only add those cells (e.g. the transect dams that are
     not also breaklines), so that pools on either side of a breakline stay apart.
+    With ``held`` (fill depth of the DEM with the dams alone, no breakline walls), only
+    pools (components before the closing) in which the terrain itself holds water at least
+    ``threshold`` deep are kept. With ``rims`` (breakline cells and their lower sides), only
+    pools on the lower side of the upper edges they touch are kept
+    (:func:`_pools_below_rims`): a compartment beyond the rims of the gullies around it is
+    not an incision. With ``edge_band`` (the grown breakline cells) the mask then grows by
+    ``edge_cells`` into that band: the barrier was widened only against diagonal leaks, the
+    gully's outline is the breakline itself.
 
     Returns int32 labels (0 = not gully), numbered 1..n.
     """
