@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kitegully.config import load_yaml
 from kitegully.polygons.conditioning import polygons_from_labels
 from kitegully.polygons.morphometry import measure_sections
 from kitegully.polygons.pipeline import PolygonParams, measure_polygons
@@ -33,8 +34,9 @@ def test_sections_of_a_known_footprint(shape):
     assert morph["volume_m3"].iloc[0] == pytest.approx(a_true * morph["length_m"].iloc[0], rel=0.12)
 
 
+@pytest.mark.parametrize("params", ["paper", "site"])
 @pytest.mark.parametrize("shape, width_tol_cells", [("V", 1), ("U", 2)])
-def test_whole_method_on_a_notch(shape, width_tol_cells):
+def test_whole_method_on_a_notch(shape, width_tol_cells, params, repo_root):
     """Breaklines, thalweg, dams, fill and sections on a gully with a headcut in a tilted plane.
 
     The V's rims are found within a cell. The U (p = 4) is concave just inside its rims, which
@@ -44,7 +46,10 @@ def test_whole_method_on_a_notch(shape, width_tol_cells):
     """
     cross = 0.05
     dem, grid, xc = notch_dem(shape, WIDTH, DEPTH, cross_slope=cross, head_m=20.0)
-    p = PolygonParams(transect_half_length_m=15.0, transect_max_drop_m=0.5, bridge="transects")
+    if params == "paper":
+        p = PolygonParams(transect_half_length_m=15.0, transect_max_drop_m=0.5, bridge="transects")
+    else:  # the default site's settings, with every [I] option on
+        p = PolygonParams.from_config(load_yaml(repo_root / "config" / "sites" / "kamech_twin.yaml")["polygons"])
     res = measure_polygons(dem, grid, p)
     assert len(res.polygons[0.5]) == 1
     sec = res.sections
