@@ -5,7 +5,7 @@ from kitegully.io.raster import Raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
 from kitegully.logs import setup_script_logging
-from kitegully.polygons.pipeline import PolygonParams, measure_polygons
+from kitegully.polygons.stage import PolygonParams, measure_polygons
 
 log = setup_script_logging(snakemake.log[0])
 out = snakemake.output

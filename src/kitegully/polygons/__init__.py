@@ -25,6 +25,25 @@ Modules by phase of the method:
     Paper Table 1, polygon scores and morphometry errors against the twin's truth.
 ``plots``
     Figures like the paper's Figs 8-11.
-``pipeline``
+``stage``
     :class:`PolygonParams` and :func:`measure_polygons`, the whole chain.
+
+Entry points (docs/architecture.md): :func:`measure_polygons` with its parameters
+:class:`PolygonParams` (``stage``); the twin evaluation :func:`regenerate_table1` and
+:func:`evaluate_against_truth` (``evaluation``). Imported lazily, so importing a phase
+module stays light.
 """
+
+from importlib import import_module
+
+_EXPORTS = {
+    "measure_polygons": "stage", "PolygonParams": "stage", "PolygonResult": "stage",
+    "regenerate_table1": "evaluation", "evaluate_against_truth": "evaluation",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -17,6 +17,7 @@ import scipy.ndimage as ndi
 import shapely
 from rasterio import features
 
+from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 
 #: The paper's Table 1 and sect. 5.3 numbers (Höfle et al. 2013; METHODS.md 3.4), m² or %.
@@ -63,6 +64,7 @@ class EvaluationParams:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "EvaluationParams":
+        cfg = config_section(cfg, "polygons.evaluation", ["zone_m", "wide_gully_m", "match_distance_m"], optional=["operators"])
         return cls(zone_m=float(cfg["zone_m"]), wide_gully_m=float(cfg["wide_gully_m"]), match_distance_m=float(cfg["match_distance_m"]))
 
 

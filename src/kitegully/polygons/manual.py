@@ -27,6 +27,7 @@ import pandas as pd
 import scipy.ndimage as ndi
 import shapely
 
+from kitegully.config import config_section
 from kitegully.seeds import rng_for
 
 
@@ -60,6 +61,8 @@ class OperatorParams:
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "OperatorParams":
         """Build from ``polygons.evaluation.operators``."""
+        cfg = config_section(cfg, "polygons.evaluation.operators", ["count", "min_visible_depth_m", "edge_bias_sd_m", "edge_noise_sd_m",
+                                                                     "edge_noise_wavelength_m", "generalisation_m"])
         return cls(count=int(cfg["count"]), min_visible_depth_m=tuple(cfg["min_visible_depth_m"]), edge_bias_sd_m=float(cfg["edge_bias_sd_m"]),
                    edge_noise_sd_m=tuple(cfg["edge_noise_sd_m"]), edge_noise_wavelength_m=float(cfg["edge_noise_wavelength_m"]),
                    generalisation_m=tuple(cfg["generalisation_m"]))

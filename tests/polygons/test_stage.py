@@ -8,7 +8,7 @@ import pytest
 from kitegully import InputError
 from kitegully.config import load_yaml
 from kitegully.io.raster import GridSpec
-from kitegully.polygons.pipeline import PolygonParams, measure_polygons
+from kitegully.polygons.stage import PolygonParams, measure_polygons
 
 from polygon_synthetic import CRS
 

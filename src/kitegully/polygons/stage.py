@@ -13,6 +13,7 @@ import pandas as pd
 import shapely
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.breaklines import CURVATURES, detect_breaklines, low_sides
 from kitegully.polygons.conditioning import barrier_mask, fill_depth, gully_mask, polygons_from_labels, rasterize_lines
@@ -139,7 +140,16 @@ class PolygonParams:
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "PolygonParams":
         """Build from the ``polygons:`` section (nested keys as in ``polygons.schema.yaml``)."""
-        b, t, tr, c, m, g = cfg["breaklines"], cfg["thalweg"], cfg["transects"], cfg["conditioning"], cfg["morphometry"], cfg["gap_fill"]
+        cfg = config_section(cfg, "polygons", ["cell_m", "gap_fill", "breaklines", "thalweg", "transects", "conditioning", "morphometry"],
+                             optional=["dem_file", "evaluation", "figure_max_px"])
+        g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"])
+        b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"])
+        t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m",
+                                                                "smooth_step_m", "snakes_alpha", "snakes_beta"])
+        tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"])
+        c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
+                                                                          "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"])
+        m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference"])
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
