@@ -191,4 +191,5 @@ def measure_sections(
                                 geometry="geometry" if sec_rec else [], crs=grid.crs)
     log.info("morphometry: %d polygons, %d medial axes, %d cross-sections, volume %.1f m3", len(morph), len(ax_rec), len(sec_rec),
              sum(r["volume_m3"] for r in morph))
-    return axes, sections, pd.DataFrame(morph)
+    cols = ["polygon_id", "area_m2", "length_m", "n_sections", "mean_width_m", "max_width_m", "mean_depth_m", "max_depth_m", "volume_m3"]
+    return axes, sections, pd.DataFrame(morph, columns=cols)
