@@ -61,6 +61,8 @@ class PolygonParams:
     min_incision_m : float or None
         Thalweg cells must lie this far below the mean DEM within ± the transect half
         length [I]; None = no check.
+    thalweg_closing_cells : int
+        Closing of the TCI mask before the skeleton (cells) [I]; 1 = none.
     smooth_step_m : float
         Vertex spacing of the snakes smoothing of thalweg and medial axes (m) [I].
     snakes_alpha, snakes_beta : float
@@ -116,6 +118,7 @@ class PolygonParams:
     min_tan_slope: float = 0.001
     thalweg_min_length_m: float = 10.0
     min_incision_m: float | None = None
+    thalweg_closing_cells: int = 1
     smooth_step_m: float = 2.0
     snakes_alpha: float = 1.0
     snakes_beta: float = 1.0
@@ -144,7 +147,7 @@ class PolygonParams:
                              optional=["dem_file", "evaluation", "figure_max_px"])
         g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"])
         b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"])
-        t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m",
+        t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m", "mask_closing_cells",
                                                                 "smooth_step_m", "snakes_alpha", "snakes_beta"])
         tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"])
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
@@ -155,7 +158,8 @@ class PolygonParams:
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
             breakline_min_length_m=b["min_length_m"], upper_edges_only=b["upper_edges_only"],
             tci_threshold=t["tci_threshold"], mfd_exponent=t["mfd_exponent"], min_tan_slope=t["min_tan_slope"],
-            thalweg_min_length_m=t["min_length_m"], min_incision_m=t["min_incision_m"], smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
+            thalweg_min_length_m=t["min_length_m"], min_incision_m=t["min_incision_m"],
+            thalweg_closing_cells=t["mask_closing_cells"], smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
             snakes_beta=t["snakes_beta"],
             transect_spacing_m=tr["spacing_m"], transect_half_length_m=tr["half_length_m"], transect_max_drop_m=tr["max_drop_m"],
             transect_min_spacing_m=tr["min_spacing_m"], transect_tangent_half_window_m=tr["tangent_half_window_m"],
@@ -250,7 +254,8 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     t = time.perf_counter()
     tci, _ = topographic_convergence_index(dem, grid.cell, p.mfd_exponent, p.min_tan_slope)
     th_lines, th_cells = thalweg_lines(tci, grid, p.tci_threshold, p.thalweg_min_length_m, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
-                                       dem, p.min_incision_m, 2.0 * p.transect_half_length_m)
+                                       dem, p.min_incision_m, 2.0 * p.transect_half_length_m,
+                                       p.thalweg_closing_cells)
     T["thalweg_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -163,12 +163,15 @@ def thalweg_lines(
     dem: np.ndarray | None = None,
     min_incision_m: float | None = None,
     incision_window_m: float = 30.0,
+    closing_cells: int = 1,
 ) -> tuple[list[shapely.LineString], np.ndarray]:
     """Mask TCI > threshold, skeletonise, vectorise, drop short pieces, smooth with snakes.
 
     With ``min_incision_m``, only cells at least that far below the mean of the DEM in a
     square of side ``incision_window_m`` around them stay in the mask: a channel is incised,
-    a flat valley floor (high TCI because tan β is small) is not.
+    a flat valley floor (high TCI because tan β is small) is not. A closing with a
+    ``closing_cells`` square then joins the fragments that flow braiding across a wide,
+    rough channel floor leaves.
 
     Returns the smoothed lines (map coordinates) and the raster of their skeleton cells.
     Raises :class:`InputError` when no line is left.
@@ -182,6 +185,9 @@ def thalweg_lines(
         mask &= relief <= -min_incision_m
         log.info("thalweg: %d of %d cells with TCI > %.3g are incised >= %.2f m below the %.0f m mean", int(mask.sum()), n_before,
                  threshold, min_incision_m, incision_window_m)
+    if closing_cells > 1:
+        pad = closing_cells
+        mask = ndi.binary_closing(np.pad(mask, pad), structure=np.ones((closing_cells, closing_cells), bool))[pad:-pad, pad:-pad]
     n_min = max(2, int(np.ceil(min_length_m / grid.cell)))
     mask = remove_short_components(mask, n_min)
     skel = skeletonize(mask)

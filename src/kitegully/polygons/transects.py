@@ -23,11 +23,13 @@ def transect_stations(line: shapely.LineString, spacing: float, dem: np.ndarray 
 
     Every ``spacing`` m starting half a spacing from the upper end; with ``max_drop``, a
     station also where the (3 × 3 minimum of the) DEM along the line has dropped by
-    ``max_drop`` since the previous station, but never closer than ``min_spacing``.
+    ``max_drop`` since the previous station, but never closer than ``min_spacing``. A line
+    too short for any station gets one at its middle (a thalweg fragment still dams its
+    reach).
     """
     L = line.length
     if max_drop is None or dem is None:
-        return np.arange(0.5 * spacing, L, spacing) if L > 0.5 * spacing else np.zeros(0)
+        return np.arange(0.5 * spacing, L, spacing) if L > 0.5 * spacing else np.array([0.5 * L])
     step = grid.cell
     s = np.arange(0.0, L + 1e-9, step)
     pts = shapely.line_interpolate_point(line, s)
@@ -47,7 +49,7 @@ def transect_stations(line: shapely.LineString, spacing: float, dem: np.ndarray 
         if due or steep:
             out.append(si)
             last_s, last_z = si, zi
-    return np.asarray(out)
+    return np.asarray(out) if out else np.array([0.5 * L])
 
 
 def make_transects(line: shapely.LineString, stations: np.ndarray, half_length: float, tangent_half_window: float) -> list[shapely.LineString]:
