@@ -13,6 +13,7 @@ STAGES = [
     "dense",
     "validate",
     "gully",
+    "polygons",
     "obia",
     "change",
 ]

@@ -1,0 +1,49 @@
+"""Gully polygons and morphometry from a DEM (Höfle et al. 2013; METHODS.md sect. 3).
+
+Modules by phase of the method:
+
+``dem_prep``
+    Minimum-z resampling of the DSM/DTM to the stage's cell; empty cells filled by
+    moving planes (best-fit plane through the k nearest valid cells within a radius).
+``breaklines``
+    Wood's bivariate quadratic in an n × n window by least-squares convolution kernels,
+    curvature, threshold, skeleton: the convex upper gully edges.
+``skeleton``
+    One-cell-wide skeletons to polylines (graph walk) and longest paths.
+``thalweg``
+    Multiple-flow-direction specific catchment area, TCI = ln(a / tan β), thalweg lines.
+``transects``
+    Orthogonal dams along the thalweg, clipped between the nearest breakline crossings.
+``conditioning``
+    Barriers raised into the DEM, priority-flood fill, fill depth, threshold masks,
+    closing, polygons.
+``morphometry``
+    Medial axis, cross-sections every 10 m: width, depth, area and volume.
+``manual``
+    Simulated manual operators digitising the gullies on the shaded DEM (twins only).
+``evaluation``
+    Paper Table 1, polygon scores and morphometry errors against the twin's truth.
+``plots``
+    Figures like the paper's Figs 8-11.
+``stage``
+    :class:`PolygonParams` and :func:`measure_polygons`, the whole chain.
+
+Entry points (docs/architecture.md): :func:`measure_polygons` with its parameters
+:class:`PolygonParams` (``stage``); the twin evaluation :func:`regenerate_table1` and
+:func:`evaluate_against_truth` (``evaluation``). Imported lazily, so importing a phase
+module stays light.
+"""
+
+from importlib import import_module
+
+_EXPORTS = {
+    "measure_polygons": "stage", "PolygonParams": "stage", "PolygonResult": "stage",
+    "regenerate_table1": "evaluation", "evaluate_against_truth": "evaluation",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

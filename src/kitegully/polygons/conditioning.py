@@ -1,0 +1,147 @@
+"""DEM conditioning, sink fill, fill-depth masks and polygons (Höfle et al. 2013 sect. 4.1-4.2)."""
+
+from __future__ import annotations
+
+import logging
+
+import geopandas as gpd
+import numpy as np
+import scipy.ndimage as ndi
+import shapely
+from rasterio import features
+
+from kitegully.io.raster import GridSpec
+from kitegully.terrain.fill import priority_flood_fill
+
+log = logging.getLogger(__name__)
+
+
+def rasterize_lines(lines: list[shapely.LineString], grid: GridSpec) -> np.ndarray:
+    """Cells touched by the lines (points every quarter cell along each line)."""
+    out = np.zeros((grid.height, grid.width), bool)
+    for ln in lines:
+        if ln.is_empty or ln.length == 0:
+            continue
+        s = np.arange(0.0, ln.length + 1e-9, 0.25 * grid.cell)
+        pts = shapely.line_interpolate_point(ln, s)
+        r, c = grid.rowcol(shapely.get_x(pts), shapely.get_y(pts))
+        r, c = np.round(r).astype(int), np.round(c).astype(int)
+        ok = (r >= 0) & (r < grid.height) & (c >= 0) & (c < grid.width)
+        out[r[ok], c[ok]] = True
+    return out
+
+
+def barrier_mask(breaklines: np.ndarray, transects: np.ndarray, grow_cells: int = 1) -> np.ndarray:
+    """Breakline and transect cells grown by ``grow_cells`` in all 8 directions."""
+    m = breaklines | transects
+    if grow_cells > 0:
+        m = ndi.binary_dilation(m, structure=np.ones((3, 3), bool), iterations=grow_cells)
+    return m
+
+
+def fill_depth(dem: np.ndarray, barriers: np.ndarray, raise_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Raise the barriers by ``raise_m``, sink-fill (priority flood, level pools), FD = filled − conditioned.
+
+    Returns (fill depth ≥ 0, NaN on nodata; conditioned DEM). O(n log n).
+    """
+    cond = np.asarray(dem, np.float64).copy()
+    cond[barriers] += raise_m
+    filled, n = priority_flood_fill(cond, epsilon=0.0)
+    fd = filled - cond
+    log.info("sink fill of the conditioned DEM: %d cells raised, max fill depth %.2f m", n, float(np.nanmax(fd)) if np.isfinite(fd).any() else 0.0)
+    return fd.astype(np.float32), cond.astype(np.float32)
+
+
+def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2: float, cell: float,
+               seeds: np.ndarray | None = None, bridgeable: np.ndarray | None = None,
+               edge_band: np.ndarray | None = None, edge_cells: int = 0, held: np.ndarray | None = None,
+               rims: tuple | None = None) -> np.ndarray:
+    """Label raster of the gully polygons at one fill-depth threshold.
+
+    ``FD ≥ threshold``, closed with a ``closing_cells`` square (bridges barriers narrower
+    than it), components smaller than ``min_area_m2`` dropped and, when
+    ``seeds`` is given, only components touching a seed cell (the thalweg) kept. With
+    ``bridgeable``, the closing may only add those cells (e.g. the transect dams that are
+    not also breaklines), so that pools on either side of a breakline stay apart.
+    With ``held`` (fill depth of the DEM with the dams alone, no breakline walls), only
+    pools (components before the closing) in which the terrain itself holds water at least
+    ``threshold`` deep are kept. With ``rims`` (breakline cells and their lower sides), only
+    pools on the lower side of the upper edges they touch are kept
+    (:func:`_pools_below_rims`): a compartment beyond the rims of the gullies around it is
+    not an incision. With ``edge_band`` (the grown breakline cells) the mask then grows by
+    ``edge_cells`` into that band: the barrier was widened only against diagonal leaks, the
+    gully's outline is the breakline itself.
+
+    Returns int32 labels (0 = not gully), numbered 1..n.
+    """
+    m = np.nan_to_num(fd, nan=0.0) >= threshold
+    if held is not None:
+        pools, npool = ndi.label(m, structure=np.ones((3, 3), bool))
+        ok = np.zeros(npool + 1, bool)
+        ok[np.unique(pools[(np.nan_to_num(held, nan=0.0) >= threshold) & (pools > 0)])] = True
+        ok[0] = False
+        m = ok[pools]
+    if rims is not None:
+        m = _pools_below_rims(m, rims, edge_cells + 2)
+    if edge_band is not None and edge_cells > 0:
+        m |= ndi.binary_dilation(m, structure=np.ones((3, 3), bool), iterations=edge_cells) & edge_band
+    if closing_cells > 1:
+        se = np.ones((closing_cells, closing_cells), bool)
+        pad = closing_cells
+        closed = ndi.binary_closing(np.pad(m, pad), structure=se)[pad:-pad, pad:-pad]
+        m = closed if bridgeable is None else m | (closed & bridgeable)
+    lab, n = ndi.label(m, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return lab.astype(np.int32)
+    size = np.bincount(lab.ravel(), minlength=n + 1) * cell * cell
+    keep = size >= min_area_m2
+    if seeds is not None:
+        touched = np.zeros(n + 1, bool)
+        touched[np.unique(lab[seeds & (lab > 0)])] = True
+        keep &= touched
+    keep[0] = False
+    new = np.zeros(n + 1, np.int32)
+    new[keep] = np.arange(1, keep.sum() + 1, dtype=np.int32)
+    return new[lab]
+
+
+def _pools_below_rims(m: np.ndarray, rims: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], reach: int) -> np.ndarray:
+    """Keep pools that lie on the lower side of most of the breakline cells they touch.
+
+    ``rims`` = (rows, cols, d_row, d_col) from :func:`kitegully.polygons.breaklines.low_sides`.
+    Each breakline cell looks ``reach`` cells to its lower and to its higher side; a pool
+    seen more often from above (it is the incision below those upper edges) than from
+    below (it is terrain beyond them) is kept; pools no breakline sees are kept (open pools).
+    """
+    pools, n = ndi.label(m, structure=np.ones((3, 3), bool))
+    rr, cc, dr, dc = rims
+    if n == 0 or rr.size == 0:
+        return m
+    h, w = m.shape
+
+    def look(sign):
+        r = np.clip(np.round(rr + sign * reach * dr).astype(int), 0, h - 1)
+        c = np.clip(np.round(cc + sign * reach * dc).astype(int), 0, w - 1)
+        return pools[r, c]
+
+    below = np.bincount(look(1.0), minlength=n + 1)
+    above = np.bincount(look(-1.0), minlength=n + 1)
+    keep = below >= above
+    keep[0] = False
+    return keep[pools]
+
+
+def polygons_from_labels(labels: np.ndarray, grid: GridSpec, threshold: float, dem: np.ndarray | None = None,
+                         fd: np.ndarray | None = None) -> gpd.GeoDataFrame:
+    """Vectorise a label raster: one polygon per label with area (m²) and mean fill depth (m)."""
+    geoms: dict[int, list] = {}
+    for geom, val in features.shapes(labels, mask=labels > 0, transform=grid.transform, connectivity=8):
+        geoms.setdefault(int(val), []).append(shapely.geometry.shape(geom))
+    ids = sorted(geoms)
+    polys = [shapely.union_all(geoms[i]) for i in ids]
+    recs = {"polygon_id": ids, "threshold_m": [threshold] * len(ids), "area_m2": [p.area for p in polys]}
+    if fd is not None and len(ids):
+        idx = np.asarray(ids)
+        fdv = np.nan_to_num(fd, nan=0.0)
+        recs["mean_fill_depth_m"] = (ndi.sum(fdv, labels, idx) / np.maximum(ndi.sum(np.ones_like(fdv), labels, idx), 1)).tolist()
+    return gpd.GeoDataFrame(recs, geometry=polys, crs=grid.crs)

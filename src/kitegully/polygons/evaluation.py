@@ -1,0 +1,258 @@
+"""Evaluation of the polygons: paper Table 1 (auto vs simulated manual sets) and scores
+against the twin's true gullies (twin evaluation rules only; reads ``truth/``).
+
+All area comparisons are made on the stage grid: every polygon set is rasterised (cell
+centres inside) and areas are cell counts × cell area.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import geopandas as gpd
+import numpy as np
+import pandas as pd
+import scipy.ndimage as ndi
+import shapely
+from rasterio import features
+
+from kitegully.config import config_section
+from kitegully.io.raster import GridSpec
+
+#: The paper's Table 1 and sect. 5.3 numbers (Höfle et al. 2013; METHODS.md 3.4), m² or %.
+PAPER_TABLE1 = {
+    "sets": (6, 9),
+    "min_area_m2": (6919, 5284),
+    "max_area_m2": (8773, 9919),
+    "mean_area_m2": (7777, 8411),
+    "sd_area_m2": (665, 1097),
+    "cv_pct": (8.6, 13.0),
+    "min_over_max_pct": (78.9, 53.3),
+    "intersection_m2": (6919, 5284),
+    "union_m2": (8773, 10991),
+    "intersection_over_mean_pct": (89.0, 62.8),
+}
+PAPER_COMPARISON = {
+    "auto_in_union_pct (|A∩U|/|A|)": 99.8,
+    "intersection_covered_pct (|A∩I|/|I|)": 99.5,
+    "union_covered_pct (|A∩U|/|U|)": 79.7,
+    "auto_over_intersection (|A|/|I|)": 1.7,
+    "mean_auto_over_mean_manual_pct": 92.5,
+}
+
+
+@dataclass(frozen=True)
+class EvaluationParams:
+    """Scoring settings (``polygons.evaluation``, without ``operators``).
+
+    Attributes
+    ----------
+    zone_m : float
+        A mapped cell within this distance of a true gully counts towards that gully's
+        precision and IoU (m) [I].
+    wide_gully_m : float
+        Gullies of mean true width above this are "wide" for the IoU target (m) [issue 16: 2 m].
+    match_distance_m : float
+        A cross-section is compared with the nearest true centreline reach within this
+        distance (m) [I].
+    """
+
+    zone_m: float = 10.0
+    wide_gully_m: float = 2.0
+    match_distance_m: float = 2.0
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "EvaluationParams":
+        cfg = config_section(cfg, "polygons.evaluation", ["zone_m", "wide_gully_m", "match_distance_m"], optional=["operators"])
+        return cls(zone_m=float(cfg["zone_m"]), wide_gully_m=float(cfg["wide_gully_m"]), match_distance_m=float(cfg["match_distance_m"]))
+
+
+def rasterize(geoms, grid: GridSpec, values=None, dtype=np.uint8) -> np.ndarray:
+    """Burn geometries (cell centres inside) on ``grid``; ``values`` default 1."""
+    geoms = [g for g in geoms if g is not None and not g.is_empty]
+    shape = (grid.height, grid.width)
+    if not geoms:
+        return np.zeros(shape, dtype)
+    vals = values if values is not None else [1] * len(geoms)
+    return features.rasterize(list(zip(geoms, vals)), out_shape=shape, transform=grid.transform, fill=0, dtype=dtype)
+
+
+def _stack_stats(masks: list[np.ndarray], cell_area: float) -> dict[str, float]:
+    areas = np.array([m.sum() * cell_area for m in masks], float)
+    inter = np.logical_and.reduce(masks).sum() * cell_area
+    union = np.logical_or.reduce(masks).sum() * cell_area
+    mean = areas.mean()
+    sd = areas.std(ddof=1) if len(areas) > 1 else 0.0
+    return {"sets": len(areas), "min_area_m2": areas.min(), "max_area_m2": areas.max(), "mean_area_m2": mean, "sd_area_m2": sd,
+            "cv_pct": 100 * sd / mean if mean else np.nan, "min_over_max_pct": 100 * areas.min() / areas.max() if areas.max() else np.nan,
+            "intersection_m2": inter, "union_m2": union, "intersection_over_mean_pct": 100 * inter / mean if mean else np.nan}
+
+
+def table1(auto: Mapping[float, gpd.GeoDataFrame], manual: gpd.GeoDataFrame, grid: GridSpec, auto_threshold: float = 0.5) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Paper Table 1 regenerated, beside the paper's values.
+
+    Parameters
+    ----------
+    auto : mapping threshold → GeoDataFrame
+        The automatic polygon sets.
+    manual : GeoDataFrame
+        One (multi)polygon per simulated operator.
+    grid : GridSpec
+        Stage grid the areas are counted on.
+    auto_threshold : float
+        The set compared with the manual union and intersection (paper: 0.5 m).
+
+    Returns
+    -------
+    stats : DataFrame
+        ``statistic, auto, manual, paper_auto, paper_manual``.
+    comparison : DataFrame
+        ``statistic, value, paper`` for the t = ``auto_threshold`` polygon A against the
+        manual union U and intersection I.
+    """
+    ca = grid.cell**2
+    am = {t: rasterize(g.geometry, grid).astype(bool) for t, g in auto.items()}
+    mm = [rasterize([g], grid).astype(bool) for g in manual.geometry]
+    sa, sm = _stack_stats(list(am.values()), ca), _stack_stats(mm, ca)
+    stats = pd.DataFrame([{"statistic": k, "auto": sa[k], "manual": sm[k], "paper_auto": PAPER_TABLE1[k][0], "paper_manual": PAPER_TABLE1[k][1]}
+                          for k in PAPER_TABLE1])
+    A = am[auto_threshold]
+    U = np.logical_or.reduce(mm)
+    I = np.logical_and.reduce(mm)
+    a, u, i = A.sum(), U.sum(), I.sum()
+    vals = [100 * (A & U).sum() / a if a else np.nan, 100 * (A & I).sum() / i if i else np.nan, 100 * (A & U).sum() / u if u else np.nan,
+            a / i if i else np.nan, 100 * sa["mean_area_m2"] / sm["mean_area_m2"] if sm["mean_area_m2"] else np.nan]
+    comp = pd.DataFrame({"statistic": list(PAPER_COMPARISON), "value": vals, "paper": list(PAPER_COMPARISON.values())})
+    return stats, comp
+
+
+def truth_table(centrelines: gpd.GeoDataFrame, truth_polys: gpd.GeoDataFrame, u_exponent: float) -> pd.DataFrame:
+    """Per true gully: area, length, mean width (length-weighted), max depth and volume.
+
+    The twin carves ``D (1 − |d/h|^p)`` across a half-width h (p = 1 for V, ``u_exponent``
+    for U sections), so a reach's true section area is ``W D p / (p + 1)``.
+    """
+    c = centrelines.copy()
+    p = np.where(c["shape"] == "U", u_exponent, 1.0)
+    c["area_true_m2"] = c["width_m"] * c["depth_m"] * p / (p + 1.0)
+    c["vol"] = c["area_true_m2"] * c["length_m"]
+    c["wl"] = c["width_m"] * c["length_m"]
+    g = c.groupby("gully_id").agg(length_m=("length_m", "sum"), wl=("wl", "sum"), max_depth_m=("depth_max_m", "max"), volume_true_m3=("vol", "sum"))
+    g["mean_width_m"] = g["wl"] / g["length_m"]
+    g = g.drop(columns="wl")
+    area = truth_polys.set_index("gully_id")[["kind", "area_m2"]]
+    return area.join(g, how="left").reset_index()
+
+
+def polygon_scores(auto: gpd.GeoDataFrame, truth_polys: gpd.GeoDataFrame, truth: pd.DataFrame, grid: GridSpec, params: EvaluationParams) -> pd.DataFrame:
+    """Precision, recall and IoU per true gully and overall (cell counts on the stage grid).
+
+    A mapped cell belongs to the nearest true gully within ``zone_m``; per gully g with
+    true cells T_g and mapped cells A_g in its zone: precision = |A_g∩T_g|/|A_g|, recall =
+    |A_g∩T_g|/|T_g|, IoU = |A_g∩T_g|/|A_g∪T_g|. Rows ``all`` (every mapped cell) and
+    ``wide`` (gullies wider than ``wide_gully_m``, their zones) close the table.
+    """
+    ids = truth_polys["gully_id"].to_numpy()
+    lab = rasterize(truth_polys.geometry, grid, values=(ids + 1).tolist(), dtype=np.int32)
+    A = rasterize(auto.geometry, grid).astype(bool)
+    dist, idx = ndi.distance_transform_edt(lab == 0, sampling=grid.cell, return_indices=True)
+    zone = np.where(dist <= params.zone_m, lab[idx[0], idx[1]], 0)
+    ca = grid.cell**2
+    n = int(lab.max()) + 1
+    T = np.bincount(lab.ravel(), minlength=n)
+    Az = np.bincount(zone[A], minlength=n)
+    TP = np.bincount(lab[A], minlength=n)
+    info = truth.set_index("gully_id")
+    rows = []
+    for gid in ids:
+        k = gid + 1
+        t, a, tp = T[k], Az[k], TP[k]
+        rows.append({"gully_id": int(gid), "kind": info.loc[gid, "kind"], "mean_width_m": info.loc[gid, "mean_width_m"],
+                     "true_area_m2": t * ca, "mapped_area_m2": a * ca, "overlap_m2": tp * ca,
+                     "precision": tp / a if a else np.nan, "recall": tp / t if t else np.nan, "iou": tp / (t + a - tp) if (t + a - tp) else np.nan})
+    df = pd.DataFrame(rows)
+    wide_ids = df.loc[df["mean_width_m"] > params.wide_gully_m, "gully_id"].to_numpy() + 1
+    for name, sel_t, sel_a in (("all", lab > 0, A), ("wide", np.isin(lab, wide_ids), A & np.isin(zone, wide_ids))):
+        t, a, tp = sel_t.sum(), sel_a.sum(), (sel_t & sel_a).sum()
+        df.loc[len(df)] = {"gully_id": -1, "kind": name, "mean_width_m": np.nan, "true_area_m2": t * ca, "mapped_area_m2": a * ca,
+                           "overlap_m2": tp * ca, "precision": tp / a if a else np.nan, "recall": tp / t if t else np.nan,
+                           "iou": tp / (t + a - tp) if (t + a - tp) else np.nan}
+    return df
+
+
+def morphometry_errors(sections: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame, truth: pd.DataFrame, u_exponent: float,
+                       params: EvaluationParams) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """Cross-section width, depth and area against the nearest true reach; volume per gully.
+
+    Returns (per-section errors, summary with median and P90 absolute errors and the
+    volume totals, per-gully volumes).
+    """
+    c = centrelines.reset_index(drop=True)
+    p = np.where(c["shape"] == "U", u_exponent, 1.0)
+    c_area = (c["width_m"] * c["depth_m"] * p / (p + 1.0)).to_numpy()
+    tree = shapely.STRtree(c.geometry.values)
+    mids = [shapely.line_interpolate_point(g, 0.5, normalized=True) for g in sections.geometry]
+    rows = []
+    for i, (sec, mid) in enumerate(zip(sections.itertuples(), mids)):
+        j = tree.query_nearest(mid, max_distance=params.match_distance_m)
+        if len(j) == 0:
+            continue
+        j = int(j[0])
+        rows.append({"polygon_id": sec.polygon_id, "station_m": sec.station_m, "gully_id": int(c.loc[j, "gully_id"]), "shape": c.loc[j, "shape"],
+                     "width_m": sec.width_m, "width_true_m": c.loc[j, "width_m"], "depth_m": sec.depth_m, "depth_true_m": c.loc[j, "depth_m"],
+                     "area_m2": sec.area_m2, "area_true_m2": c_area[j], "slab_m": sec.slab_m})
+    per = pd.DataFrame(rows, columns=["polygon_id", "station_m", "gully_id", "shape", "width_m", "width_true_m", "depth_m", "depth_true_m",
+                                      "area_m2", "area_true_m2", "slab_m"])
+    for q in ("width", "depth", "area"):
+        unit = "m2" if q == "area" else "m"
+        per[f"{q}_error_{unit}"] = per[f"{q}_{unit}"] - per[f"{q}_true_{unit}"]
+    summ = []
+    for q, unit in (("width", "m"), ("depth", "m"), ("area", "m2")):
+        e = per[f"{q}_error_{unit}"].abs()
+        summ.append({"quantity": f"{q} ({unit})", "sections": len(e), "median_abs_error": e.median() if len(e) else np.nan,
+                     "p90_abs_error": e.quantile(0.9) if len(e) else np.nan, "median_error": per[f"{q}_error_{unit}"].median() if len(e) else np.nan})
+    vol = per.assign(v=per["area_m2"] * per["slab_m"]).groupby("gully_id")["v"].sum()
+    gv = truth.set_index("gully_id")[["kind", "volume_true_m3"]].join(vol.rename("volume_m3"), how="left").fillna({"volume_m3": 0.0})
+    gv["volume_error_pct"] = 100 * (gv["volume_m3"] - gv["volume_true_m3"]) / gv["volume_true_m3"]
+    total_auto = float((sections["area_m2"] * sections["slab_m"]).sum()) if len(sections) else 0.0
+    total_true = float(truth["volume_true_m3"].sum())
+    measured = gv.loc[gv["volume_m3"] > 0]
+    summ.append({"quantity": "volume, all sections vs all true gullies (m3)", "sections": len(sections), "median_abs_error": np.nan, "p90_abs_error": np.nan,
+                 "median_error": np.nan, "measured": total_auto, "true": total_true, "error_pct": 100 * (total_auto - total_true) / total_true if total_true else np.nan})
+    summ.append({"quantity": "volume, gullies with matched sections (m3)", "sections": len(per), "median_abs_error": np.nan, "p90_abs_error": np.nan,
+                 "median_error": np.nan, "measured": float(measured["volume_m3"].sum()), "true": float(measured["volume_true_m3"].sum()),
+                 "error_pct": 100 * (measured["volume_m3"].sum() - measured["volume_true_m3"].sum()) / measured["volume_true_m3"].sum() if len(measured) else np.nan})
+    return per, pd.DataFrame(summ), gv.reset_index()
+
+
+def regenerate_table1(auto: Mapping[float, gpd.GeoDataFrame], truth_polys: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame,
+                      grid: GridSpec, operators_cfg: Mapping[str, Any], seed: int, u_exponent: float,
+                      auto_threshold: float = 0.5) -> tuple[pd.DataFrame, pd.DataFrame, gpd.GeoDataFrame]:
+    """Simulate the manual operators on the true outlines and build paper Table 1.
+
+    Returns (Table 1 statistics beside the paper, t = ``auto_threshold`` comparison with
+    the manual union and intersection, the operators' outlines with their habits).
+    """
+    from kitegully.polygons.manual import OperatorParams, operator_outlines
+
+    truth = truth_table(centrelines, truth_polys, u_exponent)
+    ops = operator_outlines(truth_polys, dict(zip(truth["gully_id"], truth["max_depth_m"].fillna(0.0))),
+                            OperatorParams.from_config(operators_cfg), seed)
+    stats, comp = table1(auto, ops, grid, auto_threshold)
+    return stats, comp, ops
+
+
+def evaluate_against_truth(auto: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, truth_polys: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame,
+                           grid: GridSpec, cfg: Mapping[str, Any], u_exponent: float) -> dict[str, pd.DataFrame]:
+    """Polygon scores and morphometry errors against the twin's true gullies.
+
+    Returns a dict of tables: ``scores`` (per gully, ``all``, ``wide``), ``errors``
+    (median / P90 absolute errors, volume totals), ``sections`` (per cross-section) and
+    ``volumes`` (per gully).
+    """
+    params = EvaluationParams.from_config(cfg)
+    truth = truth_table(centrelines, truth_polys, u_exponent)
+    scores = polygon_scores(auto, truth_polys, truth, grid, params)
+    per, summ, vol = morphometry_errors(sections, centrelines, truth, u_exponent, params)
+    return {"scores": scores, "errors": summ, "sections": per, "volumes": vol}

@@ -1,0 +1,195 @@
+"""Medial axes and cross-sections of the gully polygons (Höfle et al. 2013 sect. 4.2-4.3, Figs 10-11).
+
+Per polygon: grassfire thinning of its raster to a one-cell skeleton, pruned to the
+longest path (the medial axis), smoothed with snakes. Cross-sections orthogonal to the
+axis, one at the middle of each of ``n = round(L / spacing)`` equal slabs of the axis
+(``L / n`` ≈ spacing apart), clipped to the polygon and draped on the DEM:
+
+- width = clipped length (m);
+- depth = max(z_ref − z) (m);
+- area = ∫ max(z_ref − z, 0) ds (m²), trapezoidal at half-cell steps;
+- volume = Σ area · L / n (m³).
+
+Reference surface ``z_ref`` (:data:`REFERENCES`): ``lower_end`` = elevation of the lower
+end of the clipped section, level across ([I] METHODS.md 3.2 step 9); ``line`` = straight
+line between the two ends; ``spill`` = the sink-fill level of the conditioned DEM (the
+spill surface of the pool the section lies in).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import geopandas as gpd
+import numpy as np
+import pandas as pd
+import scipy.ndimage as ndi
+import shapely
+from scipy.ndimage import map_coordinates
+from skimage.morphology import thin
+
+from kitegully.io.raster import GridSpec
+from kitegully.polygons.skeleton import longest_path
+from kitegully.polygons.thalweg import resample_line, snakes_smooth
+
+log = logging.getLogger(__name__)
+
+#: Depth reference surfaces (``polygons.morphometry.reference``).
+REFERENCES = ("lower_end", "line", "spill")
+
+
+def medial_axis(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float, beta: float) -> shapely.LineString | None:
+    """Smoothed longest path of the thinned mask (sub-array whose top-left cell is (r0, c0))."""
+    skel = thin(ndi.binary_fill_holes(mask))
+    rr, cc = longest_path(skel)
+    if rr.size < 2:
+        return None
+    xs = grid.x0 + (c0 + cc + 0.5) * grid.cell
+    ys = grid.y0 - (r0 + rr + 0.5) * grid.cell
+    xy = resample_line(np.column_stack([xs, ys]), smooth_step)
+    if len(xy) < 2:
+        return None
+    return shapely.LineString(snakes_smooth(xy, alpha, beta))
+
+
+def _section_piece(poly, px: float, py: float, nx: float, ny: float, half: float):
+    line = shapely.LineString([(px - half * nx, py - half * ny), (px + half * nx, py + half * ny)])
+    inter = line.intersection(poly)
+    parts = [g for g in getattr(inter, "geoms", [inter]) if g.geom_type == "LineString" and not g.is_empty]
+    if not parts:
+        return None
+    pt = shapely.Point(px, py)
+    return min(parts, key=lambda g: g.distance(pt))
+
+
+def drape(line: shapely.LineString, surface: np.ndarray, grid: GridSpec, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Points every ``step`` m along ``line`` (ends included): s, x, y and bilinear z."""
+    n = max(int(np.ceil(line.length / step)), 1)
+    s = np.linspace(0.0, line.length, n + 1)
+    pts = shapely.line_interpolate_point(line, s)
+    x, y = shapely.get_x(pts), shapely.get_y(pts)
+    r, c = grid.rowcol(x, y)
+    z = map_coordinates(surface, [r, c], order=1, mode="nearest")
+    return s, x, y, z
+
+
+def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndarray | None = None) -> tuple[float, float]:
+    """(max depth, cross-sectional area) of a draped section below the reference surface."""
+    if reference == "lower_end":
+        zr = np.full_like(z, min(z[0], z[-1]))
+    elif reference == "line":
+        zr = z[0] + (z[-1] - z[0]) * (s / s[-1] if s[-1] > 0 else 0.0)
+    elif reference == "spill":
+        zr = level
+    else:
+        raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
+    d = np.maximum(np.nan_to_num(zr - z, nan=0.0), 0.0)
+    area = float(np.sum(0.5 * (d[1:] + d[:-1]) * np.diff(s))) if len(s) > 1 else 0.0
+    return float(d.max()), area
+
+
+def measure_sections(
+    labels: np.ndarray,
+    polygons: gpd.GeoDataFrame,
+    dem: np.ndarray,
+    level: np.ndarray,
+    grid: GridSpec,
+    spacing: float,
+    reference: str,
+    smooth_step: float,
+    alpha: float,
+    beta: float,
+) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
+    """Medial axes, cross-sections and per-polygon morphometry.
+
+    Parameters
+    ----------
+    labels : ndarray int
+        Polygon labels (0 = none), the ``polygon_id`` of ``polygons``.
+    polygons : GeoDataFrame
+        The vectorised polygons (``polygon_id``, geometry).
+    dem : ndarray
+        DEM the sections are draped on (m).
+    level : ndarray
+        Pool level = sink-filled conditioned DEM (m), for ``reference="spill"``.
+    grid : GridSpec
+    spacing : float
+        Nominal cross-section spacing (m); 10 m in the paper.
+    reference : str
+        Depth reference (:data:`REFERENCES`).
+    smooth_step, alpha, beta : float
+        Vertex spacing (m) and snakes weights of the axis smoothing.
+
+    Returns
+    -------
+    axes : GeoDataFrame
+        ``polygon_id, length_m`` and the medial axis.
+    sections : GeoDataFrame
+        ``polygon_id, station_m, width_m, depth_m, area_m2, slab_m`` and the 3-D draped line.
+    morph : DataFrame
+        Per polygon: area, axis length, sections, mean/max width and depth, volume.
+
+    Notes
+    -----
+    O(Σ bounding-box cells) for the thinning plus O(sections · section length / cell).
+    """
+    if reference not in REFERENCES:
+        raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
+    dem64 = np.asarray(dem, np.float64)
+    lev64 = np.asarray(level, np.float64)
+    objs = ndi.find_objects(labels)
+    geom_of = dict(zip(polygons["polygon_id"], polygons.geometry))
+    ax_rec, sec_rec, morph = [], [], []
+    step = 0.5 * grid.cell
+    for pid, sl in enumerate(objs, start=1):
+        if sl is None or pid not in geom_of:
+            continue
+        poly = geom_of[pid]
+        r0, c0 = max(sl[0].start - 1, 0), max(sl[1].start - 1, 0)
+        r1, c1 = min(sl[0].stop + 1, labels.shape[0]), min(sl[1].stop + 1, labels.shape[1])
+        axis = medial_axis(labels[r0:r1, c0:c1] == pid, grid, r0, c0, smooth_step, alpha, beta)
+        row = {"polygon_id": pid, "area_m2": poly.area, "length_m": 0.0, "n_sections": 0, "mean_width_m": np.nan,
+               "max_width_m": np.nan, "mean_depth_m": np.nan, "max_depth_m": np.nan, "volume_m3": 0.0}
+        if axis is None or axis.length <= 0:
+            morph.append(row)
+            continue
+        L = axis.length
+        n = max(1, int(round(L / spacing)))
+        slab = L / n
+        half = float(np.hypot(r1 - r0, c1 - c0)) * grid.cell + 1.0
+        ax_rec.append({"polygon_id": pid, "length_m": L, "geometry": axis})
+        ws, ds, vol = [], [], 0.0
+        for k in range(n):
+            s0 = (k + 0.5) * slab
+            a = axis.interpolate(max(s0 - 0.5 * slab, 0.0))
+            b = axis.interpolate(min(s0 + 0.5 * slab, L))
+            p = axis.interpolate(s0)
+            tx, ty = b.x - a.x, b.y - a.y
+            tn = np.hypot(tx, ty)
+            if tn == 0:
+                continue
+            piece = _section_piece(poly, p.x, p.y, -ty / tn, tx / tn, half)
+            if piece is None:
+                continue
+            s, x, y, z = drape(piece, dem64, grid, step)
+            lev = None
+            if reference == "spill":
+                _, _, _, lev = drape(piece, lev64, grid, step)
+            depth, area = section_profile(s, z, reference, lev)
+            vol += area * slab
+            ws.append(piece.length)
+            ds.append(depth)
+            sec_rec.append({"polygon_id": pid, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
+                            "slab_m": slab, "geometry": shapely.LineString(np.column_stack([x, y, z]))})
+        row.update({"length_m": L, "n_sections": len(ws), "volume_m3": vol})
+        if ws:
+            row.update({"mean_width_m": float(np.mean(ws)), "max_width_m": float(np.max(ws)),
+                        "mean_depth_m": float(np.mean(ds)), "max_depth_m": float(np.max(ds))})
+        morph.append(row)
+    axes = gpd.GeoDataFrame(ax_rec or {"polygon_id": [], "length_m": []}, geometry="geometry" if ax_rec else [], crs=grid.crs)
+    sections = gpd.GeoDataFrame(sec_rec or {"polygon_id": [], "station_m": [], "width_m": [], "depth_m": [], "area_m2": [], "slab_m": []},
+                                geometry="geometry" if sec_rec else [], crs=grid.crs)
+    log.info("morphometry: %d polygons, %d medial axes, %d cross-sections, volume %.1f m3", len(morph), len(ax_rec), len(sec_rec),
+             sum(r["volume_m3"] for r in morph))
+    cols = ["polygon_id", "area_m2", "length_m", "n_sections", "mean_width_m", "max_width_m", "mean_depth_m", "max_depth_m", "volume_m3"]
+    return axes, sections, pd.DataFrame(morph, columns=cols)

@@ -1,0 +1,209 @@
+"""Thalweg from the topographic convergence index (Höfle et al. 2013 sect. 4.1).
+
+``TCI = ln(a / tan β)`` with ``a`` the specific catchment area (m²/m) from multiple-flow
+routing (Quinn et al. 1991 contour-length weights with Freeman's 1991 slope exponent)
+on the priority-flood filled DEM, and ``β`` the local slope of the DEM.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import scipy.ndimage as ndi
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+import shapely
+from numba import njit
+from skimage.morphology import skeletonize
+
+from kitegully import InputError
+from kitegully.io.raster import GridSpec
+from kitegully.polygons.skeleton import remove_short_components, skeleton_paths
+from kitegully.terrain.fill import priority_flood_fill
+
+log = logging.getLogger(__name__)
+
+_DR = np.array([-1, -1, -1, 0, 0, 1, 1, 1])
+_DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
+
+
+@njit(cache=True)
+def _mfd(z, order, cell, exponent, acc):
+    h, w = z.shape
+    dist = np.empty(8)
+    clen = np.empty(8)
+    for k in range(8):
+        diag = _DR[k] != 0 and _DC[k] != 0
+        dist[k] = cell * (np.sqrt(2.0) if diag else 1.0)
+        clen[k] = cell * (0.354 if diag else 0.5)  # Quinn et al. 1991 contour lengths
+    wts = np.empty(8)
+    for i in range(order.size):
+        j = order[i]
+        r = j // w
+        c = j % w
+        zc = z[r, c]
+        tot = 0.0
+        for k in range(8):
+            rr = r + _DR[k]
+            cc = c + _DC[k]
+            wts[k] = 0.0
+            if rr < 0 or rr >= h or cc < 0 or cc >= w:
+                continue
+            zn = z[rr, cc]
+            if not np.isfinite(zn) or zn >= zc:
+                continue
+            wts[k] = ((zc - zn) / dist[k]) ** exponent * clen[k]
+            tot += wts[k]
+        if tot <= 0.0:
+            continue
+        a = acc[r, c]
+        for k in range(8):
+            if wts[k] > 0.0:
+                acc[r + _DR[k], c + _DC[k]] += a * wts[k] / tot
+
+
+def mfd_catchment_area(z: np.ndarray, cell: float, exponent: float = 1.1, epsilon: float = 1e-4) -> np.ndarray:
+    """Upslope area (m²) by multiple-flow-direction routing on the filled DEM.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata (flow leaves the grid there).
+    cell : float
+        Cell size (m).
+    exponent : float
+        Slope exponent of the flow partition (Freeman 1991: 1.1; Quinn 1991: 1).
+    epsilon : float
+        Priority-flood gradient (m per cell) so that every cell drains.
+
+    Returns
+    -------
+    ndarray float64
+        Contributing area (m²), including the cell itself; NaN where ``z`` is NaN.
+
+    Notes
+    -----
+    Cells are processed from high to low (one sort), each passing its area to its lower
+    neighbours in proportion to ``(tan β_k)^p · L_k``. O(n log n) time, O(n) memory.
+    """
+    filled, _ = priority_flood_fill(z, epsilon=epsilon)
+    valid = np.isfinite(filled)
+    flat = np.where(valid, filled, -np.inf).ravel()
+    order = np.argsort(-flat, kind="stable")
+    order = order[: int(valid.sum())]
+    acc = np.where(valid, cell * cell, 0.0)
+    _mfd(np.where(valid, filled, np.nan), order.astype(np.int64), float(cell), float(exponent), acc)
+    acc[~valid] = np.nan
+    return acc
+
+
+def local_slope(z: np.ndarray, cell: float) -> np.ndarray:
+    """tan β from Horn's 3 × 3 finite differences (NaN next to nodata)."""
+    zp = np.pad(np.asarray(z, np.float64), 1, mode="edge")
+    a, b, c = zp[:-2, :-2], zp[:-2, 1:-1], zp[:-2, 2:]
+    d, f = zp[1:-1, :-2], zp[1:-1, 2:]
+    g, hh, i = zp[2:, :-2], zp[2:, 1:-1], zp[2:, 2:]
+    dzdx = ((c + 2 * f + i) - (a + 2 * d + g)) / (8 * cell)
+    dzdy = ((g + 2 * hh + i) - (a + 2 * b + c)) / (8 * cell)
+    return np.hypot(dzdx, dzdy)
+
+
+def topographic_convergence_index(z: np.ndarray, cell: float, exponent: float, min_tan_slope: float) -> tuple[np.ndarray, np.ndarray]:
+    """TCI = ln(a / tan β), with a = MFD area / cell width (m²/m) and tan β ≥ ``min_tan_slope``.
+
+    Returns (tci, specific catchment area).
+    """
+    area = mfd_catchment_area(z, cell, exponent)
+    sca = area / cell
+    tanb = np.maximum(local_slope(z, cell), min_tan_slope)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tci = np.log(sca / tanb)
+    return tci.astype(np.float32), sca.astype(np.float32)
+
+
+def snakes_smooth(xy: np.ndarray, alpha: float = 1.0, beta: float = 1.0) -> np.ndarray:
+    """Snakes line smoothing (GRASS ``v.generalize method=snakes``), end points kept.
+
+    Minimises ``Σ |x_i - x⁰_i|² + α |x''_i|² + β |x''''_i|²`` (second and fourth
+    differences of the vertex sequence): ``(I + α D2ᵀD2 + β D4ᵀD4) x = x⁰``.
+    """
+    n = len(xy)
+    if n < 5:
+        return xy.copy()
+    d2 = sp.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(n - 2, n))
+    d4 = sp.diags([1.0, -4.0, 6.0, -4.0, 1.0], [0, 1, 2, 3, 4], shape=(n - 4, n))
+    A = (sp.identity(n) + alpha * (d2.T @ d2) + beta * (d4.T @ d4)).tolil()
+    rhs = xy.astype(np.float64).copy()
+    for i in (0, n - 1):  # fixed end points
+        A[i, :] = 0.0
+        A[i, i] = 1.0
+    return spla.spsolve(A.tocsc(), rhs)
+
+
+def resample_line(xy: np.ndarray, step: float) -> np.ndarray:
+    """Vertices every ``step`` metres along a polyline (end point kept)."""
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return xy[:1]
+    n = max(int(np.ceil(s[-1] / step)), 1)
+    t = np.linspace(0.0, s[-1], n + 1)
+    return np.column_stack([np.interp(t, s, xy[:, 0]), np.interp(t, s, xy[:, 1])])
+
+
+def thalweg_lines(
+    tci: np.ndarray,
+    grid: GridSpec,
+    threshold: float,
+    min_length_m: float,
+    smooth_step_m: float,
+    alpha: float,
+    beta: float,
+    dem: np.ndarray | None = None,
+    min_incision_m: float | None = None,
+    incision_window_m: float = 30.0,
+    closing_cells: int = 1,
+) -> tuple[list[shapely.LineString], np.ndarray]:
+    """Mask TCI > threshold, skeletonise, vectorise, drop short pieces, smooth with snakes.
+
+    With ``min_incision_m``, only cells at least that far below the mean of the DEM in a
+    square of side ``incision_window_m`` around them stay in the mask: a channel is incised,
+    a flat valley floor (high TCI because tan β is small) is not. A closing with a
+    ``closing_cells`` square then joins the fragments that flow braiding across a wide,
+    rough channel floor leaves.
+
+    Returns the smoothed lines (map coordinates) and the raster of their skeleton cells.
+    Raises :class:`InputError` when no line is left.
+    """
+    mask = np.nan_to_num(tci, nan=-np.inf) > threshold
+    if min_incision_m is not None and dem is not None:
+        zf = np.where(np.isfinite(dem), dem, np.nanmean(dem)).astype(np.float64)
+        size = max(3, int(round(incision_window_m / grid.cell)) | 1)
+        relief = zf - ndi.uniform_filter(zf, size=size, mode="nearest")
+        n_before = int(mask.sum())
+        mask &= relief <= -min_incision_m
+        log.info("thalweg: %d of %d cells with TCI > %.3g are incised >= %.2f m below the %.0f m mean", int(mask.sum()), n_before,
+                 threshold, min_incision_m, incision_window_m)
+    if closing_cells > 1:
+        pad = closing_cells
+        mask = ndi.binary_closing(np.pad(mask, pad), structure=np.ones((closing_cells, closing_cells), bool))[pad:-pad, pad:-pad]
+    n_min = max(2, int(np.ceil(min_length_m / grid.cell)))
+    mask = remove_short_components(mask, n_min)
+    skel = skeletonize(mask)
+    xs, ys = grid.cell_centres()
+    lines = []
+    kept = np.zeros_like(skel)
+    for r, c in skeleton_paths(skel, min_cells=2):
+        xy = np.column_stack([xs[c], ys[r]])
+        length = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+        if length < min_length_m:
+            continue
+        kept[r, c] = True
+        xy = snakes_smooth(resample_line(xy, smooth_step_m), alpha, beta)
+        lines.append(shapely.LineString(xy))
+    log.info("thalweg: %.2f %% of cells with TCI > %.3g, %d lines >= %.1f m (total %.0f m)",
+             100.0 * mask.mean(), threshold, len(lines), min_length_m, sum(l.length for l in lines))
+    if not lines:
+        raise InputError(f"polygons.thalweg.tci_threshold: no thalweg found: no cells with TCI > {threshold} form a line of at least {min_length_m} m")
+    return lines, kept

@@ -1,0 +1,113 @@
+"""Artificial dams orthogonal to the thalweg (Höfle et al. 2013 sect. 4.1).
+
+One transect every ``spacing_m`` along each thalweg line, ``half_length_m`` to each side.
+Where a transect crosses breaklines on both sides of the thalweg only its middle part,
+between the nearest crossing on each side, is kept; otherwise it keeps its full length.
+Optionally ([I]) the next transect comes earlier where the thalweg has dropped by
+``max_drop_m`` since the last one, so that no pool's floor falls by more than that
+between its dams (the paper's advice for steep channels).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+from scipy.ndimage import map_coordinates, minimum_filter
+
+from kitegully.io.raster import GridSpec
+
+
+def transect_stations(line: shapely.LineString, spacing: float, dem: np.ndarray | None = None, grid: GridSpec | None = None,
+                      max_drop: float | None = None, min_spacing: float = 0.0) -> np.ndarray:
+    """Distances along ``line`` (m) where the transects stand.
+
+    Every ``spacing`` m starting half a spacing from the upper end; with ``max_drop``, a
+    station also where the (3 × 3 minimum of the) DEM along the line has dropped by
+    ``max_drop`` since the previous station, but never closer than ``min_spacing``. A line
+    too short for any station gets one at its middle (a thalweg fragment still dams its
+    reach).
+    """
+    L = line.length
+    if max_drop is None or dem is None:
+        return np.arange(0.5 * spacing, L, spacing) if L > 0.5 * spacing else np.array([0.5 * L])
+    step = grid.cell
+    s = np.arange(0.0, L + 1e-9, step)
+    pts = shapely.line_interpolate_point(line, s)
+    x, y = shapely.get_x(pts), shapely.get_y(pts)
+    r, c = grid.rowcol(x, y)
+    zmin = minimum_filter(np.nan_to_num(dem, nan=np.nanmax(dem)), size=3, mode="nearest")
+    z = map_coordinates(zmin, [r, c], order=1, mode="nearest")
+    out = []
+    last_s, last_z = 0.0, z[0]
+    for si, zi in zip(s, z):
+        ds = si - last_s
+        if ds < min_spacing:
+            continue
+        first = not out
+        due = ds >= (0.5 * spacing if first else spacing)
+        steep = abs(last_z - zi) >= max_drop
+        if due or steep:
+            out.append(si)
+            last_s, last_z = si, zi
+    return np.asarray(out) if out else np.array([0.5 * L])
+
+
+def make_transects(line: shapely.LineString, stations: np.ndarray, half_length: float, tangent_half_window: float) -> list[shapely.LineString]:
+    """Straight transects through the stations, orthogonal to the line's mean direction
+    within ``± tangent_half_window`` m of each station."""
+    out = []
+    L = line.length
+    for s in stations:
+        a = line.interpolate(max(s - tangent_half_window, 0.0))
+        b = line.interpolate(min(s + tangent_half_window, L))
+        p = line.interpolate(s)
+        tx, ty = b.x - a.x, b.y - a.y
+        n = np.hypot(tx, ty)
+        if n == 0:
+            continue
+        nx, ny = -ty / n, tx / n
+        out.append(shapely.LineString([(p.x - half_length * nx, p.y - half_length * ny), (p.x + half_length * nx, p.y + half_length * ny)]))
+    return out
+
+
+def clip_transects(transects: list[shapely.LineString], breaklines: list[shapely.LineString]) -> tuple[list[shapely.LineString], np.ndarray]:
+    """Keep the middle part between the nearest breakline crossings where both sides cross.
+
+    Parameters
+    ----------
+    transects : list of LineString
+        Two-point transects whose midpoint is on the thalweg.
+    breaklines : list of LineString
+        Vector breaklines.
+
+    Returns
+    -------
+    clipped : list of LineString
+    was_clipped : ndarray bool
+    """
+    tree = shapely.STRtree(breaklines) if breaklines else None
+    out, flags = [], []
+    for t in transects:
+        (x0, y0), (x1, y1) = t.coords[0], t.coords[-1]
+        mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        ux, uy = (x1 - x0) / t.length, (y1 - y0) / t.length
+        offs = []
+        if tree is not None:
+            for i in tree.query(t, predicate="intersects"):
+                inter = t.intersection(breaklines[i])
+                for g in getattr(inter, "geoms", [inter]):
+                    if g.is_empty:
+                        continue
+                    for px, py in np.asarray(g.coords if g.geom_type != "Point" else [g.coords[0]]):
+                        offs.append((px - mx) * ux + (py - my) * uy)
+        offs = np.asarray(offs)
+        neg = offs[offs < 0]
+        pos = offs[offs > 0]
+        if neg.size and pos.size:
+            a, b = neg.max(), pos.min()
+            out.append(shapely.LineString([(mx + a * ux, my + a * uy), (mx + b * ux, my + b * uy)]))
+            flags.append(True)
+        else:
+            out.append(t)
+            flags.append(False)
+    return out, np.asarray(flags, bool)

@@ -1,0 +1,60 @@
+"""Morphometry: V and U notches of known width, depth and volume recovered within a cell."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kitegully.config import load_yaml
+from kitegully.polygons.conditioning import polygons_from_labels
+from kitegully.polygons.morphometry import measure_sections
+from kitegully.polygons.stage import PolygonParams, measure_polygons
+
+from polygon_synthetic import notch_dem, true_area
+
+WIDTH, DEPTH = 8.0, 2.0
+
+
+@pytest.mark.parametrize("shape", ["V", "U"])
+def test_sections_of_a_known_footprint(shape):
+    # level rims (no cross slope), polygon = the notch footprint
+    dem, grid, xc = notch_dem(shape, WIDTH, DEPTH, cross_slope=0.0)
+    xs, ys = grid.cell_centres()
+    lab = np.zeros(dem.shape, np.int32)
+    lab[20:220, :] = (np.abs(xs - xc) <= 0.5 * WIDTH)[None, :]  # cell edges half a cell outside the rims
+    polys = polygons_from_labels(lab, grid, 0.5)
+    axes, sec, morph = measure_sections(lab, polys, dem, dem, grid, 10.0, "lower_end", 2.0, 1.0, 1.0)
+    assert len(axes) == 1 and len(sec) >= 8
+    inner = sec[(sec["station_m"] > 10) & (sec["station_m"] < axes["length_m"].iloc[0] - 10)]
+    assert np.abs(inner["width_m"] - WIDTH).max() <= grid.cell
+    assert np.abs(inner["depth_m"] - DEPTH).max() <= 0.01
+    a_true = true_area(shape, WIDTH, DEPTH)
+    assert inner["area_m2"].median() == pytest.approx(a_true, rel=0.12)
+    # volume of the measured reach: area x length of the medial axis
+    assert morph["volume_m3"].iloc[0] == pytest.approx(a_true * morph["length_m"].iloc[0], rel=0.12)
+
+
+@pytest.mark.parametrize("params", ["paper", "site"])
+@pytest.mark.parametrize("shape, width_tol_cells", [("V", 1), ("U", 2)])
+def test_whole_method_on_a_notch(shape, width_tol_cells, params, repo_root):
+    """Breaklines, thalweg, dams, fill and sections on a gully with a headcut in a tilted plane.
+
+    The V's rims are found within a cell. The U (p = 4) is concave just inside its rims, which
+    pulls the 9 x 9 convexity band, and with it the breakline skeleton, one cell outwards.
+    Depth is measured from the lower rim, which the plane's cross slope lifts above the
+    axis by up to 0.05 x W/2 = 0.2 m.
+    """
+    cross = 0.05
+    dem, grid, xc = notch_dem(shape, WIDTH, DEPTH, cross_slope=cross, head_m=20.0)
+    if params == "paper":
+        p = PolygonParams(transect_half_length_m=15.0, transect_max_drop_m=0.5, bridge="transects")
+    else:  # the default site's settings, with every [I] option on
+        p = PolygonParams.from_config(load_yaml(repo_root / "config" / "sites" / "kamech_twin.yaml")["polygons"])
+    res = measure_polygons(dem, grid, p)
+    assert len(res.polygons[0.5]) == 1
+    sec = res.sections
+    assert len(sec) >= 6
+    assert np.median(np.abs(sec["width_m"] - WIDTH)) <= width_tol_cells * grid.cell + 1e-6
+    assert np.median(np.abs(sec["depth_m"] - DEPTH)) <= cross * 0.5 * WIDTH + 0.02
+    length = res.axes["length_m"].sum()
+    assert res.morphometry["volume_m3"].sum() == pytest.approx(true_area(shape, WIDTH, DEPTH) * length, rel=0.1)

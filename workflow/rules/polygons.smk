@@ -1,0 +1,116 @@
+# Gully polygons and morphometry (Höfle et al. 2013, Figs 4-12, Table 1; METHODS.md sect. 3).
+# Library: kitegully.polygons. Runs on the dense DSM or on a DEM file given in polygons.dem_file.
+
+if "polygons" in config:
+
+    POLY = config["polygons"]
+    POLY_CAT = "Gully polygons"
+    POLY_ATTRIBUTION = config["site"].get("attribution")
+    POLY_DEM = POLY["dem_file"] or result("dense", "dsm.tif")
+    POLY_T = [float(t) for t in POLY["conditioning"]["thresholds_m"]]
+    POLY_METHOD = {k: v for k, v in POLY.items() if k not in ("dem_file", "evaluation", "figure_max_px")}
+
+    def poly_set(t):
+        return result("polygons", f"gully_polygons_t{t:g}.gpkg")
+
+    rule polygons_map:
+        input:
+            dem=POLY_DEM,
+        output:
+            polygons=[poly_set(t) for t in POLY_T],
+            dem=result("polygons", "dem.tif"),
+            tci=result("polygons", "tci.tif"),
+            fill_depth=result("polygons", "fill_depth.tif"),
+            breaklines=result("polygons", "breaklines.gpkg"),
+            thalweg=result("polygons", "thalweg.gpkg"),
+            transects=result("polygons", "transects.gpkg"),
+            axes=result("polygons", "medial_axes.gpkg"),
+            sections=result("polygons", "cross_sections.gpkg"),
+            morphometry=report(result("polygons", "morphometry.csv"), caption=caption("polygons_morphometry"), category=POLY_CAT),
+            summary=report(result("polygons", "polygons_summary.csv"), caption=caption("polygons_summary"), category=POLY_CAT),
+        params:
+            cfg=POLY_METHOD,
+            crs=config["site"]["crs"],
+        log:
+            logfile("polygons", "map"),
+        benchmark:
+            benchfile("polygons", "map")
+        script:
+            "../scripts/polygons_map.py"
+
+    rule polygons_figure:
+        input:
+            dem=rules.polygons_map.output.dem,
+            tci=rules.polygons_map.output.tci,
+            polygons=rules.polygons_map.output.polygons,
+            thalweg=rules.polygons_map.output.thalweg,
+            transects=rules.polygons_map.output.transects,
+            axes=rules.polygons_map.output.axes,
+            sections=rules.polygons_map.output.sections,
+            morphometry=rules.polygons_map.output.morphometry,
+        output:
+            figure=report(result("polygons", "gully_polygons.png"), caption=caption("polygons_map"), category=POLY_CAT),
+        params:
+            thresholds=POLY_T,
+            tci_threshold=POLY["thalweg"]["tci_threshold"],
+            max_px=POLY["figure_max_px"],
+            attribution=POLY_ATTRIBUTION,
+        log:
+            logfile("polygons", "figure"),
+        script:
+            "../scripts/polygons_figure.py"
+
+    POLY_TARGETS = [rules.polygons_map.output, rules.polygons_figure.output.figure]
+
+    if IS_TWIN:
+        POLY_TRUTH = {"truth": result("twin", "truth/gully_polygons.gpkg"), "centrelines": result("twin", "truth/gully_centrelines.gpkg")}
+
+        # Evaluation rules: the only polygon rules that read truth/.
+        rule polygons_table1:
+            input:
+                **POLY_TRUTH,
+                dem=rules.polygons_map.output.dem,
+                polygons=rules.polygons_map.output.polygons,
+            output:
+                table=report(result("polygons", "table1.csv"), caption=caption("polygons_table1"), category=POLY_CAT),
+                comparison=report(result("polygons", "table1_comparison.csv"), caption=caption("polygons_table1_comparison"), category=POLY_CAT),
+                manual=result("polygons", "manual_polygons.gpkg"),
+                figure=report(result("polygons", "manual_comparison.png"), caption=caption("polygons_manual_comparison"), category=POLY_CAT),
+            params:
+                operators=POLY["evaluation"]["operators"],
+                thresholds=POLY_T,
+                auto_threshold=POLY["morphometry"]["threshold_m"],
+                u_exponent=config["twin"]["gullies"]["u_shape_exponent"],
+                seed=config["seed"],
+                max_px=POLY["figure_max_px"],
+                attribution=POLY_ATTRIBUTION,
+            log:
+                logfile("polygons", "table1"),
+            script:
+                "../scripts/polygons_table1.py"
+
+        rule polygons_evaluate:
+            input:
+                **POLY_TRUTH,
+                dem=rules.polygons_map.output.dem,
+                polygons=poly_set(POLY["morphometry"]["threshold_m"]),
+                sections=rules.polygons_map.output.sections,
+            output:
+                scores=report(result("polygons", "polygon_scores.csv"), caption=caption("polygons_scores"), category=POLY_CAT),
+                errors=report(result("polygons", "morphometry_errors.csv"), caption=caption("polygons_morphometry_errors"), category=POLY_CAT),
+                sections=result("polygons", "morphometry_errors_sections.csv"),
+                volumes=result("polygons", "volume_errors.csv"),
+            params:
+                cfg={k: v for k, v in POLY["evaluation"].items() if k != "operators"},
+                u_exponent=config["twin"]["gullies"]["u_shape_exponent"],
+            log:
+                logfile("polygons", "evaluate"),
+            script:
+                "../scripts/polygons_evaluate.py"
+
+        POLY_TARGETS += [rules.polygons_table1.output, rules.polygons_evaluate.output]
+
+    if POLY["dem_file"] is None and not Path("workflow/rules/dense.smk").exists():
+        logger.warning("polygons stage left out of `all`: no rule file for stage dense yet")
+    else:
+        add_targets(*POLY_TARGETS)
