@@ -25,6 +25,8 @@ from numba.typed import List
 
 from kitegully.dense.kernels import multiview_ncc_stack, sample_stack, sgm_aggregate
 from kitegully.dense.views import PyramidCache, ViewSet
+from kitegully.io.raster import GridSpec
+from kitegully.terrain.holes import fill_nearest
 
 log = logging.getLogger(__name__)
 
@@ -111,14 +113,6 @@ class TileResult:
     nviews: np.ndarray
 
 
-def _fill_nearest(z: np.ndarray) -> np.ndarray:
-    bad = ~np.isfinite(z)
-    if not bad.any() or bad.all():
-        return z
-    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-    return z[tuple(idx)]
-
-
 def view_levels(views: ViewSet, idx: list[int], z_ground: float, cell: float) -> np.ndarray:
     """Image pyramid level per view whose pixel size is closest to ``cell`` (in log scale), so
     the 2×2-mean pyramid acts as the anti-aliasing filter of the ground resampling."""
@@ -173,8 +167,9 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     if H % f or W % f:
         raise ValueError(f"tile size {H}x{W} is not a multiple of {f}")
     zlo, zhi = float(z_range[0]), float(z_range[1])
-    x0, y0 = xs[0] - cell / 2, ys[0] + cell / 2
-    idx = visible_views(views, (x0, x0 + W * cell), (y0 - H * cell, y0), (zlo, zhi))
+    tile = GridSpec(xs[0] - cell / 2, ys[0] + cell / 2, cell, W, H, "")  # local frame, no CRS
+    xmin, ymin, xmax, ymax = tile.bounds
+    idx = visible_views(views, (xmin, xmax), (ymin, ymax), (zlo, zhi))
     nan = np.full((H, W), np.nan, np.float32)
     if len(idx) < params.min_views:
         return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
@@ -188,10 +183,9 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     schedule = list(range(L - 1, -1, -1)) + [0] * (params.final_passes - 1)
     for n_pass, lev in enumerate(schedule):
         last = n_pass == len(schedule) - 1
-        cl = cell * 2 ** lev
-        hl, wl = H // 2 ** lev, W // 2 ** lev
-        xl = x0 + (np.arange(wl) + 0.5) * cl
-        yl = y0 - (np.arange(hl) + 0.5) * cl
+        level_grid = tile.coarsened(2 ** lev)
+        cl, hl, wl = level_grid.cell, level_grid.height, level_grid.width
+        xl, yl = level_grid.cell_centres()
         dz = params.z_step_cells * cl * hb
         if z_prev is None:
             K = int(np.ceil((zhi - zlo) / dz)) + 1
@@ -241,7 +235,7 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
             zf = np.where(good, z, np.nan)
             if not np.isfinite(zf).any():
                 return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
-            zf = _fill_nearest(zf)
+            zf = fill_nearest(zf)
             z_prev = ndimage.median_filter(zf, size=3, mode="nearest")
         else:
             keep = (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)

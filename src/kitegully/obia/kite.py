@@ -85,8 +85,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         _check_grids(ortho, dsm, ortho_path, dsm_path)
         if tile_cells < 4 * params.seed_bandwidth_cells:
             raise ValueError(f"tile_cells {tile_cells} must be at least 4 seed band widths ({4 * params.seed_bandwidth_cells} cells)")
-        t = ortho.transform
-        grid = GridSpec(t.c, t.f, t.a, ortho.width, ortho.height, ortho.crs.to_string())
+        grid = GridSpec.from_transform(ortho.transform, ortho.width, ortho.height, ortho.crs.to_string())
         halo = params.blur_radius_cells + params.slope_window_cells
         counts = np.zeros(params.hist_bins, dtype=np.int64)
         edges = np.linspace(EXG_RANGE[0], EXG_RANGE[1], params.hist_bins + 1)
