@@ -174,8 +174,10 @@ def wadi_centreline(valley: Valley, bounds, step: float) -> tuple[np.ndarray, np
     return x[inside], y[inside]
 
 
-def trace_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: np.ndarray, tgrid, seed: int) -> list[Gully]:
-    """Wadi plus gullies traced from the heads on the pre-gully surface ``z_trace``.
+def plan_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: np.ndarray, tgrid, seed: int) -> list[Gully]:
+    """The twin's true network: wadi plus gullies traced from sampled heads on the
+    pre-gully surface ``z_trace`` (not :func:`kitegully.gully.network.trace_network`,
+    which traces a network on an observed DEM).
 
     Complexity O(heads·max_steps) for tracing plus O(cells) for the gradient.
     """

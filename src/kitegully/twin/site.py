@@ -227,7 +227,7 @@ def build_site(tw: TwinParams, crs: str, seed: int, epoch: int = 1) -> TwinSite:
     keep = wl >= t["trace_min_wavelength_m"]
     z_trace = pregully_grid(valley, txs, tys, sub_seed(seed, "relief"), wl[keep], amp[keep])
     gcfg = tw.gullies
-    network = gl.trace_network(valley, fields, gcfg, grid.bounds, z_trace, tgrid, seed)
+    network = gl.plan_network(valley, fields, gcfg, grid.bounds, z_trace, tgrid, seed)
     retreat, widen = {}, None
     if epoch == 2:
         gl.assign_attributes(network, gcfg, valley, seed)  # epoch-1 attributes decide which heads have a headcut
