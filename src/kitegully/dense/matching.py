@@ -147,6 +147,66 @@ def height_base_ratio(views: ViewSet, idx: list[int], z_ground: float, max_ratio
     return float(np.clip(height / max(b, 1e-9), 1.0, max_ratio))
 
 
+def _label_range(params: MatchParams, z_prev: np.ndarray | None, zlo: float, zhi: float, dz: float,
+                 hl: int, wl: int) -> tuple[np.ndarray, int, float]:
+    """Elevation labels of one pass: lowest label per cell, label count K and step dz.
+
+    The first (coarsest) pass spans the tile's elevation bounds with at most
+    ``max_labels`` labels (dz widened if needed); later passes search ±``refine_radius_steps``
+    around the previous surface, upsampled, kept inside the bounds."""
+    if z_prev is None:
+        K = int(np.ceil((zhi - zlo) / dz)) + 1
+        if K > params.max_labels:
+            K = params.max_labels
+            dz = (zhi - zlo) / (K - 1)
+        base = np.full((hl, wl), zlo, np.float64)
+    else:
+        up = cv2.resize(z_prev.astype(np.float32), (wl, hl), interpolation=cv2.INTER_LINEAR).astype(np.float64)
+        K = 2 * params.refine_radius_steps + 1
+        # the search window stays inside the tile's elevation bounds
+        base = np.clip(up - params.refine_radius_steps * dz, zlo, max(zlo, zhi - (K - 1) * dz))
+    return base, K, dz
+
+
+def _ncc_volume(views: ViewSet, cache: PyramidCache, idx: list[int], cams: tuple, levels: np.ndarray,
+                xl: np.ndarray, yl: np.ndarray, base: np.ndarray, dz: float, K: int,
+                params: MatchParams) -> tuple[np.ndarray, np.ndarray]:
+    """Multi-view NCC (K, h, w) and usable image count per label, from the images
+    resampled at each label's elevation (``cams`` = stacked R, C and intrinsics)."""
+    Rs, Cs, Ps = cams
+    hl, wl = len(yl), len(xl)
+    imgs = List()
+    for i, s in zip(idx, levels):
+        imgs.append(cache.level(i, int(s)))
+    stack = np.empty((K, len(idx), hl, wl), np.float32)
+    sample_stack(imgs, Rs, Cs, Ps, levels.astype(np.int64), xl, yl, base, float(dz), stack)
+    score = np.empty((K, hl, wl), np.float32)
+    nvw = np.empty((K, hl, wl), np.int16)
+    # the texture test is against the image noise, which the 2x2-mean pyramid halves per level
+    min_std = params.min_std_dn / 2.0 ** levels.astype(np.float64)
+    multiview_ncc_stack(stack, params.window_half_cells, min_std, score, nvw)
+    return score, nvw
+
+
+def _sgm_winner(score: np.ndarray, K: int, params: MatchParams) -> tuple[np.ndarray, np.ndarray]:
+    """Winning label per cell after semi-global aggregation of ``(1 − NCC)/2`` and its
+    sub-step offset in [−0.5, 0.5] (parabola through the aggregated costs around it)."""
+    cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
+    agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
+    d = np.argmin(agg, axis=2)
+    dc = np.clip(d, 1, K - 2) if K >= 3 else d
+    r, c = np.indices(d.shape)
+    if K >= 3:
+        cm, c0, cp = agg[r, c, dc - 1], agg[r, c, dc], agg[r, c, dc + 1]
+        den = cm - 2 * c0 + cp
+        with np.errstate(divide="ignore", invalid="ignore"):
+            off = np.where((den > 1e-12) & (d == dc), 0.5 * (cm - cp) / den, 0.0)
+        off = np.clip(off, -0.5, 0.5)
+    else:
+        off = np.zeros(d.shape)
+    return d, off
+
+
 def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarray, cell: float,
                z_range: tuple[float, float], params: MatchParams) -> TileResult:
     """Match one tile coarse to fine.
@@ -187,43 +247,10 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         cl, hl, wl = level_grid.cell, level_grid.height, level_grid.width
         xl, yl = level_grid.cell_centres()
         dz = params.z_step_cells * cl * hb
-        if z_prev is None:
-            K = int(np.ceil((zhi - zlo) / dz)) + 1
-            if K > params.max_labels:
-                K = params.max_labels
-                dz = (zhi - zlo) / (K - 1)
-            base = np.full((hl, wl), zlo, np.float64)
-        else:
-            up = cv2.resize(z_prev.astype(np.float32), (wl, hl), interpolation=cv2.INTER_LINEAR).astype(np.float64)
-            K = 2 * params.refine_radius_steps + 1
-            # the search window stays inside the tile's elevation bounds
-            base = np.clip(up - params.refine_radius_steps * dz, zlo, max(zlo, zhi - (K - 1) * dz))
-        levels = view_levels(views, idx, zmid, cl)
-        imgs = List()
-        for i, s in zip(idx, levels):
-            imgs.append(cache.level(i, int(s)))
-        stack = np.empty((K, len(idx), hl, wl), np.float32)
-        sample_stack(imgs, Rs, Cs, Ps, levels.astype(np.int64), xl, yl, base, float(dz), stack)
-        score = np.empty((K, hl, wl), np.float32)
-        nvw = np.empty((K, hl, wl), np.int16)
-        # the texture test is against the image noise, which the 2x2-mean pyramid halves per level
-        min_std = params.min_std_dn / 2.0 ** levels.astype(np.float64)
-        multiview_ncc_stack(stack, params.window_half_cells, min_std, score, nvw)
-        del stack
-        cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
-        agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
-        d = np.argmin(agg, axis=2)
-        # sub-step refinement: parabola through the aggregated costs around the winner
-        dc = np.clip(d, 1, K - 2) if K >= 3 else d
+        base, K, dz = _label_range(params, z_prev, zlo, zhi, dz, hl, wl)
+        score, nvw = _ncc_volume(views, cache, idx, (Rs, Cs, Ps), view_levels(views, idx, zmid, cl), xl, yl, base, dz, K, params)
+        d, off = _sgm_winner(score, K, params)
         r, c = np.indices(d.shape)
-        if K >= 3:
-            cm, c0, cp = agg[r, c, dc - 1], agg[r, c, dc], agg[r, c, dc + 1]
-            den = cm - 2 * c0 + cp
-            with np.errstate(divide="ignore", invalid="ignore"):
-                off = np.where((den > 1e-12) & (d == dc), 0.5 * (cm - cp) / den, 0.0)
-            off = np.clip(off, -0.5, 0.5)
-        else:
-            off = np.zeros(d.shape)
         z = base + (d + off) * dz
         ncc = score[d, r, c]
         nv = nvw[d, r, c]
