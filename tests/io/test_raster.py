@@ -151,3 +151,19 @@ def test_with_data_keeps_grid_and_shape_is_checked():
 def test_missing_file_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match="cannot open raster"):
         Raster.read(tmp_path / "nope.tif")
+
+
+def test_covering_grid_snaps_outward_like_the_old_dense_site_grid():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        xmin, ymin = rng.uniform(-1e6, 1e6, 2)
+        xmax, ymax = xmin + rng.uniform(0.01, 500), ymin + rng.uniform(0.01, 500)
+        cell = float(rng.choice([0.05, 0.1, 0.2, 0.25, 0.5, 1.0]))
+        g = GridSpec.covering((xmin, ymin, xmax, ymax), cell, CRS)
+        # old dense/stage.py site_grid
+        x0 = np.floor(xmin / cell) * cell
+        y0 = np.ceil(ymax / cell) * cell
+        old = GridSpec(float(x0), float(y0), cell, int(np.ceil((xmax - x0) / cell)), int(np.ceil((y0 - ymin) / cell)), CRS)
+        assert g == old
+        bx0, by0, bx1, by1 = g.bounds
+        assert bx0 <= xmin and by1 >= ymax and bx1 >= xmax - 1e-6 and by0 <= ymin + 1e-6

@@ -56,6 +56,17 @@ class GridSpec:
         """The grid of a north-up ``transform`` (as rasterio reports it); no checks here."""
         return cls(transform.c, transform.f, transform.a, width, height, crs)
 
+    @classmethod
+    def covering(cls, bounds: tuple[float, float, float, float], cell: float, crs: str) -> "GridSpec":
+        """The smallest grid covering ``bounds = (xmin, ymin, xmax, ymax)`` whose origin
+        is a whole multiple of ``cell`` (so it aligns with any such grid)."""
+        xmin, ymin, xmax, ymax = bounds
+        x0 = np.floor(xmin / cell) * cell
+        y0 = np.ceil(ymax / cell) * cell
+        w = int(np.ceil((xmax - x0) / cell))
+        h = int(np.ceil((y0 - ymin) / cell))
+        return cls(float(x0), float(y0), cell, w, h, crs)
+
     @property
     def shape(self) -> tuple[int, int]:
         """(rows, cols)."""

@@ -29,7 +29,7 @@ from shapely.geometry import LineString, Point
 
 from kitegully import InputError
 from kitegully.config import config_section
-from kitegully.io.raster import GridSpec, _profile
+from kitegully.io.raster import GridSpec, Raster, _profile
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
 from kitegully.seeds import rng_for
@@ -383,11 +383,9 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
             d.update_tags(**tags)
     t_terrain = time.perf_counter() - t0
     # --- points on the written rasters
-    lc = rasterio.open(truth / "landcover.tif").read(1)
-    with rasterio.open(truth / "dsm.tif") as src:
-        dsm = src.read(1)
-    with rasterio.open(truth / "dtm.tif") as src:
-        dtm = src.read(1)
+    lc = Raster.read(truth / "landcover.tif").data
+    dsm = Raster.read(truth / "dsm.tif").data
+    dtm = Raster.read(truth / "dtm.tif").data
     scfg = site.tw.survey
     tcfg = site.tw.targets
     if fixed_points is None:
