@@ -172,15 +172,15 @@ def test_flat_routing_key_checked():
 
 # ----------------------------------------------------------------------- phases of flat resolution
 def test_neighbour_step_and_bounds():
-    from kitegully.terrain.flats import _neighbour
+    from kitegully.terrain.flats import _inner_neighbour, _neighbour
 
     h, w = 5, 6
     got = [_neighbour(0, 0, k, h, w, D8_OFFSETS) for k in range(8)]
     # only E (0, 1), S (1, 0) and SE (1, 1) of the top-left corner are inside
     assert got == [-1, -1, -1, -1, 1, -1, 6, 7]
     assert [_neighbour(2, 3, k, h, w, D8_OFFSETS) for k in range(8)] == [8, 9, 10, 14, 16, 20, 21, 22]
-    # h = -1: no bounds test (callers use it for cells known to be inside)
-    assert _neighbour(2, 3, 0, -1, w, D8_OFFSETS) == 8
+    # cells known to be inside: the same step without the bounds test
+    assert [_inner_neighbour(2, 3, k, w, D8_OFFSETS) for k in range(8)] == [8, 9, 10, 14, 16, 20, 21, 22]
 
 
 def test_flat_phases_on_a_plateau_walled_on_the_west():

@@ -39,15 +39,21 @@ def _append(buf, size, value):
 
 
 @njit(cache=True, inline="always")
+def _inner_neighbour(r, c, k, w, offs):
+    """Flat index of the D8 neighbour ``k`` of a cell (r, c) known to be inside the grid
+    (not an outlet, so not on the edge): no bounds test in the hot D8 pass."""
+    return (r + offs[k, 0]) * w + c + offs[k, 1]
+
+
+@njit(cache=True, inline="always")
 def _neighbour(r, c, k, h, w, offs):
     """Flat index of the D8 neighbour ``k`` of cell (r, c), or -1 outside the grid.
 
-    The one neighbour step of every loop below (compiled inline). ``h = -1`` skips the
-    bounds test, for cells known to be inside (not outlets: not on the grid edge);
-    the hot D8 pass over every cell is 25 % slower with the test."""
+    With :func:`_inner_neighbour`, the one neighbour step of every loop below
+    (compiled inline)."""
     rr = r + offs[k, 0]
     cc = c + offs[k, 1]
-    if h >= 0 and (rr < 0 or cc < 0 or rr >= h or cc >= w):
+    if rr < 0 or cc < 0 or rr >= h or cc >= w:
         return -1
     return rr * w + cc
 
@@ -104,7 +110,7 @@ def _d8_pass(flat, h, w, offs, inv):
             best = -1
             best_s = 0.0
             for k in range(8):
-                j = _neighbour(r, c, k, -1, w, offs)  # inside: a non-outlet cell is not on the edge
+                j = _inner_neighbour(r, c, k, w, offs)  # a non-outlet cell is not on the edge
                 s = (zc - flat[j]) * inv[k]
                 if s > best_s:
                     best_s = s
@@ -238,7 +244,7 @@ def _drain_flats(flat, h, w, offs, inv, dirs, outlet, labels, mask):
         if lab != 0:
             mi = mask[i]
             for k in range(8):
-                j = _neighbour(r, c, k, -1, w, offs)  # inside: a labelled undrained cell is no outlet
+                j = _inner_neighbour(r, c, k, w, offs)  # a labelled undrained cell is no outlet
                 if labels[j] != lab:
                     continue
                 s = (mi - mask[j]) * inv[k]
