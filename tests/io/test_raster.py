@@ -167,3 +167,24 @@ def test_covering_grid_snaps_outward_like_the_old_dense_site_grid():
         assert g == old
         bx0, by0, bx1, by1 = g.bounds
         assert bx0 <= xmin and by1 >= ymax and bx1 >= xmax - 1e-6 and by0 <= ymin + 1e-6
+
+
+@pytest.mark.parametrize("problem, match", [("rotated", "rotated or not north-up"), ("south-up", "rotated or not north-up"),
+                                            ("no_crs", "has no CRS"), ("non_square", "cells are not square")])
+def test_readers_check_the_grid_once(tmp_path, problem, match):
+    """grid_of: the checks that Raster.read, read_raster and the tiled OBIA reader share."""
+    from kitegully.io.raster import grid_of
+
+    path = tmp_path / f"{problem}.tif"
+    t = {"rotated": Affine(GRID.cell, 0.01, GRID.x0, 0.01, -GRID.cell, GRID.y0),
+         "south-up": Affine(GRID.cell, 0, GRID.x0, 0, GRID.cell, GRID.y0),
+         "no_crs": GRID.transform,
+         "non_square": Affine(GRID.cell, 0, GRID.x0, 0, -1.5 * GRID.cell, GRID.y0)}[problem]
+    with rasterio.open(path, "w", driver="GTiff", width=GRID.width, height=GRID.height, count=1, dtype="float32",
+                       crs=None if problem == "no_crs" else CRS, transform=t) as dst:
+        dst.write(np.zeros((1,) + GRID.shape, np.float32))
+    with pytest.raises(InputError, match=match) as err:
+        Raster.read(path)
+    assert str(path) in str(err.value)
+    with rasterio.open(path) as src, pytest.raises(InputError, match=match):
+        grid_of(src, path)

@@ -286,6 +286,22 @@ def read_raster(path: str | Path, band: int | None = 1) -> tuple[np.ndarray, Gri
     return data, grid
 
 
+def grid_of(src, path: str | Path) -> GridSpec:
+    """The grid of an open rasterio dataset ``src`` read from ``path``.
+
+    Raises :class:`InputError` naming ``path`` when the raster is rotated or not
+    north-up, has no CRS, or has non-square cells (the checks of every reader).
+    """
+    t = src.transform
+    if t.b != 0 or t.d != 0 or t.e >= 0:
+        raise InputError(f"{path}: raster is rotated or not north-up; reproject it first")
+    if src.crs is None:
+        raise InputError(f"{path}: raster has no CRS")
+    if abs(abs(t.a) - abs(t.e)) > 1e-9 * abs(t.a):
+        raise InputError(f"{path}: cells are not square ({t.a} x {-t.e})")
+    return GridSpec.from_transform(t, src.width, src.height, src.crs.to_string())
+
+
 def _read(path: str | Path, band: int | None) -> tuple[np.ndarray, GridSpec, float | int | None]:
     path = Path(path)
     try:
@@ -293,14 +309,7 @@ def _read(path: str | Path, band: int | None) -> tuple[np.ndarray, GridSpec, flo
     except rasterio.errors.RasterioIOError as exc:
         raise InputError(f"{path}: cannot open raster ({exc})") from None
     with src:
-        t = src.transform
-        if t.b != 0 or t.d != 0 or t.e >= 0:
-            raise InputError(f"{path}: raster is rotated or not north-up; reproject it first")
-        if src.crs is None:
-            raise InputError(f"{path}: raster has no CRS")
-        if abs(abs(t.a) - abs(t.e)) > 1e-9 * abs(t.a):
-            raise InputError(f"{path}: cells are not square ({t.a} x {-t.e})")
-        grid = GridSpec.from_transform(t, src.width, src.height, src.crs.to_string())
+        grid = grid_of(src, path)
         data = src.read(band) if band is not None else src.read()
         nodata = src.nodata
         if data.dtype.kind == "f":
