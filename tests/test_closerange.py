@@ -127,3 +127,24 @@ def test_workflow_tiny_twin_tables(tmp_path):
     assert np.allclose(areas["error_m2"], areas["area_auto_m2"] - areas["area_ref_m2"])
     assert (base / "scenes" / "scene_01" / "scene_figure.png").stat().st_size > 10_000
     assert (base / "valley_vs_otsu.md").exists()
+
+
+def test_scene_phases_frame_terrain_and_irradiance(obia_cfg):
+    """Phases of generate_scene: the frame's coordinates, the dipping plane, and an
+    overcast sky that lights every cell alike."""
+    from kitegully.twin.closerange import _Frame, _irradiance, _terrain, scene_rng
+
+    params = copy.deepcopy(obia_cfg["scenes"])
+    fr = _Frame.square(1.0, 0.02)
+    assert fr.n == 50 and fr.size == pytest.approx(1.0)
+    assert fr.xs[0] == pytest.approx(0.01) and fr.Y[-1, 0] == pytest.approx(-0.99) and fr.X[0, -1] == pytest.approx(0.99)
+    params["texture"] = {**params["texture"], "undulation_m": 0.0, "grass_roughness_m": 0.0}
+    dem, slope = _terrain(scene_rng(1, "t"), params, fr)
+    lo, hi = params["slope_deg"]
+    assert lo <= slope <= hi
+    # a plane dipping east at the drawn slope
+    np.testing.assert_allclose(np.diff(dem, axis=1), -np.tan(np.radians(slope)) * fr.cell, rtol=1e-9)
+    assert np.allclose(np.diff(dem, axis=0), 0.0)
+    overcast = {"sun_elevation_deg": 30.0, "sun_azimuth_deg": 180.0, "diffuse_fraction": 1.0}
+    irr, lit = _irradiance(params, overcast, fr, dem, slope)
+    assert lit.all() and np.allclose(irr, np.asarray(params["colours"]["sky_tint"]))

@@ -204,3 +204,22 @@ def test_every_traced_path_descends_to_an_outlet(with_nodata):
         else:  # merged: the next cell belongs to an earlier path, which ends at an outlet
             assert down[starts[p + 1] - 1] in set(cells[: starts[p]])
     assert len(np.unique(cells)) == cells.size
+
+
+def test_fill_nearest_takes_the_nearest_valid_value():
+    """The one nearest-fill of the project (dense matching, orthophoto, OBIA slope)."""
+    from kitegully.terrain.holes import fill_nearest
+
+    z = np.full((5, 7), np.nan)
+    z[0, 0], z[4, 6] = 1.0, 2.0
+    f = fill_nearest(z)
+    assert f[1, 1] == 1.0 and f[3, 5] == 2.0 and f[0, 6] in (1.0, 2.0)
+    assert np.isfinite(f).all() and np.isnan(z[1, 1])  # input untouched
+    # every cell takes the value of a valid cell at the smallest distance
+    rr, cc = np.indices(z.shape)
+    d1, d2 = np.hypot(rr - 0, cc - 0), np.hypot(rr - 4, cc - 6)
+    assert np.all(f[d1 < d2] == 1.0) and np.all(f[d2 < d1] == 2.0)
+    full = np.arange(6.0).reshape(2, 3)
+    assert fill_nearest(full) is full
+    empty = np.full((2, 2), np.nan)
+    assert fill_nearest(empty) is empty

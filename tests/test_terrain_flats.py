@@ -168,3 +168,52 @@ def test_open_water_hole_kept_and_network_ends_at_its_shore():
 def test_flat_routing_key_checked():
     with pytest.raises(ValueError, match="flat_routing"):
         GullyParams(flat_routing="d-infinity")
+
+
+# ----------------------------------------------------------------------- phases of flat resolution
+def test_neighbour_step_and_bounds():
+    from kitegully.terrain.flats import _inner_neighbour, _neighbour
+
+    h, w = 5, 6
+    got = [_neighbour(0, 0, k, h, w, D8_OFFSETS) for k in range(8)]
+    # only E (0, 1), S (1, 0) and SE (1, 1) of the top-left corner are inside
+    assert got == [-1, -1, -1, -1, 1, -1, 6, 7]
+    assert [_neighbour(2, 3, k, h, w, D8_OFFSETS) for k in range(8)] == [8, 9, 10, 14, 16, 20, 21, 22]
+    # cells known to be inside: the same step without the bounds test
+    assert [_inner_neighbour(2, 3, k, w, D8_OFFSETS) for k in range(8)] == [8, 9, 10, 14, 16, 20, 21, 22]
+
+
+def test_flat_phases_on_a_plateau_walled_on_the_west():
+    """5 x 6 flat at 1 m with a 2 m wall in column 0: 12 interior cells have no lower
+    neighbour; the edge cells drain (outlets) and are the low edge; the interior cells
+    next to the wall are the high edge; one flat; every interior cell is resolved."""
+    from kitegully.terrain.flats import _d8_pass, _drain_flats, _flat_edges, _flat_mask, _label_flats
+    from kitegully.terrain.flow import _INV_DIST
+
+    z = np.ones((5, 6))
+    z[:, 0] = 2.0
+    h, w = z.shape
+    flat = z.ravel()
+    dirs, outlet, n_noflow = _d8_pass(flat, h, w, D8_OFFSETS, _INV_DIST)
+    assert n_noflow == 12 and outlet.sum() == 18 and (dirs == 255).all()
+    low, nlow, high, nhigh = _flat_edges(flat, h, w, D8_OFFSETS, dirs, outlet)
+    assert sorted(high[:nhigh].tolist()) == [1 * w + 1, 2 * w + 1, 3 * w + 1]
+    low = low[:nlow]
+    assert outlet[low].all() and (flat[low] == 1.0).all() and 0 * w + 2 in low.tolist()
+    labels, nlab, queue = _label_flats(flat, h, w, D8_OFFSETS, low, nlow)
+    assert nlab == 1 and (labels.reshape(h, w)[:, 1:] == 1).all() and (labels.reshape(h, w)[:, 0] == 0).all()
+    mask = _flat_mask(queue, labels, nlab, dirs, outlet, low, nlow, high, nhigh, h, w, D8_OFFSETS).reshape(h, w)
+    inner = mask[1:4, 1:5]
+    # low-edge cells are the towards-BFS seeds (level 1 -> 2); the wall is off the flat
+    assert (inner > 0).all() and (mask[0, 1:] == 2).all() and (mask[:, 0] == 0).all()
+    # nearer the wall (away gradient) and farther from the outlets (towards gradient): higher mask
+    assert inner[1, 0] > inner[1, 1]
+    n_resolved, n_left = _drain_flats(flat, h, w, D8_OFFSETS, _INV_DIST, dirs, outlet, labels, mask.ravel())
+    assert (n_resolved, n_left) == (12, 0)
+    d = dirs.reshape(h, w)
+    assert (d[1:4, 1:5] != 255).all()
+    # nothing flows west into the wall
+    west = {0, 3, 5}  # NW, W, SW
+    assert not any(int(k) in west for k in d[1:4, 1])
+    full, nr, nl = flow_directions(z)
+    assert np.array_equal(full, d) and (nr, nl) == (12, 0)

@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from kitegully.tether.planning import Camera, line_length_for_angle, plan_flight, stereo_precision_m
+from kitegully.tether.planning import PlanningCamera, line_length_for_angle, plan_flight, stereo_precision_m
 
-NEX5N = Camera(23.4, 15.6, 4912, 3264, 18.0)
+NEX5N = PlanningCamera(23.4, 15.6, 4912, 3264, 18.0)
 
 
 def test_gsd_and_footprint_of_the_paper_camera():

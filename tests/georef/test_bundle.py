@@ -126,3 +126,34 @@ def test_intrinsics_sd_is_consistent_with_the_focal_length_error():
     assert abs(df) <= 4 * sd["f"]
     dz = camera_centres(adjusted.rv, adjusted.t)[:, 2] - C[:, 2]
     assert np.mean(dz) == pytest.approx(60.0 * df / 1200.0, abs=2 * np.std(dz) + GSD)
+
+
+def test_problem_indexing_and_a_damped_step_lower_the_cost():
+    """Phases of adjust: the parameter index of every observation, and one LM step."""
+    from kitegully.georef.bundle import _apply_step, _damped_step, _normal_equations, _problem, _residual_state
+
+    model, survey, *_ = synthetic_block()
+    Xm = gcp_errors(model, np.zeros_like(survey)) + 0.0
+    sim = umeyama(Xm, survey)
+    model = transform_block(model, sim)
+    model.gcp_xyz = sim.apply(Xm)
+    s = BundleSettings(sigma_tie_px=0.3, sigma_gcp_px=0.5, refine=("f", "k1"))
+    pb = _problem(model, survey, s)
+    ni, npt, ng = len(model.rv), len(model.points), len(model.gcp_xyz)
+    assert (pb.nri, pb.P, pb.N) == (2, 2 + 6 * ni, npt + ng)
+    assert pb.n_tie == len(model.obs_image) and pb.n_g == len(model.gcp_obs_image)
+    # columns of cx, cy, k2 are not refined; f and k1 of the one camera are unknowns 0 and 1
+    assert (pb.cidx[:, [1, 2, 4]] == -1).all() and (pb.cidx[:, 0] == 0).all() and (pb.cidx[:, 3] == 1).all()
+    # pose columns: 2 + 6 * image + (0..5); GCP observations point past the tie points
+    assert np.array_equal(pb.cidx[:, 5:], 2 + 6 * pb.o_img[:, None] + np.arange(6))
+    assert (pb.o_pt[pb.n_tie:] >= npt).all() and (pb.o_sig[pb.n_tie:] == 0.5).all()
+    pts = np.vstack([model.points, model.gcp_xyz])
+    state = (model.intr.copy(), model.rv.copy(), model.t.copy(), pts)
+    cost, r, w = _residual_state(pb, *state)
+    U, W, V, gc, gp = _normal_equations(pb, *state, w, r)
+    assert U.shape == (pb.P, pb.P) and W.shape == (pb.P, 3 * pb.N) and V.shape == (pb.N, 3, 3)
+    np.testing.assert_allclose(U, U.T, rtol=1e-10, atol=1e-9)
+    dc, dp = _damped_step(pb, U, W, V, gc, gp, 1e-3)
+    new = _apply_step(pb, *state, dc, dp)
+    assert new[0] is not state[0] and np.array_equal(state[3], pts)  # inputs unchanged
+    assert _residual_state(pb, *new)[0] < cost

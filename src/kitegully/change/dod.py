@@ -108,7 +108,7 @@ def overlap_grid(a: GridSpec, b: GridSpec, a_path: str = "epoch 1", b_path: str 
     c1 = int(np.floor((x1 - ax0) / a.cell + 1e-6))
     r0 = int(np.ceil((a.y0 - y1) / a.cell - 1e-6))
     r1 = int(np.floor((a.y0 - y0) / a.cell + 1e-6))
-    return GridSpec(a.x0 + c0 * a.cell, a.y0 - r0 * a.cell, a.cell, c1 - c0, r1 - r0, a.crs)
+    return a.window(r0, c0, r1 - r0, c1 - c0)
 
 
 def resample(r: Raster, grid: GridSpec, dx: float = 0.0, dy: float = 0.0) -> np.ndarray:

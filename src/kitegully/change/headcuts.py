@@ -63,8 +63,7 @@ def find_head(z: np.ndarray, grid: GridSpec, x: float, y: float, params: ChangeP
     piece = lab == near
     k = int(np.nanargmax(np.where(piece, win, -np.inf)))
     hr, hc = np.unravel_index(k, win.shape)
-    xs = grid.x0 + (ca + hc + 0.5) * c
-    ys = grid.y0 - (ra + hr + 0.5) * c
+    xs, ys = grid.xy(ra + hr, ca + hc)
     return float(xs), float(ys), float(depth[hr, hc])
 
 

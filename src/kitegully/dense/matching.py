@@ -25,6 +25,8 @@ from numba.typed import List
 
 from kitegully.dense.kernels import multiview_ncc_stack, sample_stack, sgm_aggregate
 from kitegully.dense.views import PyramidCache, ViewSet
+from kitegully.io.raster import GridSpec
+from kitegully.terrain.holes import fill_nearest
 
 log = logging.getLogger(__name__)
 
@@ -111,14 +113,6 @@ class TileResult:
     nviews: np.ndarray
 
 
-def _fill_nearest(z: np.ndarray) -> np.ndarray:
-    bad = ~np.isfinite(z)
-    if not bad.any() or bad.all():
-        return z
-    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-    return z[tuple(idx)]
-
-
 def view_levels(views: ViewSet, idx: list[int], z_ground: float, cell: float) -> np.ndarray:
     """Image pyramid level per view whose pixel size is closest to ``cell`` (in log scale), so
     the 2×2-mean pyramid acts as the anti-aliasing filter of the ground resampling."""
@@ -153,6 +147,66 @@ def height_base_ratio(views: ViewSet, idx: list[int], z_ground: float, max_ratio
     return float(np.clip(height / max(b, 1e-9), 1.0, max_ratio))
 
 
+def _label_range(params: MatchParams, z_prev: np.ndarray | None, zlo: float, zhi: float, dz: float,
+                 hl: int, wl: int) -> tuple[np.ndarray, int, float]:
+    """Elevation labels of one pass: lowest label per cell, label count K and step dz.
+
+    The first (coarsest) pass spans the tile's elevation bounds with at most
+    ``max_labels`` labels (dz widened if needed); later passes search ±``refine_radius_steps``
+    around the previous surface, upsampled, kept inside the bounds."""
+    if z_prev is None:
+        K = int(np.ceil((zhi - zlo) / dz)) + 1
+        if K > params.max_labels:
+            K = params.max_labels
+            dz = (zhi - zlo) / (K - 1)
+        base = np.full((hl, wl), zlo, np.float64)
+    else:
+        up = cv2.resize(z_prev.astype(np.float32), (wl, hl), interpolation=cv2.INTER_LINEAR).astype(np.float64)
+        K = 2 * params.refine_radius_steps + 1
+        # the search window stays inside the tile's elevation bounds
+        base = np.clip(up - params.refine_radius_steps * dz, zlo, max(zlo, zhi - (K - 1) * dz))
+    return base, K, dz
+
+
+def _ncc_volume(views: ViewSet, cache: PyramidCache, idx: list[int], cams: tuple, levels: np.ndarray,
+                xl: np.ndarray, yl: np.ndarray, base: np.ndarray, dz: float, K: int,
+                params: MatchParams) -> tuple[np.ndarray, np.ndarray]:
+    """Multi-view NCC (K, h, w) and usable image count per label, from the images
+    resampled at each label's elevation (``cams`` = stacked R, C and intrinsics)."""
+    Rs, Cs, Ps = cams
+    hl, wl = len(yl), len(xl)
+    imgs = List()
+    for i, s in zip(idx, levels):
+        imgs.append(cache.level(i, int(s)))
+    stack = np.empty((K, len(idx), hl, wl), np.float32)
+    sample_stack(imgs, Rs, Cs, Ps, levels.astype(np.int64), xl, yl, base, float(dz), stack)
+    score = np.empty((K, hl, wl), np.float32)
+    nvw = np.empty((K, hl, wl), np.int16)
+    # the texture test is against the image noise, which the 2x2-mean pyramid halves per level
+    min_std = params.min_std_dn / 2.0 ** levels.astype(np.float64)
+    multiview_ncc_stack(stack, params.window_half_cells, min_std, score, nvw)
+    return score, nvw
+
+
+def _sgm_winner(score: np.ndarray, K: int, params: MatchParams) -> tuple[np.ndarray, np.ndarray]:
+    """Winning label per cell after semi-global aggregation of ``(1 − NCC)/2`` and its
+    sub-step offset in [−0.5, 0.5] (parabola through the aggregated costs around it)."""
+    cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
+    agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
+    d = np.argmin(agg, axis=2)
+    dc = np.clip(d, 1, K - 2) if K >= 3 else d
+    r, c = np.indices(d.shape)
+    if K >= 3:
+        cm, c0, cp = agg[r, c, dc - 1], agg[r, c, dc], agg[r, c, dc + 1]
+        den = cm - 2 * c0 + cp
+        with np.errstate(divide="ignore", invalid="ignore"):
+            off = np.where((den > 1e-12) & (d == dc), 0.5 * (cm - cp) / den, 0.0)
+        off = np.clip(off, -0.5, 0.5)
+    else:
+        off = np.zeros(d.shape)
+    return d, off
+
+
 def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarray, cell: float,
                z_range: tuple[float, float], params: MatchParams) -> TileResult:
     """Match one tile coarse to fine.
@@ -173,8 +227,9 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     if H % f or W % f:
         raise ValueError(f"tile size {H}x{W} is not a multiple of {f}")
     zlo, zhi = float(z_range[0]), float(z_range[1])
-    x0, y0 = xs[0] - cell / 2, ys[0] + cell / 2
-    idx = visible_views(views, (x0, x0 + W * cell), (y0 - H * cell, y0), (zlo, zhi))
+    tile = GridSpec(xs[0] - cell / 2, ys[0] + cell / 2, cell, W, H, "")  # local frame, no CRS
+    xmin, ymin, xmax, ymax = tile.bounds
+    idx = visible_views(views, (xmin, xmax), (ymin, ymax), (zlo, zhi))
     nan = np.full((H, W), np.nan, np.float32)
     if len(idx) < params.min_views:
         return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
@@ -188,48 +243,14 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     schedule = list(range(L - 1, -1, -1)) + [0] * (params.final_passes - 1)
     for n_pass, lev in enumerate(schedule):
         last = n_pass == len(schedule) - 1
-        cl = cell * 2 ** lev
-        hl, wl = H // 2 ** lev, W // 2 ** lev
-        xl = x0 + (np.arange(wl) + 0.5) * cl
-        yl = y0 - (np.arange(hl) + 0.5) * cl
+        level_grid = tile.coarsened(2 ** lev)
+        cl, hl, wl = level_grid.cell, level_grid.height, level_grid.width
+        xl, yl = level_grid.cell_centres()
         dz = params.z_step_cells * cl * hb
-        if z_prev is None:
-            K = int(np.ceil((zhi - zlo) / dz)) + 1
-            if K > params.max_labels:
-                K = params.max_labels
-                dz = (zhi - zlo) / (K - 1)
-            base = np.full((hl, wl), zlo, np.float64)
-        else:
-            up = cv2.resize(z_prev.astype(np.float32), (wl, hl), interpolation=cv2.INTER_LINEAR).astype(np.float64)
-            K = 2 * params.refine_radius_steps + 1
-            # the search window stays inside the tile's elevation bounds
-            base = np.clip(up - params.refine_radius_steps * dz, zlo, max(zlo, zhi - (K - 1) * dz))
-        levels = view_levels(views, idx, zmid, cl)
-        imgs = List()
-        for i, s in zip(idx, levels):
-            imgs.append(cache.level(i, int(s)))
-        stack = np.empty((K, len(idx), hl, wl), np.float32)
-        sample_stack(imgs, Rs, Cs, Ps, levels.astype(np.int64), xl, yl, base, float(dz), stack)
-        score = np.empty((K, hl, wl), np.float32)
-        nvw = np.empty((K, hl, wl), np.int16)
-        # the texture test is against the image noise, which the 2x2-mean pyramid halves per level
-        min_std = params.min_std_dn / 2.0 ** levels.astype(np.float64)
-        multiview_ncc_stack(stack, params.window_half_cells, min_std, score, nvw)
-        del stack
-        cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
-        agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
-        d = np.argmin(agg, axis=2)
-        # sub-step refinement: parabola through the aggregated costs around the winner
-        dc = np.clip(d, 1, K - 2) if K >= 3 else d
+        base, K, dz = _label_range(params, z_prev, zlo, zhi, dz, hl, wl)
+        score, nvw = _ncc_volume(views, cache, idx, (Rs, Cs, Ps), view_levels(views, idx, zmid, cl), xl, yl, base, dz, K, params)
+        d, off = _sgm_winner(score, K, params)
         r, c = np.indices(d.shape)
-        if K >= 3:
-            cm, c0, cp = agg[r, c, dc - 1], agg[r, c, dc], agg[r, c, dc + 1]
-            den = cm - 2 * c0 + cp
-            with np.errstate(divide="ignore", invalid="ignore"):
-                off = np.where((den > 1e-12) & (d == dc), 0.5 * (cm - cp) / den, 0.0)
-            off = np.clip(off, -0.5, 0.5)
-        else:
-            off = np.zeros(d.shape)
         z = base + (d + off) * dz
         ncc = score[d, r, c]
         nv = nvw[d, r, c]
@@ -241,7 +262,7 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
             zf = np.where(good, z, np.nan)
             if not np.isfinite(zf).any():
                 return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
-            zf = _fill_nearest(zf)
+            zf = fill_nearest(zf)
             z_prev = ndimage.median_filter(zf, size=3, mode="nearest")
         else:
             keep = (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)

@@ -13,7 +13,6 @@ import logging
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from numba.typed import List
 
@@ -21,17 +20,9 @@ from kitegully.dense.kernels import best_view_ortho
 from kitegully.dense.matching import view_levels, visible_views
 from kitegully.dense.views import PyramidCache, ViewSet
 from kitegully.io.raster import GridSpec
+from kitegully.terrain.holes import fill_nearest
 
 log = logging.getLogger(__name__)
-
-
-def fill_nearest(z: np.ndarray) -> np.ndarray:
-    """NaN cells take the value of the nearest valid cell (all-NaN input is returned as is)."""
-    bad = ~np.isfinite(z)
-    if not bad.any() or bad.all():
-        return z
-    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-    return z[tuple(idx)]
 
 
 def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 1, tile_cells: int = 512,
@@ -56,8 +47,8 @@ def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 
 
     Cost: O(cells · V · (1 + ray march length / cell)).
     """
-    ocell = grid.cell / upsample
-    og = GridSpec(grid.x0, grid.y0, ocell, grid.width * upsample, grid.height * upsample, grid.crs)
+    og = grid.refined(upsample)
+    ocell = og.cell
     filled = fill_nearest(dsm.astype(np.float64))
     if not np.isfinite(filled).any():
         raise ValueError("orthophoto: the DSM has no valid cell")
@@ -67,7 +58,9 @@ def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 
     nb = cache.level(0, finest, colour=True).shape[2]
     out = np.zeros((nb, og.height, og.width), np.uint8)
     source = np.full((og.height, og.width), -1, np.int16)
-    x0l, y0l = grid.x0 - views.offset[0], grid.y0 - views.offset[1]
+    # the DSM grid and the orthophoto grid in the views' local frame
+    dsm_local = grid.shifted(-views.offset[0], -views.offset[1])
+    ortho_local = og.shifted(-views.offset[0], -views.offset[1])
     marg = int(np.ceil(overlap_m / grid.cell))
     T = max(1, tile_cells // upsample)
     for r0 in range(0, grid.height, T):
@@ -80,8 +73,8 @@ def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 
             zt = zloc[r0:r0 + h, c0:c0 + w].astype(np.float32)
             zo = cv2.resize(zt, (w * upsample, h * upsample), interpolation=cv2.INTER_LINEAR).astype(np.float64) \
                 if upsample > 1 else zt.astype(np.float64)
-            xs = x0l + (c0 * upsample + np.arange(w * upsample) + 0.5) * ocell
-            ys = y0l - (r0 * upsample + np.arange(h * upsample) + 0.5) * ocell
+            xs, ys = ortho_local.cell_centres(r0 * upsample, c0 * upsample, h * upsample, w * upsample)
+            win = dsm_local.window(ra, ca, rb - ra, cb - ca)
             zr = (float(zwin.min()), float(zwin.max()))
             idx = visible_views(views, (xs[0], xs[-1]), (ys[-1], ys[0]), zr)
             levels = view_levels(views, idx, float(np.median(zo)), ocell)
@@ -96,7 +89,7 @@ def orthophoto(views: ViewSet, dsm: np.ndarray, grid: GridSpec, upsample: int = 
                     imgs, np.ascontiguousarray([v.R for v in vv]), np.ascontiguousarray([v.C for v in vv]),
                     np.ascontiguousarray([v.params() for v in vv]), levels.astype(np.int64),
                     np.array([v.width for v in vv], np.int64), np.array([v.height for v in vv], np.int64),
-                    xs, ys, zo, zwin, x0l + ca * grid.cell, y0l - ra * grid.cell, grid.cell, zr[1], grid.cell,
+                    xs, ys, zo, zwin, win.x0, win.y0, grid.cell, zr[1], grid.cell,
                     occlusion_tolerance_m, tile_out, tile_k)
             else:
                 tile_k[:] = -1

@@ -210,11 +210,7 @@ def site_grid(views: ViewSet, params: DenseParams, crs: str, site_json: str | Pa
         xmin, ymin, xmax, ymax = (float(ext[k]) for k in ("xmin", "ymin", "xmax", "ymax"))
         if xmax <= xmin or ymax <= ymin:
             raise InputError(f"dense.extent: xmax/ymax must exceed xmin/ymin, got {dict(ext)}")
-    x0 = np.floor(xmin / cell) * cell
-    y0 = np.ceil(ymax / cell) * cell
-    w = int(np.ceil((xmax - x0) / cell))
-    h = int(np.ceil((y0 - ymin) / cell))
-    return GridSpec(float(x0), float(y0), cell, w, h, crs)
+    return GridSpec.covering((xmin, ymin, xmax, ymax), cell, crs)
 
 
 NODATA_COLOUR = "#e8b4b4"

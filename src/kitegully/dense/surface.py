@@ -108,8 +108,9 @@ def dense_surface(views: ViewSet, grid: GridSpec, params: MatchParams, tile_cell
     ncc = np.full_like(dsm, np.nan)
     nviews = np.zeros(dsm.shape, np.int16)
     nseen = np.zeros(dsm.shape, np.int16)
-    xs_all = grid.x0 - views.offset[0] + (np.arange(-O, grid.width + T + O) + 0.5) * grid.cell
-    ys_all = grid.y0 - views.offset[1] - (np.arange(-O, grid.height + T + O) + 0.5) * grid.cell
+    # cell centres in the views' local frame, with a margin of O cells around the grid and T beyond
+    local = grid.shifted(-views.offset[0], -views.offset[1])
+    xs_all, ys_all = local.cell_centres(-O, -O, grid.height + T + 2 * O, grid.width + T + 2 * O)
     t0 = time.perf_counter()
     starts = [(r, c) for r in range(0, grid.height, T) for c in range(0, grid.width, T)]
     for n, (r0, c0) in enumerate(starts):

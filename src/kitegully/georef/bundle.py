@@ -157,127 +157,209 @@ def _bincount2(index, values, size):
     return np.bincount(index.ravel(), weights=values.ravel(), minlength=size)
 
 
-def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Block, dict]:
-    """Run the GCP bundle adjustment; returns the adjusted block and a report.
+@dataclass
+class _Problem:
+    """The fixed structure of one adjustment: observations, their weights and where each
+    observation's camera and point parameters sit in the unknowns.
 
-    ``gcp_prior`` (n_gcp, 3) are the surveyed GCP positions in the block's frame.
-    Tie points and GCP points are one point set; GCP points carry the prior.
+    Tie points and GCP points are one point set (GCPs after the ``npt`` tie points);
+    observations are tie observations then GCP observations.
     """
+
+    s: BundleSettings
+    gcp_prior: np.ndarray
+    nc: int  # cameras
+    ni: int  # images
+    npt: int  # tie points
+    ng: int  # GCP points
+    ref: np.ndarray  # refined intrinsic columns (indices into INTRINSIC_NAMES)
+    cam: np.ndarray  # camera of each observation
+    o_img: np.ndarray
+    o_pt: np.ndarray  # index into the joint point set
+    o_xy: np.ndarray
+    o_sig: np.ndarray
+    cidx: np.ndarray  # global camera-parameter index of each observation's 5+6 columns (-1: not refined)
+    keep_c: np.ndarray
+    prior_w: np.ndarray
+    n_tie: int
+    n_g: int
+
+    @property
+    def nri(self) -> int:
+        return len(self.ref)
+
+    @property
+    def P(self) -> int:
+        """Size of the reduced camera system (refined intrinsics + poses)."""
+        return self.nc * self.nri + 6 * self.ni
+
+    @property
+    def N(self) -> int:
+        return self.npt + self.ng
+
+
+def _problem(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> _Problem:
+    """Index the observations and parameters of ``block`` (phase 1 of :func:`adjust`)."""
     nc, ni, npt, ng = len(block.intr), len(block.rv), len(block.points), len(block.gcp_xyz)
     ref = np.array([INTRINSIC_NAMES.index(n) for n in s.refine], dtype=int)
     nri = len(ref)
-    P = nc * nri + 6 * ni  # reduced camera system size
-    N = npt + ng
-    # observations: tie then GCP, with point index into the joint point set
     o_img = np.concatenate([block.obs_image, block.gcp_obs_image]).astype(int)
     o_pt = np.concatenate([block.obs_point, npt + block.gcp_obs_gcp]).astype(int)
     o_xy = np.concatenate([block.obs_xy, block.gcp_obs_xy])
     o_sig = np.concatenate([np.full(len(block.obs_image), s.sigma_tie_px), np.full(len(block.gcp_obs_image), s.sigma_gcp_px)])
-    n_tie, n_g = len(block.obs_image), len(block.gcp_obs_image)
     cam = block.cam_of_image[o_img]
-    # global camera-parameter index of each observation's 5+6 columns (-1: not refined)
     cidx = np.full((len(o_img), 11), -1)
     for j, r in enumerate(ref):
         cidx[:, r] = cam * nri + j
     cidx[:, 5:] = nc * nri + 6 * o_img[:, None] + np.arange(6)
-    keep_c = cidx >= 0
     sig_prior = np.array([s.sigma_gcp_xy_m, s.sigma_gcp_xy_m, s.sigma_gcp_z_m])
-    prior_w = 1.0 / sig_prior**2
+    return _Problem(s, gcp_prior, nc, ni, npt, ng, ref, cam, o_img, o_pt, o_xy, o_sig, cidx, cidx >= 0,
+                    1.0 / sig_prior**2, len(block.obs_image), len(block.gcp_obs_image))
 
-    intr, rv, t = block.intr.copy(), block.rv.copy(), block.t.copy()
-    pts = np.vstack([block.points, block.gcp_xyz]) if ng else block.points.copy()
 
-    def residual_state(intr, rv, t, pts):
-        p = project(intr[cam], rv[o_img], t[o_img], pts[o_pt])
-        r = (p - o_xy) / o_sig[:, None]
-        rn = np.linalg.norm(r, axis=1)
-        if s.loss == "huber":
-            w = np.where(rn <= s.loss_scale, 1.0, s.loss_scale / np.maximum(rn, 1e-12))
-            rho = np.where(rn <= s.loss_scale, rn**2, 2 * s.loss_scale * rn - s.loss_scale**2)
-        else:
-            w, rho = np.ones_like(rn), rn**2
-        cost = 0.5 * rho.sum()
-        if ng:
-            cost += 0.5 * float(np.sum((pts[npt:] - gcp_prior) ** 2 * prior_w))
-        return cost, r, w
+def _residual_state(pb: _Problem, intr, rv, t, pts) -> tuple[float, np.ndarray, np.ndarray]:
+    """Cost, normalised image residuals (n, 2) and their Huber weights (n,)."""
+    s = pb.s
+    p = project(intr[pb.cam], rv[pb.o_img], t[pb.o_img], pts[pb.o_pt])
+    r = (p - pb.o_xy) / pb.o_sig[:, None]
+    rn = np.linalg.norm(r, axis=1)
+    if s.loss == "huber":
+        w = np.where(rn <= s.loss_scale, 1.0, s.loss_scale / np.maximum(rn, 1e-12))
+        rho = np.where(rn <= s.loss_scale, rn**2, 2 * s.loss_scale * rn - s.loss_scale**2)
+    else:
+        w, rho = np.ones_like(rn), rn**2
+    cost = 0.5 * rho.sum()
+    if pb.ng:
+        cost += 0.5 * float(np.sum((pts[pb.npt:] - pb.gcp_prior) ** 2 * pb.prior_w))
+    return cost, r, w
 
-    def normal_equations(intr, rv, t, pts, w, r):
-        """Gauss-Newton normal equations: U (P×P), W (P×3N), V (N,3,3), gradients gc (P,), gp (N,3)."""
-        _, Ji, Jp, JX = projection_jacobian(intr[cam], rv[o_img], t[o_img], pts[o_pt])
-        sw = (np.sqrt(w) / o_sig)[:, None, None]
-        Jc = np.concatenate([Ji, Jp], axis=2) * sw  # (n, 2, 11)
-        Jx = JX * sw
-        rr = r * np.sqrt(w)[:, None]
-        Jc = np.where(keep_c[:, None, :], Jc, 0.0)
-        ci = np.where(keep_c, cidx, 0)
-        # U (P×P), W (P×3N), V (N,3,3), gradients
-        U_vals = np.einsum("nki,nkj->nij", Jc, Jc)
-        U = _bincount2(ci[:, :, None] * P + ci[:, None, :], U_vals, P * P).reshape(P, P)
-        W_vals = np.einsum("nki,nkj->nij", Jc, Jx)  # (n, 11, 3)
-        W_cols = 3 * o_pt[:, None, None] + np.arange(3)[None, None, :]
-        W = coo_matrix((W_vals.ravel(), (np.broadcast_to(ci[:, :, None], W_vals.shape).ravel(), np.broadcast_to(W_cols, W_vals.shape).ravel())), shape=(P, 3 * N)).tocsr()
-        V = _bincount2(o_pt[:, None, None] * 9 + (np.arange(3)[:, None] * 3 + np.arange(3))[None], np.einsum("nki,nkj->nij", Jx, Jx), 9 * N).reshape(N, 3, 3)
-        gc = _bincount2(ci, np.einsum("nki,nk->ni", Jc, rr), P)
-        gp = _bincount2(3 * o_pt[:, None] + np.arange(3), np.einsum("nki,nk->ni", Jx, rr), 3 * N).reshape(N, 3)
-        if ng:
-            V[npt:] += np.diag(prior_w)[None]
-            gp[npt:] += (pts[npt:] - gcp_prior) * prior_w
-        return U, W, V, gc, gp
 
-    cost, r, w = residual_state(intr, rv, t, pts)
+def _normal_equations(pb: _Problem, intr, rv, t, pts, w, r):
+    """Gauss-Newton normal equations: U (P×P), W (P×3N), V (N,3,3), gradients gc (P,), gp (N,3)."""
+    P, N, o_pt = pb.P, pb.N, pb.o_pt
+    _, Ji, Jp, JX = projection_jacobian(intr[pb.cam], rv[pb.o_img], t[pb.o_img], pts[o_pt])
+    sw = (np.sqrt(w) / pb.o_sig)[:, None, None]
+    Jc = np.concatenate([Ji, Jp], axis=2) * sw  # (n, 2, 11)
+    Jx = JX * sw
+    rr = r * np.sqrt(w)[:, None]
+    Jc = np.where(pb.keep_c[:, None, :], Jc, 0.0)
+    ci = np.where(pb.keep_c, pb.cidx, 0)
+    U_vals = np.einsum("nki,nkj->nij", Jc, Jc)
+    U = _bincount2(ci[:, :, None] * P + ci[:, None, :], U_vals, P * P).reshape(P, P)
+    W_vals = np.einsum("nki,nkj->nij", Jc, Jx)  # (n, 11, 3)
+    W_cols = 3 * o_pt[:, None, None] + np.arange(3)[None, None, :]
+    W = coo_matrix((W_vals.ravel(), (np.broadcast_to(ci[:, :, None], W_vals.shape).ravel(), np.broadcast_to(W_cols, W_vals.shape).ravel())), shape=(P, 3 * N)).tocsr()
+    V = _bincount2(o_pt[:, None, None] * 9 + (np.arange(3)[:, None] * 3 + np.arange(3))[None], np.einsum("nki,nkj->nij", Jx, Jx), 9 * N).reshape(N, 3, 3)
+    gc = _bincount2(ci, np.einsum("nki,nk->ni", Jc, rr), P)
+    gp = _bincount2(3 * o_pt[:, None] + np.arange(3), np.einsum("nki,nk->ni", Jx, rr), 3 * N).reshape(N, 3)
+    if pb.ng:
+        V[pb.npt:] += np.diag(pb.prior_w)[None]
+        gp[pb.npt:] += (pts[pb.npt:] - pb.gcp_prior) * pb.prior_w
+    return U, W, V, gc, gp
+
+
+def _damped_step(pb: _Problem, U, W, V, gc, gp, lam: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Levenberg–Marquardt step with damping ``lam``: camera update by the Schur complement,
+    then the point updates; ``None`` when the reduced system is singular."""
+    N = pb.N
+    Ud = U + lam * np.diag(np.diag(U) + 1e-9)
+    Vd = V + lam * (V * np.eye(3)[None]) + 1e-12 * np.eye(3)[None]
+    Vinv = np.linalg.inv(Vd)
+    Vinv_sp = _blockdiag(Vinv)
+    WV = W @ Vinv_sp
+    S = Ud - (WV @ W.T).toarray()
+    rhs = -gc + WV @ gp.ravel()
+    try:
+        dc = np.linalg.solve(S, rhs)
+    except np.linalg.LinAlgError:
+        return None
+    dp = -(Vinv @ (gp + (W.T @ dc).reshape(N, 3))[:, :, None])[:, :, 0]
+    return dc, dp
+
+
+def _apply_step(pb: _Problem, intr, rv, t, pts, dc, dp):
+    """Parameters after the update ``(dc, dp)`` (copies; the inputs are left unchanged)."""
+    nc, nri = pb.nc, pb.nri
+    intr_n, rv_n, t_n = intr.copy(), rv.copy(), t.copy()
+    if nri:
+        intr_n[:, pb.ref] += dc[: nc * nri].reshape(nc, nri)
+    pose = dc[nc * nri:].reshape(pb.ni, 6)
+    rv_n += pose[:, :3]
+    t_n += pose[:, 3:]
+    return intr_n, rv_n, t_n, pts + dp
+
+
+def _levenberg_marquardt(pb: _Problem, state: tuple) -> tuple[tuple, float, float, np.ndarray, np.ndarray, int]:
+    """Iterate damped Gauss-Newton steps from ``state = (intr, rv, t, pts)``.
+
+    Returns the final state, initial and final cost, final residuals and weights and
+    the number of iterations. Up to 10 damping increases per iteration; stops when no
+    step lowers the cost or the relative decrease is below ``rel_tolerance``.
+    """
+    s = pb.s
+    cost, r, w = _residual_state(pb, *state)
     cost0 = cost
     lam = 1e-3
     it = 0
     for it in range(1, s.max_iterations + 1):
-        U, W, V, gc, gp = normal_equations(intr, rv, t, pts, w, r)
+        U, W, V, gc, gp = _normal_equations(pb, *state, w, r)
         improved = False
         for _ in range(10):
-            Ud = U + lam * np.diag(np.diag(U) + 1e-9)
-            Vd = V + lam * (V * np.eye(3)[None]) + 1e-12 * np.eye(3)[None]
-            Vinv = np.linalg.inv(Vd)
-            Vinv_sp = _blockdiag(Vinv)
-            WV = W @ Vinv_sp
-            S = Ud - (WV @ W.T).toarray()
-            rhs = -gc + WV @ gp.ravel()
-            try:
-                dc = np.linalg.solve(S, rhs)
-            except np.linalg.LinAlgError:
+            step = _damped_step(pb, U, W, V, gc, gp, lam)
+            if step is None:
                 lam *= 10
                 continue
-            dp = -(Vinv @ (gp + (W.T @ dc).reshape(N, 3))[:, :, None])[:, :, 0]
-            intr_n, rv_n, t_n = intr.copy(), rv.copy(), t.copy()
-            if nri:
-                intr_n[:, ref] += dc[: nc * nri].reshape(nc, nri)
-            pose = dc[nc * nri:].reshape(ni, 6)
-            rv_n += pose[:, :3]
-            t_n += pose[:, 3:]
-            pts_n = pts + dp
-            cost_n, r_n, w_n = residual_state(intr_n, rv_n, t_n, pts_n)
+            new = _apply_step(pb, *state, *step)
+            cost_n, r_n, w_n = _residual_state(pb, *new)
             if np.isfinite(cost_n) and cost_n < cost:
                 rel = (cost - cost_n) / max(cost, 1e-300)
-                intr, rv, t, pts, cost, r, w = intr_n, rv_n, t_n, pts_n, cost_n, r_n, w_n
+                state, cost, r, w = new, cost_n, r_n, w_n
                 lam = max(lam / 3, 1e-9)
                 improved = True
                 break
             lam *= 10
         if not improved or rel < s.rel_tolerance:
             break
-    # precision of the refined intrinsics: (J^T J)^-1 of the final state, reduced to the camera block
-    U, W, V, _, _ = normal_equations(intr, rv, t, pts, w, r)
+    return state, cost0, cost, r, w, it
+
+
+def _intrinsics_sd(pb: _Problem, state: tuple, w: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """A-priori SD (nc, nri) of the refined intrinsics: (JᵀJ)⁻¹ of the final state reduced
+    to the camera block (NaN when singular)."""
+    nc, nri = pb.nc, pb.nri
+    U, W, V, _, _ = _normal_equations(pb, *state, w, r)
     Vinv_sp = _blockdiag(np.linalg.inv(V + 1e-12 * np.eye(3)[None]))
     S = U - (W @ Vinv_sp @ W.T).toarray()
     try:
         cov_c = np.linalg.inv(S[: nc * nri, : nc * nri] - S[: nc * nri, nc * nri:] @ np.linalg.solve(S[nc * nri:, nc * nri:], S[nc * nri:, : nc * nri]))
-        intr_sd = np.sqrt(np.clip(np.diag(cov_c), 0, None)).reshape(nc, nri) if nri else np.zeros((nc, 0))
+        return np.sqrt(np.clip(np.diag(cov_c), 0, None)).reshape(nc, nri) if nri else np.zeros((nc, 0))
     except np.linalg.LinAlgError:
-        intr_sd = np.full((nc, nri), np.nan)
+        return np.full((nc, nri), np.nan)
+
+
+def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Block, dict]:
+    """Run the GCP bundle adjustment; returns the adjusted block and a report.
+
+    ``gcp_prior`` (n_gcp, 3) are the surveyed GCP positions in the block's frame.
+    Tie points and GCP points are one point set; GCP points carry the prior.
+    Phases: :func:`_problem` (indexing), :func:`_levenberg_marquardt` (the solve),
+    :func:`_intrinsics_sd` (precision), then the adjusted block and the report.
+    """
+    pb = _problem(block, gcp_prior, s)
+    npt = pb.npt
+    pts = np.vstack([block.points, block.gcp_xyz]) if pb.ng else block.points.copy()
+    state0 = (block.intr.copy(), block.rv.copy(), block.t.copy(), pts)
+    state, cost0, cost, r, w, it = _levenberg_marquardt(pb, state0)
+    intr_sd = _intrinsics_sd(pb, state, w, r)
+    intr, rv, t, pts = state
     out = block.copy()
     out.intr, out.rv, out.t = intr, rv, t
     out.points, out.gcp_xyz = pts[:npt], pts[npt:]
+    n_tie, n_g = pb.n_tie, pb.n_g
     tie_res = r[:n_tie] * s.sigma_tie_px
     report = {
-        "n_parameters": int(P + 3 * N),
-        "n_residuals": int(2 * (n_tie + n_g) + 3 * ng),
+        "n_parameters": int(pb.P + 3 * pb.N),
+        "n_residuals": int(2 * (n_tie + n_g) + 3 * pb.ng),
         "n_tie_observations": int(n_tie),
         "n_gcp_observations": int(n_g),
         "initial_cost": float(cost0),
@@ -285,7 +367,7 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
         "n_iterations": int(it),
         "tie_rms_px": float(np.sqrt(np.mean(np.sum(tie_res**2, axis=1)))) if n_tie else float("nan"),
         # a-priori standard deviations (from the configured sigmas) of the refined intrinsics, camera by camera
-        "intrinsics_sd": [{INTRINSIC_NAMES[k]: float(intr_sd[c, j]) for j, k in enumerate(ref)} for c in range(nc)],
+        "intrinsics_sd": [{INTRINSIC_NAMES[k]: float(intr_sd[c, j]) for j, k in enumerate(pb.ref)} for c in range(pb.nc)],
     }
     log.info("GCP bundle adjustment: %d parameters, cost %.4g -> %.4g in %d iterations, tie RMS %.3f px",
              report["n_parameters"], cost0, cost, it, report["tie_rms_px"])

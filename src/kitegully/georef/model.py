@@ -11,6 +11,7 @@ from kitegully import InputError
 from kitegully.georef.bundle import Block
 from kitegully.georef.geometry import matrix_to_rotvec, rotvec_to_matrix, triangulate
 from kitegully.georef.similarity import Similarity
+from kitegully.seeds import rng_for
 
 
 @dataclass
@@ -109,7 +110,7 @@ def block_from_reconstruction(
     o_xy = np.array(o_xy, float).reshape(-1, 2)
     size = np.array([[rec.cameras[int(rec.images[int(i)].camera_id)].width, rec.cameras[int(rec.images[int(i)].camera_id)].height]
                      for i in image_ids], float).reshape(-1, 2)
-    keep = select_tie_points(o_img, o_pt, o_xy, len(pids), max_tie_points, size, tie_grid, np.random.default_rng(seed))
+    keep = select_tie_points(o_img, o_pt, o_xy, len(pids), max_tie_points, size, tie_grid, rng_for(seed))
     new_idx = np.full(len(pids), -1)
     new_idx[keep] = np.arange(len(keep))
     sel = new_idx[o_pt] >= 0

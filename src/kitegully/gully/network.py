@@ -264,12 +264,6 @@ def trace_network(filled: np.ndarray, head_cells: np.ndarray, directions: np.nda
     return GullyNetwork(cells, pos_down, order, verts, seg_start, seg_order, head_cells, all_ends, tuple(filled.shape))
 
 
-def _coords(grid: GridSpec, flat_idx: np.ndarray) -> np.ndarray:
-    r = flat_idx // grid.width
-    c = flat_idx - r * grid.width
-    return np.column_stack([grid.x0 + (c + 0.5) * grid.cell, grid.y0 - (r + 0.5) * grid.cell])
-
-
 def network_lines(net: GullyNetwork, grid: GridSpec, keep: np.ndarray | None = None) -> gpd.GeoDataFrame:
     """Network segments as lines through cell centres, with ``stream_order`` and ``length_m``.
 
@@ -289,7 +283,7 @@ def network_lines(net: GullyNetwork, grid: GridSpec, keep: np.ndarray | None = N
             edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
             runs = [v[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= 2]
         for run in runs:
-            geoms.append(_coords(grid, run))
+            geoms.append(grid.flat_xy(run))
             orders.append(int(net.seg_order[s]))
             seg_ids.append(s + 1)
     if geoms:

@@ -21,11 +21,10 @@ def pick_section(net: GullyNetwork, depth: np.ndarray, gully: np.ndarray, grid: 
     h, w = grid.height, grid.width
     rad = half_length_m / grid.cell
     cells = net.cells
-    r = cells // w
-    c = cells - r * w
+    r, c = grid.unravel(cells)
     ok = gully.ravel()[cells] & (r > rad) & (r < h - rad) & (c > rad) & (c < w - rad) if cells.size else np.zeros(0, bool)
     if not ok.any():
-        xc, yc = grid.x0 + w * grid.cell / 2, grid.y0 - h * grid.cell / 2
+        xc, yc = grid.centre
         return xc, yc + half_length_m, xc, yc - half_length_m
     cand = np.flatnonzero(ok)
     k = cand[np.argmax(depth.ravel()[cells[cand]])]
@@ -41,8 +40,7 @@ def pick_section(net: GullyNetwork, depth: np.ndarray, gully: np.ndarray, grid: 
     n = np.hypot(dr, dc)
     # perpendicular in (row, col) → map: x = col, y = -row
     px, py = -dr / n, -dc / n  # unit vector perpendicular to (dc, -dr)
-    xc = grid.x0 + (c[k] + 0.5) * grid.cell
-    yc = grid.y0 - (r[k] + 0.5) * grid.cell
+    xc, yc = grid.xy(r[k], c[k])
     return xc - px * half_length_m, yc - py * half_length_m, xc + px * half_length_m, yc + py * half_length_m
 
 
@@ -126,7 +124,7 @@ def validation_map(
     z = dem[::step, ::step]
     hs = hillshade(z, grid.cell * step)
     xmin, ymin, xmax, ymax = grid.bounds
-    ext = (xmin, xmin + z.shape[1] * step * grid.cell, grid.y0 - z.shape[0] * step * grid.cell, grid.y0)
+    ext = (xmin, xmin + z.shape[1] * step * grid.cell, ymax - z.shape[0] * step * grid.cell, ymax)  # decimated cells
     fig, ax = new_figure(figsize=(7.0, 7.0 * (ymax - ymin) / max(xmax - xmin, 1e-9) + 0.6))
     ax.imshow(hs, cmap="gray", extent=ext, interpolation="nearest")
     gm = gully[::step, ::step].astype(float)

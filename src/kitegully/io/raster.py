@@ -51,11 +51,62 @@ class GridSpec:
         """(xmin, ymin, xmax, ymax) in map units."""
         return (self.x0, self.y0 - self.height * self.cell, self.x0 + self.width * self.cell, self.y0)
 
-    def cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
-        """1-D arrays of column-centre x and row-centre y coordinates."""
-        xs = self.x0 + (np.arange(self.width) + 0.5) * self.cell
-        ys = self.y0 - (np.arange(self.height) + 0.5) * self.cell
+    @classmethod
+    def from_transform(cls, transform: Affine, width: int, height: int, crs: str) -> "GridSpec":
+        """The grid of a north-up ``transform`` (as rasterio reports it); no checks here."""
+        return cls(transform.c, transform.f, transform.a, width, height, crs)
+
+    @classmethod
+    def covering(cls, bounds: tuple[float, float, float, float], cell: float, crs: str) -> "GridSpec":
+        """The smallest grid covering ``bounds = (xmin, ymin, xmax, ymax)`` whose origin
+        is a whole multiple of ``cell`` (so it aligns with any such grid)."""
+        xmin, ymin, xmax, ymax = bounds
+        x0 = np.floor(xmin / cell) * cell
+        y0 = np.ceil(ymax / cell) * cell
+        w = int(np.ceil((xmax - x0) / cell))
+        h = int(np.ceil((y0 - ymin) / cell))
+        return cls(float(x0), float(y0), cell, w, h, crs)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, cols)."""
+        return (self.height, self.width)
+
+    def cell_centres(self, row0: int = 0, col0: int = 0, nrows: int | None = None,
+                     ncols: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """1-D arrays of column-centre x and row-centre y coordinates.
+
+        By default the whole grid; ``row0, col0, nrows, ncols`` select a block of rows
+        and columns of this grid's lattice, which may extend outside it (negative
+        ``row0``/``col0`` or beyond the last row/column), e.g. a tile with a margin.
+        """
+        nrows = self.height - row0 if nrows is None else nrows
+        ncols = self.width - col0 if ncols is None else ncols
+        xs = self.x0 + (col0 + np.arange(ncols) + 0.5) * self.cell
+        ys = self.y0 - (row0 + np.arange(nrows) + 0.5) * self.cell
         return xs, ys
+
+    def xy(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Map coordinates of the centres of cells ``(row, col)`` (integer or fractional)."""
+        x = self.x0 + (np.asarray(col) + 0.5) * self.cell
+        y = self.y0 - (np.asarray(row) + 0.5) * self.cell
+        return x, y
+
+    @property
+    def centre(self) -> tuple[float, float]:
+        """Map coordinates of the centre of the grid's extent."""
+        return self.x0 + self.width * self.cell / 2, self.y0 - self.height * self.cell / 2
+
+    def unravel(self, flat_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Integer (row, col) of flat (row-major) cell indices."""
+        flat_index = np.asarray(flat_index)
+        r = flat_index // self.width
+        return r, flat_index - r * self.width
+
+    def flat_xy(self, flat_index: np.ndarray) -> np.ndarray:
+        """(N, 2) map coordinates of the centres of cells given by flat (row-major) index."""
+        x, y = self.xy(*self.unravel(flat_index))
+        return np.column_stack([x, y])
 
     def rowcol(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fractional (row, col) of map points, cell centres at integers."""
@@ -63,10 +114,42 @@ class GridSpec:
         row = (self.y0 - np.asarray(y)) / self.cell - 0.5
         return row, col
 
-    def resampled(self, cell: float) -> "GridSpec":
-        """Same extent on a different cell size (extent rounded down to whole cells)."""
-        w = int(np.floor(self.width * self.cell / cell))
-        h = int(np.floor(self.height * self.cell / cell))
+    def index(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Integer (row, col) of the cells containing map points (may lie outside the grid).
+
+        A point on a cell's west or north edge belongs to that cell.
+        """
+        col = np.floor((np.asarray(x, dtype=np.float64) - self.x0) / self.cell).astype(np.int64)
+        row = np.floor((self.y0 - np.asarray(y, dtype=np.float64)) / self.cell).astype(np.int64)
+        return row, col
+
+    def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Whether map points fall inside the grid (its cells, edges by :meth:`index`)."""
+        row, col = self.index(x, y)
+        return (row >= 0) & (col >= 0) & (row < self.height) & (col < self.width)
+
+    def window(self, row0: int, col0: int, nrows: int, ncols: int) -> "GridSpec":
+        """The grid of a block of rows and columns (may extend outside this grid)."""
+        return GridSpec(self.x0 + col0 * self.cell, self.y0 - row0 * self.cell, self.cell, ncols, nrows, self.crs)
+
+    def refined(self, factor: int) -> "GridSpec":
+        """Same extent with each cell split into ``factor × factor`` cells."""
+        return GridSpec(self.x0, self.y0, self.cell / factor, self.width * factor, self.height * factor, self.crs)
+
+    def coarsened(self, factor: int) -> "GridSpec":
+        """Cells of ``factor × factor`` cells from the top-left corner (partial ones dropped)."""
+        return GridSpec(self.x0, self.y0, self.cell * factor, self.width // factor, self.height // factor, self.crs)
+
+    def shifted(self, dx: float, dy: float) -> "GridSpec":
+        """The same grid with its origin moved by ``(dx, dy)`` (e.g. into a local frame)."""
+        return GridSpec(self.x0 + dx, self.y0 + dy, self.cell, self.width, self.height, self.crs)
+
+    def resampled(self, cell: float, cover: bool = False) -> "GridSpec":
+        """Same origin on a different cell size; the extent is rounded down to whole cells,
+        or up with ``cover=True`` (the new grid then covers this one)."""
+        rnd = np.ceil if cover else np.floor
+        w = int(rnd(self.width * self.cell / cell))
+        h = int(rnd(self.height * self.cell / cell))
         return GridSpec(self.x0, self.y0, cell, w, h, self.crs)
 
 
@@ -203,6 +286,22 @@ def read_raster(path: str | Path, band: int | None = 1) -> tuple[np.ndarray, Gri
     return data, grid
 
 
+def grid_of(src, path: str | Path) -> GridSpec:
+    """The grid of an open rasterio dataset ``src`` read from ``path``.
+
+    Raises :class:`InputError` naming ``path`` when the raster is rotated or not
+    north-up, has no CRS, or has non-square cells (the checks of every reader).
+    """
+    t = src.transform
+    if t.b != 0 or t.d != 0 or t.e >= 0:
+        raise InputError(f"{path}: raster is rotated or not north-up; reproject it first")
+    if src.crs is None:
+        raise InputError(f"{path}: raster has no CRS")
+    if abs(abs(t.a) - abs(t.e)) > 1e-9 * abs(t.a):
+        raise InputError(f"{path}: cells are not square ({t.a} x {-t.e})")
+    return GridSpec.from_transform(t, src.width, src.height, src.crs.to_string())
+
+
 def _read(path: str | Path, band: int | None) -> tuple[np.ndarray, GridSpec, float | int | None]:
     path = Path(path)
     try:
@@ -210,14 +309,7 @@ def _read(path: str | Path, band: int | None) -> tuple[np.ndarray, GridSpec, flo
     except rasterio.errors.RasterioIOError as exc:
         raise InputError(f"{path}: cannot open raster ({exc})") from None
     with src:
-        t = src.transform
-        if t.b != 0 or t.d != 0 or t.e >= 0:
-            raise InputError(f"{path}: raster is rotated or not north-up; reproject it first")
-        if src.crs is None:
-            raise InputError(f"{path}: raster has no CRS")
-        if abs(abs(t.a) - abs(t.e)) > 1e-9 * abs(t.a):
-            raise InputError(f"{path}: cells are not square ({t.a} x {-t.e})")
-        grid = GridSpec(t.c, t.f, t.a, src.width, src.height, src.crs.to_string())
+        grid = grid_of(src, path)
         data = src.read(band) if band is not None else src.read()
         nodata = src.nodata
         if data.dtype.kind == "f":

@@ -17,7 +17,7 @@ from rasterio.enums import Resampling
 from rasterio.warp import reproject
 
 from kitegully import InputError
-from kitegully.io.raster import GridSpec, _profile, iter_tiles
+from kitegully.io.raster import _profile, grid_of, iter_tiles
 from kitegully.obia.classify import NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.indices import EXG_RANGE
 from kitegully.obia.scene import ObiaParams, blurred_exg, segment
@@ -26,7 +26,7 @@ from kitegully.obia.threshold import ThresholdResult, find_thresholds
 log = logging.getLogger("kitegully.obia.kite")
 
 
-def _read_tile(ortho, dsm, window, grid: GridSpec):
+def _read_tile(ortho, dsm, window):
     rgb = ortho.read([1, 2, 3], window=window).astype(np.float32)
     valid = np.ones(rgb.shape[1:], dtype=bool)
     if ortho.count >= 4 and ortho.colorinterp[3] == rasterio.enums.ColorInterp.alpha:
@@ -52,11 +52,7 @@ def _check_grids(ortho, dsm, ortho_path, dsm_path) -> None:
     (the DSM is resampled bilinearly onto the orthophoto cells).
     """
     for path, src in ((ortho_path, ortho), (dsm_path, dsm)):
-        t = src.transform
-        if src.crs is None:
-            raise InputError(f"{path}: raster has no CRS")
-        if t.b != 0 or t.d != 0 or t.e >= 0 or abs(abs(t.a) - abs(t.e)) > 1e-9 * abs(t.a):
-            raise InputError(f"{path}: raster is rotated, not north-up or has non-square cells; resample it first")
+        grid_of(src, path)
     if ortho.crs != dsm.crs:
         raise InputError(f"{dsm_path}: CRS {dsm.crs} does not match the orthophoto's {ortho.crs} ({ortho_path})")
     ob, db = ortho.bounds, dsm.bounds
@@ -85,14 +81,13 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         _check_grids(ortho, dsm, ortho_path, dsm_path)
         if tile_cells < 4 * params.seed_bandwidth_cells:
             raise ValueError(f"tile_cells {tile_cells} must be at least 4 seed band widths ({4 * params.seed_bandwidth_cells} cells)")
-        t = ortho.transform
-        grid = GridSpec(t.c, t.f, t.a, ortho.width, ortho.height, ortho.crs.to_string())
+        grid = grid_of(ortho, ortho_path)
         halo = params.blur_radius_cells + params.slope_window_cells
         counts = np.zeros(params.hist_bins, dtype=np.int64)
         edges = np.linspace(EXG_RANGE[0], EXG_RANGE[1], params.hist_bins + 1)
         tiles = list(iter_tiles(grid, tile_cells, halo))
         for i, (read, core) in enumerate(tiles):
-            rgb, dem, valid = _read_tile(ortho, dsm, read, grid)
+            rgb, dem, valid = _read_tile(ortho, dsm, read)
             _, blur = blurred_exg(*rgb, valid, params)
             r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
             inner = blur[r0:r0 + core.height, c0:c0 + core.width]
@@ -106,7 +101,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         Path(out_path).parent.mkdir(parents=True, exist_ok=True)
         with rasterio.open(out_path, "w", **profile) as dst:
             for i, (read, core) in enumerate(tiles):
-                rgb, dem, valid = _read_tile(ortho, dsm, read, grid)
+                rgb, dem, valid = _read_tile(ortho, dsm, read)
                 out = np.full(valid.shape, NODATA, dtype=np.uint8)
                 if valid.any():
                     seg = segment(rgb[0], rgb[1], rgb[2], dem, grid.cell, valid, params)

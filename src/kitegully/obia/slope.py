@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from kitegully.terrain.holes import fill_nearest
+
 
 def quadratic_kernels(window: int, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """Correlation kernels giving the x and y gradient (d, e) of the LS quadratic fit.
@@ -40,9 +42,7 @@ def wood_slope(dem: np.ndarray, cell: float, window: int = 5) -> np.ndarray:
     valid = np.isfinite(z)
     if not valid.any():
         return np.full(z.shape, np.nan, dtype=np.float32)
-    if not valid.all():
-        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
-        z = z[tuple(idx)]
+    z = fill_nearest(z)
     kd, ke = quadratic_kernels(window, cell)
     # odd reflection continues linear trends across the border, so edge cells keep
     # an unbiased gradient instead of the flattening a constant extension causes

@@ -32,6 +32,7 @@ import scipy.ndimage as ndi
 from skimage.morphology import remove_small_objects, skeletonize
 
 from kitegully import InputError
+from kitegully.terrain.holes import fill_nearest
 
 log = logging.getLogger(__name__)
 
@@ -86,10 +87,7 @@ def quadratic_coefficients(z: np.ndarray, cell: float, window: int) -> tuple[np.
     nan = ~np.isfinite(z)
     if nan.all():
         raise InputError("polygons: the DEM is all nodata")
-    zf = z
-    if nan.any():
-        idx = ndi.distance_transform_edt(nan, return_distances=False, return_indices=True)
-        zf = z[idx[0], idx[1]]
+    zf = fill_nearest(z)
     # centre on the mean for numerical accuracy of the constant term
     zf = zf - np.nanmean(z)
     kernels = quadratic_kernels(window, cell)

@@ -44,8 +44,7 @@ def medial_axis(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step:
     rr, cc = longest_path(skel)
     if rr.size < 2:
         return None
-    xs = grid.x0 + (c0 + cc + 0.5) * grid.cell
-    ys = grid.y0 - (r0 + rr + 0.5) * grid.cell
+    xs, ys = grid.xy(r0 + rr, c0 + cc)
     xy = resample_line(np.column_stack([xs, ys]), smooth_step)
     if len(xy) < 2:
         return None

@@ -38,6 +38,26 @@ def _append(buf, size, value):
     return buf, size + 1
 
 
+@njit(cache=True, inline="always")
+def _inner_neighbour(r, c, k, w, offs):
+    """Flat index of the D8 neighbour ``k`` of a cell (r, c) known to be inside the grid
+    (not an outlet, so not on the edge): no bounds test in the hot D8 pass."""
+    return (r + offs[k, 0]) * w + c + offs[k, 1]
+
+
+@njit(cache=True, inline="always")
+def _neighbour(r, c, k, h, w, offs):
+    """Flat index of the D8 neighbour ``k`` of cell (r, c), or -1 outside the grid.
+
+    With :func:`_inner_neighbour`, the one neighbour step of every loop below
+    (compiled inline)."""
+    rr = r + offs[k, 0]
+    cc = c + offs[k, 1]
+    if rr < 0 or cc < 0 or rr >= h or cc >= w:
+        return -1
+    return rr * w + cc
+
+
 @njit(cache=True)
 def _flat_bfs(queue, qt, labels, dirs, outlet, seen, h, w, offs):
     """Breadth-first search from the ``qt`` seeds in ``queue`` over undrained cells of the
@@ -54,12 +74,8 @@ def _flat_bfs(queue, qt, labels, dirs, outlet, seen, h, w, offs):
         r = i // w
         c = i - r * w
         for k in range(8):
-            rr = r + offs[k, 0]
-            cc = c + offs[k, 1]
-            if rr < 0 or cc < 0 or rr >= h or cc >= w:
-                continue
-            j = rr * w + cc
-            if labels[j] != lab or dirs[j] != 255 or outlet[j] == 1 or seen[j]:
+            j = _neighbour(r, c, k, h, w, offs)
+            if j < 0 or labels[j] != lab or dirs[j] != 255 or outlet[j] == 1 or seen[j]:
                 continue
             seen[j] = 1
             queue, qt2 = _append(queue, qt, j)
@@ -73,13 +89,14 @@ def _flat_bfs(queue, qt, labels, dirs, outlet, seen, h, w, offs):
 
 
 @njit(cache=True)
-def _directions_with_flats(z, offs, inv):
-    h, w = z.shape
+def _d8_pass(flat, h, w, offs, inv):
+    """Phase 1: plain D8 (strictly lower steepest neighbour); outlets drain off the grid.
+
+    Returns directions (255 = none), the outlet flags and the number of valid non-outlet
+    cells without a direction."""
     n = h * w
-    flat = z.ravel()
     dirs = np.full(n, 255, dtype=np.uint8)
     outlet = np.zeros(n, dtype=np.uint8)
-    # 1. plain D8 (strictly lower steepest neighbour); outlets drain off the grid
     n_noflow = 0
     for r in range(h):
         for c in range(w):
@@ -93,7 +110,7 @@ def _directions_with_flats(z, offs, inv):
             best = -1
             best_s = 0.0
             for k in range(8):
-                j = (r + offs[k, 0]) * w + c + offs[k, 1]
+                j = _inner_neighbour(r, c, k, w, offs)  # a non-outlet cell is not on the edge
                 s = (zc - flat[j]) * inv[k]
                 if s > best_s:
                     best_s = s
@@ -102,11 +119,14 @@ def _directions_with_flats(z, offs, inv):
                 dirs[i] = best
             else:
                 n_noflow += 1
-    if n_noflow == 0:
-        return dirs, 0, 0
-    # 2. edges of the flats. A drained cell (D8 direction or outlet) next to an undrained
-    # cell of the same elevation is a low edge; an undrained cell next to higher ground
-    # is a high edge.
+    return dirs, outlet, n_noflow
+
+
+@njit(cache=True)
+def _flat_edges(flat, h, w, offs, dirs, outlet):
+    """Phase 2: edges of the flats. A drained cell (D8 direction or outlet) next to an
+    undrained cell of the same elevation is a low edge; an undrained cell next to higher
+    ground is a high edge. Returns (low, nlow, high, nhigh) as growable buffers."""
     low = np.empty(1024, dtype=np.int64)
     nlow = 0
     high = np.empty(1024, dtype=np.int64)
@@ -119,11 +139,9 @@ def _directions_with_flats(z, offs, inv):
                 continue
             drained = outlet[i] == 1 or dirs[i] != 255
             for k in range(8):
-                rr = r + offs[k, 0]
-                cc = c + offs[k, 1]
-                if rr < 0 or cc < 0 or rr >= h or cc >= w:
+                j = _neighbour(r, c, k, h, w, offs)
+                if j < 0:
                     continue
-                j = rr * w + cc
                 zn = flat[j]
                 if not (zn == zn):
                     continue
@@ -134,7 +152,15 @@ def _directions_with_flats(z, offs, inv):
                 elif zn > zc:
                     high, nhigh = _append(high, nhigh, i)
                     break
-    # 3. label each flat (equal-elevation cells connected to a low edge)
+    return low, nlow, high, nhigh
+
+
+@njit(cache=True)
+def _label_flats(flat, h, w, offs, low, nlow):
+    """Phase 3: label each flat (equal-elevation cells 8-connected to a low edge), 1..nlab.
+
+    Returns the labels, their number and the queue buffer (reused by the later phases)."""
+    n = h * w
     labels = np.zeros(n, dtype=np.int32)
     queue = np.empty(max(1024, nlow), dtype=np.int64)
     nlab = 0
@@ -154,16 +180,21 @@ def _directions_with_flats(z, offs, inv):
             r = i // w
             c = i - r * w
             for k in range(8):
-                rr = r + offs[k, 0]
-                cc = c + offs[k, 1]
-                if rr < 0 or cc < 0 or rr >= h or cc >= w:
-                    continue
-                j = rr * w + cc
-                if labels[j] != 0 or flat[j] != target:
+                j = _neighbour(r, c, k, h, w, offs)
+                if j < 0 or labels[j] != 0 or flat[j] != target:
                     continue
                 labels[j] = nlab
                 queue, qt = _append(queue, qt, j)
-    # 4. away from higher terrain: BFS from the labelled high edges over undrained cells
+    return labels, nlab, queue
+
+
+@njit(cache=True)
+def _flat_mask(queue, labels, nlab, dirs, outlet, low, nlow, high, nhigh, h, w, offs):
+    """Phases 4-5: the combined flat mask ``2·towards + (H − away)`` (0 off the flats).
+
+    4: away from higher terrain, BFS from the labelled high edges over undrained cells;
+    5: towards lower terrain, BFS from the low edges, combined with the away gradient."""
+    n = h * w
     mask = np.zeros(n, dtype=np.int32)
     height = np.zeros(nlab + 1, dtype=np.int32)
     seen = np.zeros(n, dtype=np.uint8)
@@ -179,7 +210,6 @@ def _directions_with_flats(z, offs, inv):
         mask[i] = level[p]
         if height[labels[i]] < level[p]:
             height[labels[i]] = level[p]
-    # 5. towards lower terrain: BFS from the low edges, combined with the away gradient
     seen[:] = 0
     qt = 0
     for t in range(nlow):
@@ -194,10 +224,16 @@ def _directions_with_flats(z, offs, inv):
             mask[i] = height[labels[i]] - mask[i] + 2 * level[p]
         else:
             mask[i] = 2 * level[p]
-    # 6. undrained flat cells flow to the same-flat neighbour with the steepest mask descent
+    return mask
+
+
+@njit(cache=True)
+def _drain_flats(flat, h, w, offs, inv, dirs, outlet, labels, mask):
+    """Phase 6: undrained flat cells flow to the same-flat neighbour with the steepest mask
+    descent (``dirs`` updated in place). Returns (n_resolved, n_left)."""
     n_resolved = 0
     n_left = 0
-    for i in range(n):
+    for i in range(h * w):
         if dirs[i] != 255 or outlet[i] == 1 or not (flat[i] == flat[i]):
             continue
         lab = labels[i]
@@ -208,7 +244,7 @@ def _directions_with_flats(z, offs, inv):
         if lab != 0:
             mi = mask[i]
             for k in range(8):
-                j = (r + offs[k, 0]) * w + c + offs[k, 1]
+                j = _inner_neighbour(r, c, k, w, offs)  # a labelled undrained cell is no outlet
                 if labels[j] != lab:
                     continue
                 s = (mi - mask[j]) * inv[k]
@@ -220,6 +256,21 @@ def _directions_with_flats(z, offs, inv):
             n_resolved += 1
         else:
             n_left += 1
+    return n_resolved, n_left
+
+
+@njit(cache=True)
+def _directions_with_flats(z, offs, inv):
+    """D8 directions with flats resolved: the six phases above, in order."""
+    h, w = z.shape
+    flat = z.ravel()
+    dirs, outlet, n_noflow = _d8_pass(flat, h, w, offs, inv)
+    if n_noflow == 0:
+        return dirs, 0, 0
+    low, nlow, high, nhigh = _flat_edges(flat, h, w, offs, dirs, outlet)
+    labels, nlab, queue = _label_flats(flat, h, w, offs, low, nlow)
+    mask = _flat_mask(queue, labels, nlab, dirs, outlet, low, nlow, high, nhigh, h, w, offs)
+    n_resolved, n_left = _drain_flats(flat, h, w, offs, inv, dirs, outlet, labels, mask)
     return dirs, n_resolved, n_left
 
 

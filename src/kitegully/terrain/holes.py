@@ -15,6 +15,20 @@ import scipy.sparse.linalg as spla
 _FOUR = ndi.generate_binary_structure(2, 1)
 
 
+def fill_nearest(z: np.ndarray) -> np.ndarray:
+    """NaN cells take the value of the nearest valid cell (Euclidean distance between centres).
+
+    Ties go to the cell :func:`scipy.ndimage.distance_transform_edt` returns. An input
+    without NaN, or with nothing but NaN, is returned as is (the same array object).
+    Complexity O(n) for n cells.
+    """
+    bad = ~np.isfinite(z)
+    if not bad.any() or bad.all():
+        return z
+    idx = ndi.distance_transform_edt(bad, return_distances=False, return_indices=True)
+    return z[tuple(idx)]
+
+
 def interior_holes(valid: np.ndarray) -> np.ndarray:
     """Boolean mask of nodata cells in 4-connected groups that do not touch the grid edge.
 

@@ -9,7 +9,7 @@ import numpy as np
 from kitegully import InputError
 from kitegully.tether.gps import LineSchedule, SyntheticFlight, SyntheticLogSettings
 from kitegully.tether.line import Atmosphere, Kite, KiteModel, LineMaterial
-from kitegully.tether.planning import Camera
+from kitegully.tether.planning import PlanningCamera
 
 
 def materials_from_config(cfg: Mapping[str, Any]) -> dict[str, LineMaterial]:
@@ -54,8 +54,9 @@ def tether_from_config(cfg: Mapping[str, Any]) -> tuple[dict[str, LineMaterial],
     return materials_from_config(cfg), kites_from_config(cfg), atmosphere_from_config(cfg)
 
 
-def camera_from_config(cam: Mapping[str, Any]) -> Camera:
-    return Camera(
+def planning_camera_from_config(cam: Mapping[str, Any]) -> PlanningCamera:
+    """The planning camera from a ``tether.plan.camera`` config section."""
+    return PlanningCamera(
         sensor_width_mm=cam["sensor_width_mm"],
         sensor_height_mm=cam["sensor_height_mm"],
         image_width_px=cam["image_width_px"],

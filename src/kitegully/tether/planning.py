@@ -16,8 +16,11 @@ import pandas as pd
 
 
 @dataclass(frozen=True)
-class Camera:
-    """A frame camera.
+class PlanningCamera:
+    """A frame camera as the flight planner sees it: sensor size (mm), pixel count and lens.
+
+    Not the imaging model of the twin's renderer (:class:`kitegully.twin.camera.Camera`,
+    intrinsics in pixels with distortion); both read the same physical camera keys.
 
     Attributes
     ----------
@@ -62,7 +65,7 @@ def line_length_for_angle(height_m: float, flight_angle_deg: float) -> float:
     return height_m / math.sin(math.radians(flight_angle_deg))
 
 
-def stereo_precision_m(height_m: float, base_m: float, camera: Camera) -> float:
+def stereo_precision_m(height_m: float, base_m: float, camera: PlanningCamera) -> float:
     """Vertical precision of a stereo pair ``δz = (H/f)·(H/B)·p`` (Moritani et al. 2010 eq. 1), m."""
     if base_m <= 0:
         return float("inf")
@@ -70,7 +73,7 @@ def stereo_precision_m(height_m: float, base_m: float, camera: Camera) -> float:
 
 
 def plan_flight(
-    camera: Camera,
+    camera: PlanningCamera,
     flying_heights_m: list[float],
     worst_flight_angle_deg: float,
     trigger_interval_s: float,

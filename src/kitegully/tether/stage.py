@@ -19,9 +19,9 @@ import pandas as pd
 from kitegully.tether.analysis import flight_angle_table, line_lengths_for_heights, table2_comparison
 from kitegully.tether.config import (
     atmosphere_from_config,
-    camera_from_config,
     kites_from_config,
     materials_from_config,
+    planning_camera_from_config,
     schedule_from_config,
     sweep_lengths,
     synthetic_flights_from_config,
@@ -145,7 +145,7 @@ def plan_flights(cfg: Mapping[str, Any]) -> tuple[pd.DataFrame, pd.DataFrame]:
     """
     plan_cfg = cfg["plan"]
     plan = plan_flight(
-        camera_from_config(plan_cfg["camera"]),
+        planning_camera_from_config(plan_cfg["camera"]),
         flying_heights_m=plan_cfg["flying_heights_m"],
         worst_flight_angle_deg=plan_cfg["worst_flight_angle_deg"],
         trigger_interval_s=plan_cfg["trigger_interval_s"],

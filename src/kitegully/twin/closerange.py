@@ -136,98 +136,119 @@ def _cast_shadow(dem: np.ndarray, cell: float, sun_az_deg: float, sun_el_deg: fl
     return shadow
 
 
-def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, origin: tuple[float, float]) -> CloseRangeScene:
-    """Generate one close-range scene.
+@dataclass
+class _Frame:
+    """Scene coordinates relative to its top-left corner: x east, y north (≤ 0)."""
 
-    Parameters
-    ----------
-    name
-        Scene name (also seeds its random stream).
-    params
-        Generator parameters shared by the scenes (config ``obia.scenes`` without
-        ``list``): ``cell_m, size_m, aoi_margin_m, slope_deg, patch_depth_m, scarp_width_m,
-        gradual_edge_width_m, patch_elongation, patch_roughness, clods, clod_area_m2,
-        edge_raggedness_m, edge_raggedness_scale_m, regrowth_cover, reference_cover_threshold, marker_count, marker_radius_m,
-        marker_survey_sd_m, colours, grass_gap_fraction, texture, camera``.
-    scene
-        Per-scene values: ``area_m2`` (0 = no eroded patch), ``greenness`` (1 = green
-        July grass, 0 = brown September grass), ``sun_elevation_deg``,
-        ``sun_azimuth_deg``, ``diffuse_fraction`` (1 = overcast).
-    seed
-        Master seed of the configuration.
-    crs, origin
-        Site CRS and the top-left corner (x, y) of the scene.
-    """
-    rng = scene_rng(seed, name)
-    cell = float(params["cell_m"])
-    # the photographer frames the eroded area and its direct surroundings (001 sect. 3.1):
-    # square scene = patch reach + a margin each side, at most size_m; size_m without patch
-    area = float(scene["area_m2"])
+    n: int  # cells per side
+    cell: float
+    xs: np.ndarray  # (n,) cell-centre distance east of the left edge (m)
+    ys: np.ndarray  # (n,) cell-centre distance south of the top edge (m)
+    X: np.ndarray  # (n, n) easting
+    Y: np.ndarray  # (n, n) northing relative to the top edge (= -ys)
+
+    @property
+    def size(self) -> float:
+        return self.n * self.cell
+
+    @classmethod
+    def square(cls, side: float, cell: float) -> "_Frame":
+        n = int(round(side / cell))
+        xs = (np.arange(n) + 0.5) * cell
+        ys = (np.arange(n) + 0.5) * cell  # distance south of the top edge
+        X, Ys = np.meshgrid(xs, ys)
+        return cls(n, cell, xs, ys, X, -Ys)
+
+
+@dataclass
+class _Patch:
+    """Vegetation cover of the eroded patch (1 grass, 0 bare) and its clods."""
+
+    v_smooth: np.ndarray  # cover as the mapper generalises it
+    v_phys: np.ndarray  # actual cover: torn, lobed turf edge
+    clod_mask: np.ndarray
+
+
+def _scene_side(rng: np.random.Generator, params: dict, area: float):
+    """Side of the square scene and the patch outline (``None`` without patch).
+
+    The photographer frames the eroded area and its direct surroundings (001 sect. 3.1):
+    square scene = patch reach + a margin each side, at most ``size_m``; ``size_m``
+    without patch."""
     side = float(params["size_m"])
+    radius_fn, reach = None, 0.0
     if area > 0:
-        radius_fn, r0 = _patch_radius(rng, area, params["patch_elongation"], params["patch_roughness"])
+        radius_fn, _r0 = _patch_radius(rng, area, params["patch_elongation"], params["patch_roughness"])
         reach = float(np.max(radius_fn(np.linspace(0, 2 * np.pi, 720))))
         side = min(side, 2.0 * (reach + float(params["aoi_margin_m"])))
-    n = int(round(side / cell))
-    grid = GridSpec(float(origin[0]), float(origin[1]), cell, n, n, crs)
-    xs = (np.arange(n) + 0.5) * cell
-    ys = (np.arange(n) + 0.5) * cell  # distance south of the top edge
-    X, Ys = np.meshgrid(xs, ys)
-    Y = -Ys  # northing relative to the top edge
-    size = n * cell
+    return side, radius_fn, reach
 
-    # --- terrain: plane dipping east (downslope = +x), undulations, micro-roughness
+
+def _terrain(rng: np.random.Generator, params: dict, fr: _Frame) -> tuple[np.ndarray, float]:
+    """Plane dipping east (downslope = +x), undulations, micro-roughness; returns (dem, slope °)."""
+    n, cell = fr.n, fr.cell
     slope = rng.uniform(*params["slope_deg"])
     tex = params["texture"]
-    dem = -np.tan(np.radians(slope)) * X
+    dem = -np.tan(np.radians(slope)) * fr.X
     dem += tex["undulation_m"] * _smooth_noise(rng, (n, n), tex["undulation_scale_m"] / cell)
     dem += tex["grass_roughness_m"] * _smooth_noise(rng, (n, n), 1.0)
+    return dem, slope
 
-    # --- eroded patch: vegetation cover v (1 grass, 0 bare), smooth for the truth
-    v_smooth = np.ones((n, n), dtype=np.float64)  # cover as the mapper generalises it
-    v_phys = v_smooth  # actual cover: torn, lobed turf edge
+
+def _eroded_patch(rng: np.random.Generator, params: dict, fr: _Frame, dem: np.ndarray, radius_fn, reach: float) -> tuple[np.ndarray, _Patch]:
+    """Carve the eroded patch into ``dem``: smooth (truth) and torn (physical) cover, clods."""
+    n, cell, size, X, Y, xs, ys = fr.n, fr.cell, fr.size, fr.X, fr.Y, fr.xs, fr.ys
+    margin = min(reach + 0.3, size / 2)
+    centre = (rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2,
+              -(rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2))
+    dxp, dyp = X - centre[0], Y - centre[1]
+    rho = np.hypot(dxp, dyp)
+    theta = np.arctan2(dyp, dxp)
+    s = rho - radius_fn(theta)  # signed radial distance, > 0 outside
+    # edge width: scarp everywhere except the downslope (east) side, which is gradual
+    downslope = np.clip(np.cos(theta), 0.0, 1.0) ** 2
+    w = params["scarp_width_m"] + (params["gradual_edge_width_m"] - params["scarp_width_m"]) * downslope
+    v_smooth = _smoothstep((s + w / 2) / w)
+    # turf tears along its root mat: lobes of a few cm that a manual mapper smooths over
+    rag = float(params["edge_raggedness_m"]) * _smooth_noise(rng, (n, n), float(params["edge_raggedness_scale_m"]) / cell)
+    v_phys = _smoothstep((s + rag + w / 2) / w)
+    # clods of grass inside the patch
     clod_mask = np.zeros((n, n), dtype=bool)
-    centre = (size / 2, -size / 2)
-    if area > 0:
-        margin = min(reach + 0.3, size / 2)
-        centre = (rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2,
-                  -(rng.uniform(margin, size - margin) if size - 2 * margin > 0 else size / 2))
-        dxp, dyp = X - centre[0], Y - centre[1]
-        rho = np.hypot(dxp, dyp)
-        theta = np.arctan2(dyp, dxp)
-        s = rho - radius_fn(theta)  # signed radial distance, > 0 outside
-        # edge width: scarp everywhere except the downslope (east) side, which is gradual
-        downslope = np.clip(np.cos(theta), 0.0, 1.0) ** 2
-        w = params["scarp_width_m"] + (params["gradual_edge_width_m"] - params["scarp_width_m"]) * downslope
-        v_smooth = _smoothstep((s + w / 2) / w)
-        # turf tears along its root mat: lobes of a few cm that a manual mapper smooths over
-        rag = float(params["edge_raggedness_m"]) * _smooth_noise(rng, (n, n), float(params["edge_raggedness_scale_m"]) / cell)
-        v_phys = _smoothstep((s + rag + w / 2) / w)
-        # clods of grass inside the patch
-        n_clods = int(rng.integers(params["clods"][0], params["clods"][1] + 1))
-        inner = np.argwhere(s < -0.3)
-        for _ in range(n_clods if len(inner) else 0):
-            cr, cc = inner[rng.integers(len(inner))]
-            a_m2 = rng.uniform(*params["clod_area_m2"])
-            ax = np.sqrt(a_m2 / np.pi) * rng.uniform(0.7, 1.4)
-            ay = a_m2 / (np.pi * ax)
-            ang = rng.uniform(0, np.pi)
-            u = (X - xs[cc]) * np.cos(ang) + (Y + ys[cr]) * np.sin(ang)
-            t = -(X - xs[cc]) * np.sin(ang) + (Y + ys[cr]) * np.cos(ang)
-            clod_mask |= (u / ax) ** 2 + (t / ay) ** 2 <= 1.0
-        depth = rng.uniform(*params["patch_depth_m"])
-        floor_tilt = 0.05 * (X - centre[0])  # floor slightly steeper than the slope [I]
-        clod_relief = ndimage.gaussian_filter(clod_mask.astype(np.float64), 1.5)
-        dem += -(depth + floor_tilt.clip(-depth * 0.5, depth * 0.5)) * (1.0 - v_phys) + depth * 0.7 * clod_relief * (1 - v_phys)
-        v_smooth = np.where(clod_mask, 1.0, v_smooth)
-        v_phys = np.where(clod_mask, 1.0, v_phys)
-    # manual reference: boundary drawn at a cover level that drifts along the outline
-    c_lo, c_hi = params["reference_cover_threshold"]
-    c_ref = 0.5 * (c_lo + c_hi) + 0.5 * (c_hi - c_lo) * np.tanh(_smooth_noise(rng, (n, n), 1.0 / cell))
-    truth_eroded = (v_smooth < c_ref).astype(np.uint8)
+    n_clods = int(rng.integers(params["clods"][0], params["clods"][1] + 1))
+    inner = np.argwhere(s < -0.3)
+    for _ in range(n_clods if len(inner) else 0):
+        cr, cc = inner[rng.integers(len(inner))]
+        a_m2 = rng.uniform(*params["clod_area_m2"])
+        ax = np.sqrt(a_m2 / np.pi) * rng.uniform(0.7, 1.4)
+        ay = a_m2 / (np.pi * ax)
+        ang = rng.uniform(0, np.pi)
+        u = (X - xs[cc]) * np.cos(ang) + (Y + ys[cr]) * np.sin(ang)
+        t = -(X - xs[cc]) * np.sin(ang) + (Y + ys[cr]) * np.cos(ang)
+        clod_mask |= (u / ax) ** 2 + (t / ay) ** 2 <= 1.0
+    depth = rng.uniform(*params["patch_depth_m"])
+    floor_tilt = 0.05 * (X - centre[0])  # floor slightly steeper than the slope [I]
+    clod_relief = ndimage.gaussian_filter(clod_mask.astype(np.float64), 1.5)
+    dem += -(depth + floor_tilt.clip(-depth * 0.5, depth * 0.5)) * (1.0 - v_phys) + depth * 0.7 * clod_relief * (1 - v_phys)
+    v_smooth = np.where(clod_mask, 1.0, v_smooth)
+    v_phys = np.where(clod_mask, 1.0, v_phys)
+    return dem, _Patch(v_smooth, v_phys, clod_mask)
 
-    # visible cover: discrete tufts.  A cell is grass where the cover exceeds a uniform
-    # tuft field, so a band of cover v shows grass on a share v of its cells [I]
+
+def _reference(rng: np.random.Generator, params: dict, fr: _Frame, v_smooth: np.ndarray) -> np.ndarray:
+    """Manual reference (uint8, 1 = eroded): boundary drawn at a cover level that drifts along the outline."""
+    n = fr.n
+    c_lo, c_hi = params["reference_cover_threshold"]
+    c_ref = 0.5 * (c_lo + c_hi) + 0.5 * (c_hi - c_lo) * np.tanh(_smooth_noise(rng, (n, n), 1.0 / fr.cell))
+    return (v_smooth < c_ref).astype(np.uint8)
+
+
+def _visible_cover(rng: np.random.Generator, params: dict, fr: _Frame, v_phys: np.ndarray, area: float) -> tuple[np.ndarray, float]:
+    """Visible cover as discrete tufts, plus pioneer plants on the patch floor; returns (cover, regrowth).
+
+    A cell is grass where the cover exceeds a uniform tuft field, so a band of cover v
+    shows grass on a share v of its cells [I]."""
+    n, cell = fr.n, fr.cell
+    tex = params["texture"]
     tuft_sigma = float(tex["tuft_size_m"]) / cell / 2.0
     soft = float(tex["tuft_edge_softness"])
 
@@ -243,8 +264,16 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
     if regrowth > 0:
         density = np.clip(regrowth * 2.0 * _uniform_field(rng, (n, n), 1.0 / cell), 0.0, 1.0)
         v_vis = np.maximum(v_vis, tufts(density, 0.5 * tuft_sigma) * (1.0 - v_phys))
+    return v_vis, regrowth
 
-    # --- GCP markers: white spheres on the grass, away from the patch
+
+def _place_markers(rng: np.random.Generator, params: dict, fr: _Frame, grid: GridSpec, dem: np.ndarray,
+                   v_phys: np.ndarray) -> tuple[np.ndarray, np.ndarray, pd.DataFrame, int]:
+    """GCP markers: white spheres on the grass, away from the patch.
+
+    Returns the DEM with the spheres, their mask, the surveyed centres (with survey
+    noise; z without the base elevation) and the number placed."""
+    n, cell, size, X, Y = fr.n, fr.cell, fr.size, fr.X, fr.Y
     marker_r = float(params["marker_radius_m"])
     truth_markers = np.zeros((n, n), dtype=np.uint8)
     rows = []
@@ -276,9 +305,15 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
             "radius_m": marker_r,
         }
     )
+    return dem, truth_markers, markers, placed
 
-    # --- reflectance (linear, 0..1)
+
+def _reflectance(rng: np.random.Generator, params: dict, scene: dict, fr: _Frame, v_vis: np.ndarray,
+                 truth_markers: np.ndarray) -> np.ndarray:
+    """Linear reflectance (n, n, 3) in 0..1: grass (greenness, blades, gaps), soil, stones, markers."""
+    n = fr.n
     col = params["colours"]
+    tex = params["texture"]
     green = np.asarray(col["grass_green"], dtype=np.float64)
     brown = np.asarray(col["grass_brown"], dtype=np.float64)
     g_local = np.clip(
@@ -298,8 +333,14 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
     soil[stones] = np.asarray(col["stone"], dtype=np.float64) * rng.uniform(0.8, 1.2)
     refl = v_vis[..., None] * grass + (1 - v_vis[..., None]) * soil
     refl[truth_markers == 1] = np.asarray(col["marker"], dtype=np.float64)
+    return refl
 
-    # --- illumination: diffuse (bluish sky) + direct sun with cast shadows
+
+def _irradiance(params: dict, scene: dict, fr: _Frame, dem: np.ndarray, slope: float) -> tuple[np.ndarray, np.ndarray]:
+    """Diffuse (bluish sky) + direct sun with cast shadows, relative to the mean plane;
+    returns (irradiance (n, n, 3), lit mask). No randomness."""
+    cell, size = fr.cell, fr.size
+    col = params["colours"]
     el, az = float(scene["sun_elevation_deg"]), float(scene["sun_azimuth_deg"])
     diffuse = float(scene["diffuse_fraction"])
     gy, gx = np.gradient(dem, cell)  # gy along rows (south)
@@ -317,10 +358,12 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
     sky = np.asarray(col["sky_tint"], dtype=np.float64)
     sun_tint = np.asarray(col["sun_tint"], dtype=np.float64)
     direct = (1.0 - diffuse) * (cos_i / cos_plane * lit)[..., None] * sun_tint
-    irradiance = diffuse * sky + direct
-    radiance = refl * irradiance
+    return diffuse * sky + direct, lit
 
-    # --- camera: blur (mosaicking), exposure, gamma, noise, 8 bit
+
+def _photograph(rng: np.random.Generator, params: dict, fr: _Frame, radiance: np.ndarray) -> np.ndarray:
+    """Camera: mosaic exposure/white balance, blur, exposure, gamma, noise; (3, n, n) uint8."""
+    n = fr.n
     cam = params["camera"]
     n_img = int(cam["mosaic_images"])
     if n_img > 1:
@@ -334,21 +377,68 @@ def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, or
     exposure = cam["target_median"] / float(np.median(radiance.mean(axis=-1)))
     encoded = np.clip(radiance * exposure * rng.uniform(0.9, 1.1), 0.0, 1.0) ** (1.0 / cam["gamma"])
     dn = encoded * 255.0 + rng.normal(0.0, cam["noise_dn"], encoded.shape)
-    rgb = np.clip(np.round(dn), 0, 255).astype(np.uint8).transpose(2, 0, 1)
+    return np.clip(np.round(dn), 0, 255).astype(np.uint8).transpose(2, 0, 1)
+
+
+def generate_scene(name: str, params: dict, scene: dict, seed: int, crs: str, origin: tuple[float, float]) -> CloseRangeScene:
+    """Generate one close-range scene.
+
+    Phases, in the order they draw from the scene's one random stream: framing
+    (:func:`_scene_side`), terrain, eroded patch, manual reference, visible cover,
+    markers, reflectance, then illumination (no draws) and the photograph.
+
+    Parameters
+    ----------
+    name
+        Scene name (also seeds its random stream).
+    params
+        Generator parameters shared by the scenes (config ``obia.scenes`` without
+        ``list``): ``cell_m, size_m, aoi_margin_m, slope_deg, patch_depth_m, scarp_width_m,
+        gradual_edge_width_m, patch_elongation, patch_roughness, clods, clod_area_m2,
+        edge_raggedness_m, edge_raggedness_scale_m, regrowth_cover, reference_cover_threshold, marker_count, marker_radius_m,
+        marker_survey_sd_m, colours, grass_gap_fraction, texture, camera``.
+    scene
+        Per-scene values: ``area_m2`` (0 = no eroded patch), ``greenness`` (1 = green
+        July grass, 0 = brown September grass), ``sun_elevation_deg``,
+        ``sun_azimuth_deg``, ``diffuse_fraction`` (1 = overcast).
+    seed
+        Master seed of the configuration.
+    crs, origin
+        Site CRS and the top-left corner (x, y) of the scene.
+    """
+    rng = scene_rng(seed, name)
+    cell = float(params["cell_m"])
+    area = float(scene["area_m2"])
+    side, radius_fn, reach = _scene_side(rng, params, area)
+    fr = _Frame.square(side, cell)
+    n = fr.n
+    grid = GridSpec(float(origin[0]), float(origin[1]), cell, n, n, crs)
+    dem, slope = _terrain(rng, params, fr)
+    grass = np.ones((n, n), dtype=np.float64)
+    patch = _Patch(grass, grass, np.zeros((n, n), dtype=bool))  # no patch: grass everywhere
+    if area > 0:
+        dem, patch = _eroded_patch(rng, params, fr, dem, radius_fn, reach)
+    truth_eroded = _reference(rng, params, fr, patch.v_smooth)
+    v_vis, regrowth = _visible_cover(rng, params, fr, patch.v_phys, area)
+    dem, truth_markers, markers, placed = _place_markers(rng, params, fr, grid, dem, patch.v_phys)
+    refl = _reflectance(rng, params, scene, fr, v_vis, truth_markers)
+    irradiance, lit = _irradiance(params, scene, fr, dem, slope)
+    rgb = _photograph(rng, params, fr, refl * irradiance)
 
     dem_abs = (dem + float(params["base_elevation_m"])).astype(np.float32)
     markers["z"] += float(params["base_elevation_m"])
+    diffuse = float(scene["diffuse_fraction"])
     meta = {
         "scene": name,
         "slope_deg": float(slope),
         "area_requested_m2": area,
         "area_ref_m2": float(truth_eroded.sum() * cell * cell),
         "greenness": float(scene["greenness"]),
-        "sun_elevation_deg": el,
-        "sun_azimuth_deg": az,
+        "sun_elevation_deg": float(scene["sun_elevation_deg"]),
+        "sun_azimuth_deg": float(scene["sun_azimuth_deg"]),
         "diffuse_fraction": diffuse,
         "shadow_fraction": float(1.0 - lit.mean()) if diffuse < 1.0 else 0.0,
-        "clod_area_m2": float((clod_mask & (truth_eroded == 0)).sum() * cell * cell),
+        "clod_area_m2": float((patch.clod_mask & (truth_eroded == 0)).sum() * cell * cell),
         "regrowth_cover": float(regrowth),
         "markers": int(placed),
     }

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from kitegully.io.raster import GridSpec
 from kitegully.seeds import rng_for
 from kitegully.twin.landcover import Fields
 from kitegully.twin.terrain import Valley
@@ -173,8 +174,10 @@ def wadi_centreline(valley: Valley, bounds, step: float) -> tuple[np.ndarray, np
     return x[inside], y[inside]
 
 
-def trace_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: np.ndarray, tgrid, seed: int) -> list[Gully]:
-    """Wadi plus gullies traced from the heads on the pre-gully surface ``z_trace``.
+def plan_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: np.ndarray, tgrid, seed: int) -> list[Gully]:
+    """The twin's true network: wadi plus gullies traced from sampled heads on the
+    pre-gully surface ``z_trace`` (not :func:`kitegully.gully.network.trace_network`,
+    which traces a network on an observed DEM).
 
     Complexity O(heads·max_steps) for tracing plus O(cells) for the gradient.
     """
@@ -402,15 +405,16 @@ def _carve(x0g, y0g, cell, nr, nc, sx0, sy0, sx1, sy1, h0, h1, d0, d1, pexp, buf
                         depth[r, c] = v
 
 
-def carve(segs: Segments, x0: float, y0: float, cell: float, nrow: int, ncol: int, buffer: float) -> tuple[np.ndarray, np.ndarray]:
-    """Gully depth (m, ≥ 0) and distance outside the nearest rim (m; < 0 inside) on a grid.
+def carve(segs: Segments, grid: GridSpec, buffer: float) -> tuple[np.ndarray, np.ndarray]:
+    """Gully depth (m, ≥ 0) and distance outside the nearest rim (m; < 0 inside) on ``grid``.
 
-    ``x0, y0`` is the top-left corner. The rim distance is only exact within ``buffer``
-    of a gully (``+inf`` beyond). Complexity O(Σ segment bounding-box cells).
+    The rim distance is only exact within ``buffer`` of a gully (``+inf`` beyond).
+    Complexity O(Σ segment bounding-box cells).
     """
+    nrow, ncol = grid.shape
     depth = np.zeros((nrow, ncol), dtype=np.float64)
     rim = np.full((nrow, ncol), np.inf, dtype=np.float64)
-    s = segs.select((x0, y0 - nrow * cell, x0 + ncol * cell, y0), buffer)
+    s = segs.select(grid.bounds, buffer)
     if s.x0.size:
-        _carve(float(x0), float(y0), float(cell), nrow, ncol, s.x0, s.y0, s.x1, s.y1, s.h0, s.h1, s.d0, s.d1, s.p, float(buffer), depth, rim)
+        _carve(float(grid.x0), float(grid.y0), float(grid.cell), nrow, ncol, s.x0, s.y0, s.x1, s.y1, s.h0, s.h1, s.d0, s.d1, s.p, float(buffer), depth, rim)
     return depth, rim

@@ -17,6 +17,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from kitegully.seeds import rng_for
 from kitegully.twin.camera import Camera
 from kitegully.twin.exif import exif_bytes, write_jpeg
 from kitegully.twin.flight import pose_from_row
@@ -64,7 +65,7 @@ def render_flight(
         ray = camera.rays_camera(np.array([camera.cx]), np.array([camera.cy]))[0] @ pose.R
         ground = pose.C + ray * (d0 if np.isfinite(d0) else (pose.C[2] - scene.zmin))
         blur = blur_vector(camera, p, ground, effects.exposure_time_s)
-        rng = np.random.default_rng([seed, i])
+        rng = rng_for(seed, i)  # = default_rng([seed, i]), the stream the images were made with
         img, ev = photograph(refl, camera, effects, rng, blur)
         when = datetime.fromisoformat(p["timestamp"])
         write_jpeg(out_dir / p["image"], img, exif_bytes(camera, when, effects.exposure_time_s), jpeg_quality)

@@ -29,7 +29,7 @@ from shapely.geometry import LineString, Point
 
 from kitegully import InputError
 from kitegully.config import config_section
-from kitegully.io.raster import GridSpec, _profile
+from kitegully.io.raster import GridSpec, Raster, _profile
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
 from kitegully.seeds import rng_for
@@ -170,8 +170,7 @@ class TwinSite:
 
     @property
     def tex_grid(self) -> GridSpec:
-        g = self.grid
-        return GridSpec(g.x0, g.y0, g.cell / self.tex_factor, g.width * self.tex_factor, g.height * self.tex_factor, g.crs)
+        return self.grid.refined(self.tex_factor)
 
     @property
     def bounds(self):
@@ -223,12 +222,12 @@ def build_site(tw: TwinParams, crs: str, seed: int, epoch: int = 1) -> TwinSite:
     wl, amp = relief_octaves(tw)
     t = tw.terrain
     tcell = t["trace_cell_m"]
-    tgrid = GridSpec(grid.x0, grid.y0, tcell, int(np.ceil(W * cell / tcell)), int(np.ceil(H * cell / tcell)), crs)
+    tgrid = grid.resampled(tcell, cover=True)
     txs, tys = tgrid.cell_centres()
     keep = wl >= t["trace_min_wavelength_m"]
     z_trace = pregully_grid(valley, txs, tys, sub_seed(seed, "relief"), wl[keep], amp[keep])
     gcfg = tw.gullies
-    network = gl.trace_network(valley, fields, gcfg, grid.bounds, z_trace, tgrid, seed)
+    network = gl.plan_network(valley, fields, gcfg, grid.bounds, z_trace, tgrid, seed)
     retreat, widen = {}, None
     if epoch == 2:
         gl.assign_attributes(network, gcfg, valley, seed)  # epoch-1 attributes decide which heads have a headcut
@@ -291,16 +290,14 @@ def compute_tile(site: TwinSite, r0: int, c0: int, nrow: int, ncol: int) -> Tile
     Complexity O(cells·octaves + Σ nearby gully segment boxes).
     """
     tw, g, v, f = site.tw, site.grid, site.valley, site.fields
-    cell = g.cell
-    xs = g.x0 + (c0 + np.arange(ncol) + 0.5) * cell
-    ys = g.y0 - (r0 + np.arange(nrow) + 0.5) * cell
+    xs, ys = g.cell_centres(r0, c0, nrow, ncol)
     X, Y = xs[None, :], ys[:, None]
     u, vp = v.u_vp(X, Y)
     z = v.base(X, Y) + fbm_grid(xs - v.cx, ys - v.cy, sub_seed(site.seed, "relief"), site.wl, site.amp)
     pi = lcm.plot_index(v, f, u, vp)
     gcfg = tw.gullies
     buf = gcfg["zone_buffer_m"]
-    depth, rim = gl.carve(site.segs, g.x0 + c0 * cell, g.y0 - r0 * cell, cell, nrow, ncol, buf)
+    depth, rim = gl.carve(site.segs, g.window(r0, c0, nrow, ncol), buf)
     z = z + lcm.field_humps(f, pi) * np.clip(rim / f.hump_clearance, 0.0, 1.0) - depth
     lcfg = tw.landcover
     # --- classes, lowest priority first
@@ -386,11 +383,9 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
             d.update_tags(**tags)
     t_terrain = time.perf_counter() - t0
     # --- points on the written rasters
-    lc = rasterio.open(truth / "landcover.tif").read(1)
-    with rasterio.open(truth / "dsm.tif") as src:
-        dsm = src.read(1)
-    with rasterio.open(truth / "dtm.tif") as src:
-        dtm = src.read(1)
+    lc = Raster.read(truth / "landcover.tif").data
+    dsm = Raster.read(truth / "dsm.tif").data
+    dtm = Raster.read(truth / "dtm.tif").data
     scfg = site.tw.survey
     tcfg = site.tw.targets
     if fixed_points is None:
@@ -453,8 +448,7 @@ def write_texture(site: TwinSite, truth: Path, gcps: pd.DataFrame, lc_full: np.n
             dsm_pad = _read_padded(sdsm, r0, c0, h, w)
             phase_pad = compute_phase(site, r0 - 1, c0 - 1, h + 2, w + 2)
             lc = lc_full[r0:r0 + h, c0:c0 + w]
-            txs = g.x0 + (c0 * k + np.arange(w * k) + 0.5) * tgrid.cell
-            tys = g.y0 - (r0 * k + np.arange(h * k) + 0.5) * tgrid.cell
+            txs, tys = tgrid.cell_centres(r0 * k, c0 * k, h * k, w * k)
             refl = tx.texture_tile(tcfg, lc, dtm_pad, dsm_pad, phase_pad, g.cell, k, txs - site.valley.cx, tys - site.valley.cy, seed)
             tg.paint_targets(refl, txs, tys, gcps, site.tw.targets)
             dst.write(tx.to_uint8(refl), window=Window(c0 * k, r0 * k, w * k, h * k))
@@ -467,8 +461,7 @@ def write_texture(site: TwinSite, truth: Path, gcps: pd.DataFrame, lc_full: np.n
 def compute_phase(site: TwinSite, r0: int, c0: int, nrow: int, ncol: int) -> np.ndarray:
     """Furrow phase (m) on a block of the DEM grid (may extend outside the site)."""
     g, v = site.grid, site.valley
-    xs = g.x0 + (c0 + np.arange(ncol) + 0.5) * g.cell
-    ys = g.y0 - (r0 + np.arange(nrow) + 0.5) * g.cell
+    xs, ys = g.cell_centres(r0, c0, nrow, ncol)
     u, vp = v.u_vp(xs[None, :], ys[:, None])
     return lcm.furrow_phase(site.fields, lcm.plot_index(v, site.fields, u, vp), u)
 
