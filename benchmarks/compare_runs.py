@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 
 #: Column or row labels that measure the run, not the science (compared never).
-RUN_MEASURES = re.compile(r"(?:^|_|\s)(?:time|seconds|_s$|wall|cpu|memory|mem_|mb|cells_per_s|per_min|per_s|speed|threads)"
-                          r"|\(s\)|elapsed|extrapolated|peak", re.I)
+RUN_MEASURES = re.compile(r"(?:^|_|\s)(?:time|seconds|wall|cpu|memory|mem_|mb|cells_per_s|per_min|per_s|speed|threads)"
+                          r"|_s$|\(s\)|elapsed|extrapolated|peak", re.I)
 
 
 def _drop_run_measures(df: pd.DataFrame) -> pd.DataFrame:
