@@ -11,9 +11,10 @@ way Snakemake jobs would run it, reading only what the step needs from files:
 * ``merge``: read all summaries, :func:`merge_tiles`, write the spill elevations;
 * ``finalise`` per tile: :func:`finalise_tile`, write the tile's filled cells.
 
-Each child reports its compute time (the library call, not interpreter start, numba
-cache loading or file I/O) and its peak RSS (``ru_maxrss``), and the peak RSS of a child that only imports the
-modules and reads nothing (the baseline, about the interpreter + numba). The tiled
+Each child reports its compute time (the fastest of ``--repeat`` calls of the library
+function: the machine is shared; not interpreter start, numba
+cache loading or file I/O) and its peak RSS (``VmHWM``); a baseline child loads the same
+code and opens the DEM but reads no data, so "above baseline" is the job's data. The tiled
 result is checked to be equal to the untiled one (bit for bit, -0.0 read as +0.0).
 
 Usage::
@@ -41,6 +42,11 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _maxrss_mb() -> float:
+    """Peak RSS of this process (VmHWM: unlike ``ru_maxrss`` it is not inherited from
+    the parent across fork + exec)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return float(line.split()[1]) / 1024.0
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
@@ -76,6 +82,16 @@ def _write_dem(z: np.ndarray, path: Path) -> None:
 # ----------------------------------------------------------------------------- jobs
 
 
+def _timed(fn, repeat: int):
+    """(result of the last call, fastest wall time of ``repeat`` calls): the machine is shared."""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        res = fn()
+        best = min(best, time.perf_counter() - t0)
+    return res, best
+
+
 def job(args: argparse.Namespace) -> dict:
     from kitegully.terrain import tiled_fill as tf
     from kitegully.terrain.fill import priority_flood_fill
@@ -88,6 +104,8 @@ def job(args: argparse.Namespace) -> dict:
     zw = np.arange(64, dtype=np.float64).reshape(8, 8) % 7
     priority_flood_fill(zw, epsilon=0.0)
     tf.tiled_priority_flood_fill(zw, 3)
+    # and GDAL: open the DEM and read one cell, so the baseline holds the raster library
+    tf.read_tile_with_halo(work / "dem.tif", tf.Tile(0, 0, 0, 0, 0, 1, 1))
     if args.job == "baseline":
         pass
     elif args.job == "untiled":
@@ -95,26 +113,20 @@ def job(args: argparse.Namespace) -> dict:
 
         with rasterio.open(work / "dem.tif") as src:
             z = src.read(1)
-        t0 = time.perf_counter()
-        w, n = priority_flood_fill(z, epsilon=0.0)
-        out["seconds"] = time.perf_counter() - t0
+        (w, n), out["seconds"] = _timed(lambda: priority_flood_fill(z, epsilon=0.0), args.repeat)
         out["n_raised"] = n
         np.save(work / "untiled.npy", w)
     elif args.job == "fill":
         t = tiles[args.name]
         zh = tf.read_tile_with_halo(work / "dem.tif", t)
-        t0 = time.perf_counter()
-        res = tf.fill_tile(zh, t)
-        out["seconds"] = time.perf_counter() - t0
+        res, out["seconds"] = _timed(lambda: tf.fill_tile(zh, t), args.repeat)
         out["n_labels"] = res.n_labels
         out["n_edges"] = int(res.edges[0].size)
         res.save(work / f"{t.name}.fill.npz")
         res.summary().save(work / f"{t.name}.summary.npz")
     elif args.job == "merge":
         sums = [tf.TileSummary.load(work / f"{name}.summary.npz") for name in tiles]
-        t0 = time.perf_counter()
-        sp = tf.merge_tiles(sums)
-        out["seconds"] = time.perf_counter() - t0
+        sp, out["seconds"] = _timed(lambda: tf.merge_tiles(sums), args.repeat)
         out["n_nodes"] = int(sp.spill.size)
         out["n_edges"] = int(sum(s.edges[0].size for s in sums))
         sp.save(work / "spill.npz")
@@ -122,16 +134,17 @@ def job(args: argparse.Namespace) -> dict:
         t = tiles[args.name]
         res = tf.TileFill.load(work / f"{t.name}.fill.npz")
         sp = tf.SpillElevations.load(work / "spill.npz")
-        t0 = time.perf_counter()
-        w = tf.finalise_tile(res, sp)
-        out["seconds"] = time.perf_counter() - t0
+        w, out["seconds"] = _timed(lambda: tf.finalise_tile(res, sp), args.repeat)
         np.save(work / f"{t.name}.final.npy", w)
     out["maxrss_mb"] = _maxrss_mb()
     return out
 
 
+_REPEAT = 3
+
+
 def _run(work: Path, jobname: str, name: str = "") -> dict:
-    cmd = [sys.executable, __file__, "--job", jobname, "--work", str(work), "--name", name]
+    cmd = [sys.executable, __file__, "--job", jobname, "--work", str(work), "--name", name, "--repeat", str(_REPEAT)]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
     if p.returncode:
@@ -145,6 +158,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", type=int, default=4000)
     ap.add_argument("--tile", type=int, default=1000)
+    ap.add_argument("--repeat", type=int, default=3, help="time each library call this often, keep the fastest")
     ap.add_argument("--job", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--work", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--name", default="", help=argparse.SUPPRESS)
@@ -152,6 +166,8 @@ def main() -> None:
     if args.job:
         print(json.dumps(job(args)))
         return
+    global _REPEAT
+    _REPEAT = args.repeat
 
     from kitegully.terrain import tiled_fill as tf
 
@@ -188,7 +204,7 @@ def main() -> None:
     lines = [
         f"# Tiled Priority-Flood vs untiled fill: {args.size} x {args.size} fractal DEM, tiles of {args.tile}",
         "",
-        f"Baseline child (interpreter + numpy/numba/rasterio, no data): peak RSS {b:.0f} MB.",
+        f"Baseline child (interpreter, numpy, jitted kernels, rasterio with the DEM open, no data): peak RSS {b:.0f} MB.",
         "",
         "| step | compute s | peak RSS MB | above baseline MB | process wall s |",
         "|---|---:|---:|---:|---:|",

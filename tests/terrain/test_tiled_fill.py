@@ -14,6 +14,7 @@ from kitegully.terrain.tiled_fill import (
     fill_tile,
     finalise_tile,
     merge_tiles,
+    read_tile_with_halo,
     tile_grid,
     tile_with_halo,
     tiled_priority_flood_fill,
@@ -140,3 +141,29 @@ def test_missing_tile_is_an_error():
     summaries = [fill_tile(tile_with_halo(z, t), t).summary() for t in tile_grid(z.shape, 10)]
     with pytest.raises(ValueError, match="missing r001_c001"):
         merge_tiles(summaries[:4] + summaries[5:])
+
+
+def test_many_random_shapes_and_tiles():
+    rng = rng_for(0, "tiled_fill", "shapes")
+    for k in range(25):
+        h, w = (int(v) for v in rng.integers(1, 40, 2))
+        z = np.round(rng.normal(0, 1, (h, w)) + rng.uniform(-2, 2) * np.linspace(0, 1, w)[None, :], 1)
+        z[rng.random((h, w)) < rng.uniform(0, 0.15)] = np.nan
+        tile = int(rng.integers(1, 15))
+        ref, _ = priority_flood_fill(z, epsilon=0.0)
+        assert _bits_equal(tiled_priority_flood_fill(z, tile), ref), (k, h, w, tile)
+
+
+def test_read_tile_with_halo_matches_array_halo(tmp_path):
+    import rasterio
+    from rasterio.transform import from_origin
+
+    z = _random_dem("tif", shape=(23, 17)).astype(np.float32)
+    path = tmp_path / "dem.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=17, height=23, count=1, dtype="float32", nodata=np.nan,
+                       crs="EPSG:32632", transform=from_origin(0, 0, 0.2, 0.2)) as dst:
+        dst.write(z, 1)
+    for t in tile_grid(z.shape, 8):
+        a = read_tile_with_halo(path, t)
+        b = tile_with_halo(z.astype(np.float64), t)
+        assert np.array_equal(a, b, equal_nan=True), t.name
