@@ -85,7 +85,9 @@ def _write_dem(z: np.ndarray, path: Path) -> None:
 def _timed(fn, repeat: int):
     """(result of the last call, fastest wall time of ``repeat`` calls): the machine is shared."""
     best = float("inf")
+    res = None
     for _ in range(repeat):
+        res = None  # free the previous result first: the peak RSS is that of one call
         t0 = time.perf_counter()
         res = fn()
         best = min(best, time.perf_counter() - t0)

@@ -45,6 +45,16 @@ flats matter (``gully.flat_routing: resolve`` and the polygon conditioning route
 with :mod:`kitegully.terrain.flats`); only ``polygons.thalweg.mfd_catchment_area`` uses
 ε = 1e-4.
 
+As Snakemake jobs (not wired yet): the tile names come from :func:`tile_grid` on the DEM
+shape and ``tile`` from the config (deterministic, no checkpoint needed); a rule
+``fill_tile`` with a ``{tile}`` wildcard reads its window with :func:`read_tile_with_halo`
+and writes ``tiles/{tile}.fill.npz`` (:meth:`TileFill.save`) and the small
+``tiles/{tile}.summary.npz``; one rule ``fill_merge`` reads every summary
+(``expand`` over the grid) and writes ``spill.npz``; a rule ``fill_finalise`` with the
+``{tile}`` wildcard reads its ``.fill.npz`` and ``spill.npz`` and writes its part of the
+filled DEM (a VRT or a last gather rule makes the mosaic, or the next tiled stage reads the
+tiles directly).
+
 Complexity: per tile O(t log t) time, O(t) memory (t cells; the float64 fill, int32
 labels, a byte per cell, the queues and the label-pair list); merge O(E log V) time and
 O(V + E) memory for V labels (≤ perimeter cells, ≈ 4·n/tile for tiles of side ``tile``)
