@@ -68,8 +68,44 @@ def relative_orientation(cam_left: Camera, cam_right: Camera, uv_left: np.ndarra
     if E is None or E.shape != (3, 3):
         raise InputError("relative orientation: the matched points admit no unique essential matrix (degenerate geometry)")
     _, R, t, mask = cv2.recoverPose(E, xl, xr, np.eye(3), mask=mask)
-    t = np.ravel(t)
-    return R, t / np.linalg.norm(t) * base_m, np.ravel(mask).astype(bool)
+    inl = np.ravel(mask).astype(bool)
+    R, t = _refine_coplanarity(R, np.ravel(t), xl[inl], xr[inl])
+    return R, t / np.linalg.norm(t) * base_m, inl
+
+
+def _refine_coplanarity(R: np.ndarray, t: np.ndarray, xl: np.ndarray, xr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares refinement of (R, t) minimising the Sampson distance of the coplanarity condition.
+
+    The RANSAC essential matrix is a minimal-sample model; this adjusts all five degrees of
+    freedom (rotation vector, base direction) over every inlier.
+    """
+    import cv2
+    from scipy.optimize import least_squares
+
+    t = t / np.linalg.norm(t)
+    hl = np.column_stack([xl, np.ones(len(xl))])
+    hr = np.column_stack([xr, np.ones(len(xr))])
+    # base direction on a tangent plane of the unit sphere at t
+    a = np.cross(t, [0.0, 0.0, 1.0] if abs(t[2]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(t, a)
+
+    def unpack(p):
+        Rp = cv2.Rodrigues(p[:3])[0] @ R
+        tp = t + p[3] * a + p[4] * b
+        return Rp, tp / np.linalg.norm(tp)
+
+    def resid(p):
+        Rp, tp = unpack(p)
+        tx = np.array([[0, -tp[2], tp[1]], [tp[2], 0, -tp[0]], [-tp[1], tp[0], 0]])
+        E = tx @ Rp
+        Ex = hl @ E.T
+        Etx = hr @ E
+        num = np.sum(hr * Ex, axis=1)
+        return num / np.sqrt(Ex[:, 0] ** 2 + Ex[:, 1] ** 2 + Etx[:, 0] ** 2 + Etx[:, 1] ** 2)
+
+    sol = least_squares(resid, np.zeros(5), method="lm", xtol=1e-14, ftol=1e-14)
+    return unpack(sol.x)
 
 
 @dataclass
