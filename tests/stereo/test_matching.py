@@ -76,7 +76,11 @@ def test_rendered_pair_to_dem_end_to_end():
     rect = rectify_pair(rig.left, rig.right, R, T, (2.6, 2.8))
     Lr, Rr = rect.remap(L, "left"), rect.remap(Rimg, "right")
     dr = rect.disparity_for_depth(np.array([2.8, 2.6]))
-    disp = match_epipolar(Lr, Rr, tuple(dr), MatchParams(levels=3), roi=(520, 120, 880, 580))
+    box = np.array([[-0.08, -0.1, 0.0], [0.08, 0.1, 0.0]])
+    (bx0, by0), (bx1, by1) = np.sort(rect.rectify_points(rig.left.project(box, rig.pose_left), "left"), axis=0)
+    roi = (int(bx0), int(by0), int(bx1), int(by1))
+    assert roi[2] - roi[0] > 250 and roi[3] - roi[1] > 300
+    disp = match_epipolar(Lr, Rr, tuple(dr), MatchParams(levels=3), roi=roi)
     P = disparity_to_points(disp, rect, rig.pose_left, step=2)
     assert len(P) > 5000
     err = P[:, 2] - relief(P[:, 0], P[:, 1])

@@ -69,7 +69,7 @@ def test_rectified_images_have_no_vertical_shift():
 
 
 def test_pair_without_overlap_is_rejected():
-    rig = paper_rig(2.7, 6.0)
+    rig = paper_rig(2.7, 6.0, convergent=False)  # two parallel cameras 6 m apart, 1.2 m footprints
     R, T = relative_orientation_from_poses(rig.pose_left, rig.pose_right)
     with pytest.raises(InputError, match=r"rectification: the left and right images do not overlap at object distances 2.5–2.9 m \(B = 6 m\)"):
         rectify_pair(rig.left, rig.right, R, T, (2.5, 2.9))

@@ -216,7 +216,7 @@ def rectify_pair(cam_left: Camera, cam_right: Camera, R: np.ndarray, T: np.ndarr
         raise InputError("rectification: the base length is zero, so the pair has no stereo geometry")
     size = (cam_left.width, cam_left.height)
     R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(cam_left.K, cam_left.dist_coeffs, cam_right.K, cam_right.dist_coeffs,
-                                                size, np.asarray(R, float), T.reshape(3, 1), flags=cv2.CALIB_ZERO_DISPARITY, alpha=alpha)
+                                                size, np.asarray(R, float), T.reshape(3, 1), flags=0, alpha=alpha)
     if abs(P2[1, 3]) > abs(P2[0, 3]):
         raise InputError("rectification: the base is mostly vertical in the images; this library expects a left/right pair")
     rect = Rectification(cam_left, cam_right, R1, R2, P1, P2, Q, size)

@@ -140,8 +140,23 @@ class StereoRig:
         return float((self.pose_left.C[2] + self.pose_right.C[2]) / 2.0 - z_object)
 
 
+def look_at_pose(centre: np.ndarray, target: np.ndarray, omega_deg: float = 0.0, phi_deg: float = 0.0, kappa_deg: float = 0.0) -> Pose:
+    """Pose whose optical axis passes through ``target`` (image x along world x), then tilted by small angles."""
+    import cv2
+
+    C = np.asarray(centre, float)
+    z = np.asarray(target, float) - C
+    z /= np.linalg.norm(z)
+    x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    Rt = cv2.Rodrigues(np.radians([omega_deg, phi_deg, kappa_deg]).astype(float))[0]
+    return Pose(R=Rt @ np.vstack([x, y, z]), C=C)
+
+
 def paper_rig(H_m: float, B_m: float, centre_xy: tuple[float, float] = (0.0, 0.0),
-              tilt_deg: tuple[float, float, float, float, float, float] = (0.3, -0.2, 0.4, -0.25, 0.35, -0.5)) -> StereoRig:
+              tilt_deg: tuple[float, float, float, float, float, float] = (0.3, -0.2, 0.4, -0.25, 0.35, -0.5),
+              convergent: bool = True) -> StereoRig:
     """The paper's rig at height ``H_m`` and base ``B_m`` over ``centre_xy`` (object plane z = 0).
 
     Parameters
@@ -152,7 +167,11 @@ def paper_rig(H_m: float, B_m: float, centre_xy: tuple[float, float] = (0.0, 0.0
         Point under the middle of the base (m).
     tilt_deg : six floats
         (ω, φ, κ) of the left then the right camera (deg): a real rig is never exactly
-        parallel, so rectification has something to correct.
+        aligned, so rectification has something to correct.
+    convergent : bool
+        Aim both optical axes at ``centre_xy`` on z = 0 (True) or look straight down.
+        [I] The paper does not say; with B/H up to 0.42 and a 25° × 16° field of view a
+        parallel pair would not both see the box, so the cameras must converge.
 
     Returns
     -------
@@ -162,8 +181,11 @@ def paper_rig(H_m: float, B_m: float, centre_xy: tuple[float, float] = (0.0, 0.0
         raise InputError(f"stereo rig: H = {H_m} m and B = {B_m} m must both be positive")
     cams = paper_cameras()
     cx, cy = centre_xy
-    pl = nadir_pose(np.array([cx - B_m / 2, cy, H_m]), *tilt_deg[:3])
-    pr = nadir_pose(np.array([cx + B_m / 2, cy, H_m]), *tilt_deg[3:])
+    Cl, Cr, target = np.array([cx - B_m / 2, cy, H_m]), np.array([cx + B_m / 2, cy, H_m]), np.array([cx, cy, 0.0])
+    if convergent:
+        pl, pr = look_at_pose(Cl, target, *tilt_deg[:3]), look_at_pose(Cr, target, *tilt_deg[3:])
+    else:
+        pl, pr = nadir_pose(Cl, *tilt_deg[:3]), nadir_pose(Cr, *tilt_deg[3:])
     return StereoRig(cams["left"], cams["right"], pl, pr)
 
 
