@@ -114,7 +114,11 @@ def run(H, B, texture, seed, cams=None):
     corners = np.array([[BOX[0] * s, BOX[1] * s, 0], [BOX[2] * s, BOX[1] * s, 0], [BOX[2] * s, BOX[3] * s, 0], [BOX[0] * s, BOX[3] * s, 0]])
     cr = rect.rectify_points(rig.left.project(corners, rig.pose_left), "left")
     roi = (int(cr[:, 0].min()), int(cr[:, 1].min()), int(cr[:, 0].max()) + 1, int(cr[:, 1].max()) + 1)
-    dr = rect.disparity_for_depth(np.array([H + 0.1, H - 0.1]))
+    if cams is None:
+        dr = rect.disparity_for_depth(np.array([H + 0.1, H - 0.1]))
+    else:  # the model frame's depth is only approximately H: search around the tie points' disparities
+        dt = rect.rectify_points(ul, "left")[:, 0] - rect.rectify_points(ur, "right")[:, 0]
+        dr = np.array([dt.min() - 10.0, dt.max() + 10.0])
     levels = int(np.clip(np.ceil(np.log2(max(dr[1] - dr[0], 8) / 8)), 2, 5))
     t0 = time.perf_counter()
     disp = match_epipolar(Lr, Rr, tuple(dr), MatchParams(levels=levels), roi=roi)
