@@ -306,9 +306,8 @@ def grid_dem(points: np.ndarray, grid: GridSpec, min_count: int = 1) -> Raster:
     P = np.asarray(points, float)
     if P.ndim != 2 or P.shape[1] != 3:
         raise InputError(f"grid_dem: points must be an N × 3 array, got shape {P.shape}")
-    col = np.floor((P[:, 0] - grid.x0) / grid.cell).astype(np.int64)
-    row = np.floor((grid.y0 - P[:, 1]) / grid.cell).astype(np.int64)
-    ok = (col >= 0) & (col < grid.width) & (row >= 0) & (row < grid.height) & np.isfinite(P[:, 2])
+    row, col = grid.index(P[:, 0], P[:, 1])
+    ok = grid.contains(P[:, 0], P[:, 1]) & np.isfinite(P[:, 2])
     idx = row[ok] * grid.width + col[ok]
     n = np.bincount(idx, minlength=grid.width * grid.height)
     s = np.bincount(idx, weights=P[ok, 2], minlength=grid.width * grid.height)

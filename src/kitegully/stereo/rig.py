@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kitegully import InputError
-from kitegully.tether.planning import Camera as PlanningCamera
+from kitegully.tether.planning import PlanningCamera
 from kitegully.tether.planning import stereo_precision_m
 from kitegully.twin.camera import Camera, Pose, rotation_to_quaternion  # noqa: F401
 
