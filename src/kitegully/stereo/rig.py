@@ -21,7 +21,7 @@ import numpy as np
 from kitegully import InputError
 from kitegully.tether.planning import PlanningCamera
 from kitegully.tether.planning import stereo_precision_m
-from kitegully.twin.camera import Camera, Pose, rotation_to_quaternion  # noqa: F401
+from kitegully.twin.camera import Camera, Pose
 
 #: Image size of the Nikon D2H (px).
 D2H_SIZE_PX = (2464, 1632)
