@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+
+from kitegully import InputError
+from kitegully.stereo.calibration import (ControlField, Observation, calibrate_camera, calibration_field, calibration_poses,
+                                          calibration_table, simulate_observations)
+from kitegully.stereo.rig import D2H_PIXEL_MM, camera_to_table, paper_cameras
+
+
+def test_field_is_the_papers():
+    f = calibration_field()
+    assert len(f.ids) == 32
+    assert (f.xyz[:20, 2] > 0).all() and len(np.unique(f.xyz[:20, 2])) == 3
+    assert (f.xyz[20:, 2] == 0).all()
+
+
+def test_noise_free_calibration_recovers_intrinsics():
+    cams = paper_cameras()
+    field, poses = calibration_field(), calibration_poses()
+    results = {}
+    for side, cam in cams.items():
+        obs = simulate_observations(cam, field, poses)
+        assert len(obs) == 6
+        results[side] = calibrate_camera(field, obs, cam.width, cam.height, D2H_PIXEL_MM, template=cam, name=side)
+        rec, tru = camera_to_table(results[side].camera), camera_to_table(cam)
+        assert abs(rec["f_mm"] - tru["f_mm"]) < 0.05  # issue target, mm
+        assert abs(rec["K1"] - tru["K1"]) < 0.10 * abs(tru["K1"])
+        assert abs(rec["x0_mm"] - tru["x0_mm"]) < 0.0094  # well under one pixel
+        assert results[side].rms_px < 1e-3
+    table = calibration_table(results, cams)
+    assert len(table) == 10 and set(table["camera"]) == {"left", "right"}
+    assert (table.loc[table.parameter == "f", "paper"].to_numpy() == [51.4, 51.5]).all()
+
+
+def test_point_seen_once_is_rejected():
+    cam = paper_cameras()["left"]
+    field, poses = calibration_field(), calibration_poses()
+    obs = simulate_observations(cam, field, poses)
+    keep = obs[0].ids[0]
+    obs = [obs[0]] + [Observation(o.ids[o.ids != keep], o.uv[o.ids != keep]) for o in obs[1:]]
+    with pytest.raises(InputError, match=f"left: calibration point '{keep}' is seen in only one image"):
+        calibrate_camera(field, obs, cam.width, cam.height, D2H_PIXEL_MM, name="left")
+
+
+def test_unknown_target_and_too_few_points():
+    cam = paper_cameras()["left"]
+    field, poses = calibration_field(), calibration_poses()
+    obs = simulate_observations(cam, field, poses)
+    bad = [Observation(np.where(o.ids == o.ids[0], "X99", o.ids), o.uv) for o in obs]
+    with pytest.raises(InputError, match="measures target 'X99', which is not in the control field"):
+        calibrate_camera(field, bad, cam.width, cam.height, D2H_PIXEL_MM)
+    few = [Observation(o.ids[:5], o.uv[:5]) for o in obs]
+    with pytest.raises(InputError, match="sees 5 targets; each image needs at least 6"):
+        calibrate_camera(field, few, cam.width, cam.height, D2H_PIXEL_MM)
