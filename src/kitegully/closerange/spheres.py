@@ -49,7 +49,8 @@ class SphereDetection:
     white_min_dn : float
         Whiteness ``min(R, G, B)`` (8-bit DN) a sphere pixel reaches. [I] the polystyrene
         (reflectance ~0.9) is far above soil (~0.3) and grass (B ~0.1); between them on the
-        tone curve.
+        tone curve; seeds only, the blob then grows to the midpoint of its bright level
+        and the local background (hysteresis), so shaded sides and vignetted corners count.
     radius_px : tuple of float
         Smallest and largest expected image radius (px): ``f·r/D`` over the walk's distances.
     min_fill : float
@@ -61,7 +62,7 @@ class SphereDetection:
         Gaussian smoothing before the edge search (px).
     """
 
-    white_min_dn: float = 170.0
+    white_min_dn: float = 150.0
     radius_px: tuple[float, float] = (4.0, 80.0)
     min_fill: float = 0.8
     n_rays: int = 90
