@@ -151,34 +151,52 @@ class PoleScene:
 
 
 def _paint_rule(tex: np.ndarray, grid: GridSpec, free: np.ndarray, dem: np.ndarray, rng: np.random.Generator):
-    """Paint a 2 × 1 m folding rule (orthogonal legs) on ``tex`` (rows, cols, 3 float, 1 cm)."""
+    """Lay a 2 m folding rule as two orthogonal 1 m legs on the slope; paint it on ``tex``.
+
+    The rule is rigid and straight: its legs are 1 m long and orthogonal in 3-D, in the
+    plane fitted to the DEM within 1 m of the corner (on a 35° slope a downslope leg
+    covers 0.82 m in plan).  ``tex`` is (rows, cols, 3) float at half the DEM cell.
+    Returns the (3, 3) points: end of leg A, corner, end of leg B.
+    """
     cell = grid.cell
     h, w = dem.shape
+    xs, ys = grid.cell_centres()
     for _ in range(500):
         corner = np.array([rng.uniform(grid.x0 + 0.2, grid.x0 + w * cell - 0.2), rng.uniform(grid.y0 - h * cell + 0.2, grid.y0 - 0.2)])
+        r0, c0 = (int(v) for v in np.rint(grid.rowcol(corner[0], corner[1])))
+        k = int(round(1.0 / cell))
+        win = (slice(max(r0 - k, 0), min(r0 + k + 1, h)), slice(max(c0 - k, 0), min(c0 + k + 1, w)))
+        X, Y = np.meshgrid(xs[win[1]] - corner[0], ys[win[0]] - corner[1])
+        A = np.column_stack([X.ravel(), Y.ravel(), np.ones(X.size)])
+        ga, gb, gc = np.linalg.lstsq(A, dem[win].ravel(), rcond=None)[0]
+        normal = np.array([-ga, -gb, 1.0]) / np.sqrt(ga * ga + gb * gb + 1.0)
         phi = rng.uniform(0, 2 * np.pi)
-        ea = np.array([np.cos(phi), np.sin(phi)])
-        eb = np.array([-ea[1], ea[0]]) * (1 if rng.uniform() < 0.5 else -1)
+        t1 = np.array([np.cos(phi), np.sin(phi), ga * np.cos(phi) + gb * np.sin(phi)])
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(normal, t1) * (1 if rng.uniform() < 0.5 else -1)
+        c3 = np.array([corner[0], corner[1], gc + 0.003])  # on the fitted plane, 3 mm thick rule
+        ends = np.vstack([c3 + t1, c3, c3 + t2])
         s = np.linspace(0.0, 1.0, 101)
-        pts = np.vstack([corner + s[:, None] * ea, corner + s[:, None] * eb])
+        pts = np.vstack([c3[:2] + s[:, None] * t1[:2], c3[:2] + s[:, None] * t2[:2]])
         r, c = grid.rowcol(pts[:, 0], pts[:, 1])
         r, c = np.rint(r).astype(int), np.rint(c).astype(int)
         if r.min() < 0 or c.min() < 0 or r.max() >= h or c.max() >= w or not free[r, c].all():
             continue
-        # paint at texture resolution (1 cm): 2 cm wide, yellow, black mark every decimetre
+        # paint at texture resolution: 2 cm wide, yellow, a black mark every decimetre of the leg
         tcell = cell / 2
         th, tw = tex.shape[:2]
-        X, Y = np.meshgrid(grid.x0 + (np.arange(tw) + 0.5) * tcell, grid.y0 - (np.arange(th) + 0.5) * tcell)
-        for e in (ea, eb):
-            along = (X - corner[0]) * e[0] + (Y - corner[1]) * e[1]
-            across = -(X - corner[0]) * e[1] + (Y - corner[1]) * e[0]
-            on = (along >= -0.01) & (along <= 1.0) & (np.abs(across) <= 0.01)
-            mark = on & (np.abs(along - np.round(along, 1)) <= 0.005)
+        TX, TY = np.meshgrid(grid.x0 + (np.arange(tw) + 0.5) * tcell, grid.y0 - (np.arange(th) + 0.5) * tcell)
+        for t in (t1, t2):
+            e = t[:2] / np.linalg.norm(t[:2])
+            plan_len = float(np.linalg.norm(t[:2]))
+            along = (TX - corner[0]) * e[0] + (TY - corner[1]) * e[1]
+            across = -(TX - corner[0]) * e[1] + (TY - corner[1]) * e[0]
+            on = (along >= -0.01) & (along <= plan_len) & (np.abs(across) <= 0.01)
+            leg = along / plan_len  # metres along the (sloping) leg
+            mark = on & (np.abs(leg - np.round(leg, 1)) <= 0.005)
             tex[on] = (0.93, 0.80, 0.20)
             tex[mark] = (0.08, 0.08, 0.08)
-        ends = np.vstack([corner + ea, corner, corner + eb])
-        z = ndimage.map_coordinates(dem, grid.rowcol(ends[:, 0], ends[:, 1]), order=1, mode="nearest")
-        return np.column_stack([ends, z + 0.003])
+        return ends
     raise InputError("folding rule: no 1 m x 1 m spot on grass clear of the patch and the markers in the scene")
 
 
@@ -249,12 +267,22 @@ def look_at(C: np.ndarray, target: np.ndarray, roll_rad: float = 0.0) -> np.ndar
     return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
 
 
+def _ground_plane(render: Scene):
+    """Least-squares plane through the scene's DEM (every 5th cell), as ``z(x, y)``."""
+    dem = render.dsm[::5, ::5].astype(np.float64)
+    r, c = np.nonzero(np.isfinite(dem))
+    X = render.x0 + (c * 5 + 0.5) * render.cell
+    Y = render.y0 - (r * 5 + 0.5) * render.cell
+    a, b, z0 = np.linalg.lstsq(np.column_stack([X - render.x0, Y - render.y0, np.ones(len(X))]), dem[r, c], rcond=None)[0]
+    return lambda x, y: a * (np.asarray(x) - render.x0) + b * (np.asarray(y) - render.y0) + z0
+
+
 def walk_poses(pscene: PoleScene, walk: PoleWalk, rng: np.random.Generator, max_radius_m: float | None = None) -> list[Pose]:
     """Camera poses on a rough circle around the patch, aimed at it (oblique views).
 
-    The radius is ``patch_reach_m + standoff_m``, capped at ``max_radius_m`` (the scene's
-    half-width, so the photographer stands on the modelled ground). Ground heights come
-    from the DEM (bilinear), the camera is ``pole_height_m`` above them.
+    The radius is ``patch_reach_m + standoff_m``, optionally capped at ``max_radius_m``.
+    Ground heights come from the DEM (bilinear; off the DEM from the plane fitted to it),
+    the camera is ``pole_height_m`` above them.
     """
     radius = pscene.patch_reach_m + walk.standoff_m
     if max_radius_m is not None:
@@ -264,12 +292,12 @@ def walk_poses(pscene: PoleScene, walk: PoleWalk, rng: np.random.Generator, max_
     rad = radius + walk.radius_jitter_m * rng.standard_normal(walk.n_images)
     x = pscene.patch_centre[0] + rad * np.cos(ang)
     y = pscene.patch_centre[1] + rad * np.sin(ang)
+    plane = _ground_plane(pscene.render)
     zg = surface_height(pscene.render, x, y)
-    if np.isnan(zg).any():  # off the DEM: nearest ground height of the scene's edge
-        zg = np.where(np.isnan(zg), np.nanmedian(zg), zg)
+    zg = np.where(np.isnan(zg), plane(x, y), zg)  # off the DEM: the slope's plane, extended
     aim = pscene.patch_centre[None] + walk.aim_jitter_m * rng.standard_normal((walk.n_images, 2))
     za = surface_height(pscene.render, aim[:, 0], aim[:, 1])
-    za = np.where(np.isnan(za), np.nanmedian(zg), za)
+    za = np.where(np.isnan(za), plane(aim[:, 0], aim[:, 1]), za)
     poses = []
     for i in range(walk.n_images):
         C = np.array([x[i], y[i], zg[i] + walk.pole_height_m])
