@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kitegully.closerange.spheres import detect_spheres, sphere_centre_from_ellipse
+from kitegully import InputError
+from kitegully.closerange.spheres import SphereDetection, detect_spheres, sphere_centre_from_ellipse
 from kitegully.twin.camera import Camera, Pose
 from kitegully.twin.polewalk import PoleWalk, composite_spheres, look_at, project_spheres
 from kitegully.twin.render import Photographic, photograph
@@ -70,3 +71,11 @@ def test_no_white_blob_gives_an_empty_table():
     img = np.full((200, 300, 3), 90, np.uint8)
     det = detect_spheres(img, Camera(300, 200, 250.0, 149.5, 99.5))
     assert det.empty and "u_px" in det.columns
+
+
+def test_detection_config_is_validated():
+    assert SphereDetection.from_config({"radius_px": [3, 50]}).radius_px == (3.0, 50.0)
+    with pytest.raises(InputError, match="unknown key"):
+        SphereDetection.from_config({"radius": 3})
+    with pytest.raises(InputError, match="two increasing positive radii"):
+        SphereDetection.from_config({"radius_px": [50, 3]})

@@ -31,12 +31,14 @@ Cost: O(pixels) for the blob labelling plus O(n_rays · ray length) per blob.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Mapping
 
 import cv2
 import numpy as np
 import pandas as pd
 from scipy import ndimage
 
+from kitegully import InputError
 from kitegully.twin.camera import Camera
 
 
@@ -82,6 +84,20 @@ class SphereDetection:
     min_contrast_dn: float = 80.0
     max_fit_rms_px: float = 0.3
     min_edge_share: float = 0.8
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "SphereDetection":
+        """Build from a config mapping (keys as the attributes); bad keys or values raise InputError."""
+        unknown = set(cfg) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise InputError(f"sphere detection: unknown key(s) {', '.join(sorted(unknown))}")
+        values = {k: (tuple(float(x) for x in v) if k == "radius_px" else type(getattr(cls, k))(v)) for k, v in cfg.items()}
+        p = cls(**values)
+        if not 0 < p.radius_px[0] < p.radius_px[1]:
+            raise InputError(f"sphere detection: radius_px must be two increasing positive radii, got {list(p.radius_px)}")
+        if not (0 < p.min_fill <= 1 and 0 < p.min_edge_share <= 1 and p.n_rays >= 12):
+            raise InputError("sphere detection: min_fill and min_edge_share must be in (0, 1] and n_rays at least 12")
+        return p
 
 
 def _whiteness(image: np.ndarray) -> np.ndarray:
