@@ -55,7 +55,7 @@ def main() -> None:
         truth = project_spheres(cam, poses[i], ps.spheres)
         det = detect_spheres(img, cam)
         n_det += len(det)
-        errs += [float(np.hypot(truth[:, 0] - u, truth[:, 1] - v).min()) for u, v in det[["u_px", "v_px"]].to_numpy()]
+        errs += [float(np.nanmin(np.hypot(truth[:, 0] - u, truth[:, 1] - v))) for u, v in det[["u_px", "v_px"]].to_numpy()]
     t2 = time.perf_counter()
     s = dict(cfg["sfm"], max_num_features=a.features, first_octave=0, threads=a.threads)
     s["matching"] = dict(s["matching"], camera_log=None, method="exhaustive")
