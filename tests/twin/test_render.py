@@ -215,3 +215,19 @@ def test_photograph_effects():
                          shot_noise_dn2_per_dn=0.0, exposure_time_s=0.002)
     img, _ = photograph(refl, cam, noisy, np.random.default_rng(0))
     assert img.std() == pytest.approx(2.0, rel=0.1)
+
+
+def test_rising_rays_hit_a_slope_above_the_camera():
+    # pole camera below a 35 degree slope looking up at it (issue 20): rising rays must hit
+    cell = 0.1
+    xs = (np.arange(100) + 0.5) * cell
+    dsm = np.tile(0.7 * xs, (100, 1)).astype(np.float32)  # z = 0.7 x, rising east
+    scene = make_scene(dsm, (0.0, 10.0), cell, np.full((3, 10, 10), 128, np.uint8), (0.0, 10.0), 1.0, ("R", "G", "B"))
+    d = np.array([[1.0, 0.0, 0.1], [1.0, 0.3, 0.4], [1.0, 0.0, -0.2]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.array([[1.0, 5.0, 2.0]] * 3)
+    t = cast_rays(scene, o, d)
+    expect = (2.0 - 0.7) / (0.7 * d[:, 0] - d[:, 2])
+    assert np.allclose(t, expect, atol=1e-3)
+    # a ray rising faster than the slope leaves the grid without a hit
+    assert np.isnan(cast_rays(scene, o[:1], np.array([[1.0, 0.0, 1.0]]))[0])

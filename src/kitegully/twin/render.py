@@ -186,18 +186,32 @@ def _block_max(bmax, x0, y0, bl, x, y):
 def _cast(ox, oy, oz, dx, dy, dz, dsm, x0, y0, cell, bmax, block, smax, sblock, zmin, zmax):
     """Distance along the unit ray to the first surface hit, or -1 if none.
 
+    Rays may descend (kite) or rise (a pole camera below the slope it looks at); the search
+    ends where the ray leaves the grid's height range or footprint.
+
     Empty space is skipped in steps of one super-block and then one block (horizontal
     length) while the ray's lowest point in the step stays above the dilated maximum;
     inside candidate blocks the ray is sampled every cell and the crossing refined by
     the Illinois variant of regula falsi.
     """
-    if dz >= -1e-9:
+    if dz >= -1e-9 and oz >= zmax:
         return -1.0
     t0 = 0.0
     if oz > zmax:
         t0 = (oz - zmax) / (-dz)
-    t1 = (oz - zmin) / (-dz) + 1e-6
-    if t1 <= t0:
+    if dz < -1e-9:
+        t1 = (oz - zmin) / (-dz) + 1e-6
+    elif dz > 1e-9:  # rising ray from a camera below the highest ground (a pole camera upslope)
+        t1 = (zmax - oz) / dz + 1e-6
+    else:
+        t1 = np.inf
+    # leave the grid's footprint: no surface beyond it
+    h, w = dsm.shape
+    if abs(dx) > 1e-12:
+        t1 = min(t1, max((x0 - ox) / dx, (x0 + w * cell - ox) / dx))
+    if abs(dy) > 1e-12:
+        t1 = min(t1, max((y0 - h * cell - oy) / dy, (y0 - oy) / dy))
+    if not t1 > t0:
         return -1.0
     hxy = np.sqrt(dx * dx + dy * dy)
     bl = block * cell
@@ -218,14 +232,14 @@ def _cast(ox, oy, oz, dx, dy, dz, dsm, x0, y0, cell, bmax, block, smax, sblock, 
         xa = ox + dx * ta
         ya = oy + dy * ta
         tb = min(ta + sseg, t1)
-        if oz + dz * tb > _block_max(smax, x0, y0, sbl, xa, ya):
+        if oz + dz * tb > _block_max(smax, x0, y0, sbl, xa, ya) and oz + dz * ta > _block_max(smax, x0, y0, sbl, xa, ya):
             ta = tb
             fa = oz + dz * ta - _height(dsm, x0, y0, cell, ox + dx * ta, oy + dy * ta)
             if fa <= 0.0:
                 return ta
             continue
         tb = min(ta + seg, t1)
-        if oz + dz * tb > _block_max(bmax, x0, y0, bl, xa, ya):
+        if oz + dz * tb > _block_max(bmax, x0, y0, bl, xa, ya) and oz + dz * ta > _block_max(bmax, x0, y0, bl, xa, ya):
             ta = tb
             fa = oz + dz * ta - _height(dsm, x0, y0, cell, ox + dx * ta, oy + dy * ta)
             if fa <= 0.0:

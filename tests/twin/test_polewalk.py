@@ -1,0 +1,85 @@
+"""Pole-camera walk around a close-range scene: geometry, folding rule, rendered spheres."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from kitegully import InputError
+from kitegully.closerange.spheres import detect_spheres
+from kitegully.seeds import rng_for
+from kitegully.twin.closerange import generate_scene, scene_origin
+from kitegully.twin.polewalk import PoleWalk, photograph_walk, prepare_pole_scene, project_spheres, walk_poses
+from kitegully.twin.render import surface_height
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def pole_scene():
+    cfg = yaml.safe_load((REPO / "config" / "sites" / "tiny_twin.yaml").read_text())
+    p = cfg["obia"]["scenes"]
+    sc = generate_scene("scene_01", p, p["list"][0], 1, "EPSG:32632", scene_origin(0, p))
+    return sc, prepare_pole_scene(sc, 0.10, True, rng_for(1, "test", "rule"))
+
+
+def test_walk_rings_the_patch_with_oblique_views(pole_scene):
+    sc, ps = pole_scene
+    walk = PoleWalk(n_images=24)
+    poses = walk_poses(ps, walk, rng_for(1, "test", "walk"))
+    C = np.array([p.C for p in poses])
+    r = np.hypot(C[:, 0] - ps.patch_centre[0], C[:, 1] - ps.patch_centre[1])
+    assert abs(np.median(r) - (ps.patch_reach_m + walk.standoff_m)) < 0.2
+    ang = np.sort(np.arctan2(C[:, 1] - ps.patch_centre[1], C[:, 0] - ps.patch_centre[0]))
+    assert np.diff(np.r_[ang, ang[0] + 2 * np.pi]).max() < np.radians(25)  # a closed ring
+    cam = walk.camera()
+    assert cam.f == pytest.approx(24.0 * 1200 / 36.0)
+    target = np.r_[ps.patch_centre, surface_height(ps.render, ps.patch_centre[:1], ps.patch_centre[1:])]
+    for pose in poses:
+        axis = pose.R[2]
+        assert -0.95 < axis[2] < -0.1  # looking down, not nadir: oblique
+        uv = cam.project(target[None], pose)
+        assert cam.in_image(uv, 20)[0]  # the patch is in view
+        assert pose.C[2] - target[2] > 0.3  # the camera on its pole looks down onto the patch
+
+
+def test_spheres_and_folding_rule_are_placed(pole_scene):
+    sc, ps = pole_scene
+    assert len(ps.spheres) == sc.meta["markers"] == 4
+    # true centres agree with the surveyed ones within the survey noise (RTK, 1.5 cm SD)
+    obs = sc.markers[["x", "y", "z"]].to_numpy()
+    d = np.linalg.norm(ps.spheres[:, None] - obs[None], axis=2).min(axis=1)
+    assert d.max() < 0.08
+    a, corner, b = ps.rule
+    assert np.linalg.norm(a - corner) == pytest.approx(1.0) and np.linalg.norm(b - corner) == pytest.approx(1.0)
+    assert np.dot(a - corner, b - corner) == pytest.approx(0.0, abs=1e-9)  # orthogonal legs
+    # the rule lies on the ground: its ends are within a few cm of the DEM surface
+    z = surface_height(ps.render, ps.rule[:, 0], ps.rule[:, 1])
+    assert np.abs(ps.rule[:, 2] - z).max() < 0.05
+    assert prepare_pole_scene(sc, 0.10, False, rng_for(1, "t", "r")).rule is None
+
+
+def test_rendered_walk_photos_give_sphere_centres_to_half_a_pixel(pole_scene):
+    _, ps = pole_scene
+    walk = PoleWalk(n_images=3, image_width_px=900, image_height_px=600)
+    poses = walk_poses(ps, walk, rng_for(1, "test", "walk3"))
+    cam = walk.camera()
+    errors = []
+    for i, img in photograph_walk(ps, walk, poses, rng_for(1, "test", "photo")):
+        assert img.shape == (600, 900, 3) and img.dtype == np.uint8
+        truth = project_spheres(cam, poses[i], ps.spheres)
+        for u, v in detect_spheres(img, cam)[["u_px", "v_px"]].to_numpy():
+            errors.append(np.hypot(truth[:, 0] - u, truth[:, 1] - v).min())
+    assert len(errors) >= 3
+    assert max(errors) < 0.5  # no false blob either: every detection is a sphere
+
+
+def test_pole_walk_config_is_validated():
+    assert PoleWalk.from_config({"n_images": 48}).n_images == 48
+    with pytest.raises(InputError, match="unknown key"):
+        PoleWalk.from_config({"n_photos": 48})
+    with pytest.raises(InputError, match="at least 3"):
+        PoleWalk.from_config({"n_images": 2})
