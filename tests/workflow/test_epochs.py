@@ -69,3 +69,21 @@ def test_tiny_twin_two_surveys_and_change(tmp_path):
     res = tmp_path / "results"
     run_snakemake(TINY, res, [str(res / "tiny_twin/change/evaluation_summary.csv")], cores=2)
     check_tiny_twin_change(res / "tiny_twin")
+
+
+def test_dem_site_cannot_use_the_twins_null_paths(tmp_path):
+    import yaml
+
+    cfg = yaml.safe_load((REPO / "config/sites/kamech_dem_change.yaml").read_text(encoding="utf-8"))
+    cfg["change"]["evaluation"]["dem2_truth"] = None
+    site = tmp_path / "site.yaml"
+    site.write_text(yaml.safe_dump(cfg), encoding="utf-8")
+    proc = run_snakemake(site, tmp_path / "results", extra=["-n"], check=False)
+    assert proc.returncode != 0
+    assert "change.evaluation.dem2_truth: null means the twin's own truth" in proc.stdout + proc.stderr
+    cfg["change"]["evaluation"]["dem2_truth"] = "x.tif"
+    cfg["change"]["epochs"] = None
+    site.write_text(yaml.safe_dump(cfg), encoding="utf-8")
+    proc = run_snakemake(site, tmp_path / "results", extra=["-n"], check=False)
+    assert proc.returncode != 0
+    assert "change.epochs: null (the twin's two surveys) needs a twin site" in proc.stdout + proc.stderr

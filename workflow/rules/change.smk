@@ -33,8 +33,13 @@ if "change" in config:
                            "heads1_truth": epoch_result("twin", "truth/gully_heads.gpkg", 1),
                            "heads2_truth": epoch_result("twin", "truth/gully_heads.gpkg", 2)}
             CHANGE["evaluation"] = {k: (_twin_truth[k] if v is None and k in _twin_truth else v) for k, v in CHANGE["evaluation"].items()}
-    elif CHANGE["masks"] is None:
-        CHANGE["masks"] = []
+    else:
+        if CHANGE["masks"] is None:
+            CHANGE["masks"] = []
+        _missing_truth = [k for k in ("dem1_truth", "dem2_truth") if CHANGE["evaluation"] and CHANGE["evaluation"][k] is None]
+        if _missing_truth:
+            raise WorkflowError(f"Invalid configuration: change.evaluation.{_missing_truth[0]}: null means the twin's own "
+                                "truth, which only a twin with change.epochs null has; name the GeoTIFF")
     CHANGE_METHODS = ["min_lod", "propagated", "probabilistic", "coherence"]
     CHANGE_CAT = "Change between epochs"
 
