@@ -67,7 +67,9 @@ def check_tiny_twin_change(site: Path) -> None:
 @pytest.mark.slow
 def test_tiny_twin_two_surveys_and_change(tmp_path):
     res = tmp_path / "results"
-    run_snakemake(TINY, res, [str(res / "tiny_twin/change/evaluation_summary.csv")], cores=2)
+    site = res / "tiny_twin"
+    run_snakemake(TINY, res, [str(site / "change/evaluation_summary.csv"), str(site / "validate/checkpoint_summary.csv"),
+                              str(site / "validate/epoch2/checkpoint_summary.csv")], cores=2)
     check_tiny_twin_change(res / "tiny_twin")
 
 
