@@ -1,11 +1,45 @@
 # Change between epochs (issue 17): two epoch DEMs -> co-registration on stable ground, DoD,
 # propagated uncertainty and GCD thresholds, budgets by mask, headcut retreat. A site gives its
-# epochs as DEM GeoTIFFs (change.epochs); the epoch-2 photo chain of twin sites is not wired yet.
-# Only change_evaluate reads truth (change.evaluation).
+# epochs as DEM GeoTIFFs (change.epochs); a twin site (change.epochs null) surveys both epochs
+# through flight -> sfm -> georef -> dense ({epoch} wildcard, common.smk) and compares the two
+# dense DSMs. Only change_evaluate reads truth (change.evaluation).
 
 if "change" in config:
 
-    CHANGE = config["change"]
+    CHANGE = dict(config["change"])
+    if CHANGE["epochs"] is None:
+        # Twin: the two photogrammetric DSMs, sigma from each epoch's (checked) checkpoints,
+        # masks from epoch 1's gully polygons and kite bare-soil map, heads digitised at epoch 1.
+        if not (IS_TWIN and SURVEY_EPOCHS == [1, 2] and "dense" in config):
+            raise WorkflowError("Invalid configuration: change.epochs: null (the twin's two surveys) needs a twin site "
+                                "with twin.epoch2 and the dense stage; other sites give their epochs as DEM files")
+        CHANGE["epochs"] = [
+            {"name": f"epoch{n}", "dem": epoch_result("dense", "dsm.tif", n), "nodata": None,
+             "accuracy": {"checkpoints": epoch_result("inputs", "checkpoints.csv", n)}}
+            for n in SURVEY_EPOCHS
+        ]
+        if CHANGE["masks"] is None:
+            CHANGE["masks"] = []
+            if "gully" in config:
+                CHANGE["masks"].append({"name": "gully", "file": result("gully", "gully_polygons.gpkg"), "kind": "vector",
+                                        "by": "gully_id", "unstable": True})
+            if "obia" in config and config["obia"]["kite_scale"]["enabled"]:
+                CHANGE["masks"].append({"name": "bare_soil", "file": result("obia", "kite/bare_soil.gpkg"), "kind": "vector",
+                                        "by": None, "unstable": True})
+        if CHANGE["heads_file"] is None:
+            CHANGE["heads_file"] = result("twin", "observed/gully_heads.gpkg")
+        if CHANGE["evaluation"]:
+            _twin_truth = {"dem1_truth": epoch_result("twin", "truth/dsm.tif", 1), "dem2_truth": epoch_result("twin", "truth/dsm.tif", 2),
+                           "heads1_truth": epoch_result("twin", "truth/gully_heads.gpkg", 1),
+                           "heads2_truth": epoch_result("twin", "truth/gully_heads.gpkg", 2)}
+            CHANGE["evaluation"] = {k: (_twin_truth[k] if v is None and k in _twin_truth else v) for k, v in CHANGE["evaluation"].items()}
+    else:
+        if CHANGE["masks"] is None:
+            CHANGE["masks"] = []
+        _missing_truth = [k for k in ("dem1_truth", "dem2_truth") if CHANGE["evaluation"] and CHANGE["evaluation"][k] is None]
+        if _missing_truth:
+            raise WorkflowError(f"Invalid configuration: change.evaluation.{_missing_truth[0]}: null means the twin's own "
+                                "truth, which only a twin with change.epochs null has; name the GeoTIFF")
     CHANGE_METHODS = ["min_lod", "propagated", "probabilistic", "coherence"]
     CHANGE_CAT = "Change between epochs"
 

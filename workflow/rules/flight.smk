@@ -7,7 +7,9 @@ FLIGHT = config.get("flight", {})
 # digitising, coverage and figure settings do not rerun the flight simulation.
 FLIGHT_RENDER_KEYS = ("camera", "render", "gcps", "coverage")
 FLIGHT_FIGURE_KEYS = ("wind_from_deg", "wind_speed_m_s", "line_lengths_m", "figures")
-FLIGHT_SIMULATE = {k: v for k, v in FLIGHT.items() if k not in ("render", "gcps", "coverage", "figures", "threads")}
+FLIGHT_SIMULATE_EXCLUDE = ("render", "gcps", "coverage", "figures", "threads")
+# Per survey epoch (issue 17): the section with flight.epochs.epoch<n> merged in (common.smk).
+FLIGHT_SIMULATE = epoch_section("flight", exclude=FLIGHT_SIMULATE_EXCLUDE)
 # the line model of the tether section, for the kite's offset from the operator
 FLIGHT_TETHER = {
     k: config["tether"][k] for k in ("lines", "kites", "kite_model", "atmosphere", "segment_length_m")
@@ -18,23 +20,24 @@ FLIGHT_TETHER = {
 rule flight_simulate:
     input:
         site=result("twin", "site.json"),
-        dtm=result("twin", "truth/dtm.tif"),
+        dtm=eresult("twin", "truth/dtm.tif"),
     output:
-        poses=result("flight", "truth/poses.csv"),
-        camera_track=result("flight", "truth/camera_track.csv"),
-        operator_track=result("flight", "truth/operator_track.csv"),
-        camera_gpx=result("flight", "observed/camera_gps.gpx"),
-        operator_gpx=result("flight", "observed/operator_gps.gpx"),
-        camera_gps_csv=result("flight", "observed/camera_gps.csv"),
-        operator_gps_csv=result("flight", "observed/operator_gps.csv"),
-        strips=result("flight", "flight_strips.csv"),
+        poses=eresult("flight", "truth/poses.csv"),
+        camera_track=eresult("flight", "truth/camera_track.csv"),
+        operator_track=eresult("flight", "truth/operator_track.csv"),
+        camera_gpx=eresult("flight", "observed/camera_gps.gpx"),
+        operator_gpx=eresult("flight", "observed/operator_gps.gpx"),
+        camera_gps_csv=eresult("flight", "observed/camera_gps.csv"),
+        operator_gps_csv=eresult("flight", "observed/operator_gps.csv"),
+        strips=eresult("flight", "flight_strips.csv"),
     params:
         flight=FLIGHT_SIMULATE,
         tether=FLIGHT_TETHER,
         seed=config["seed"],
+        epoch=epoch_number,
         crs=config["site"]["crs"],
     log:
-        logfile("flight", "flight_simulate"),
+        elogfile("flight", "flight_simulate"),
     script:
         "../scripts/flight_simulate.py"
 
@@ -42,32 +45,33 @@ rule flight_simulate:
 rule flight_render:
     input:
         site=result("twin", "site.json"),
-        poses=result("flight", "truth/poses.csv"),
-        dsm=result("twin", "truth/dsm.tif"),
-        texture=result("twin", "truth/texture.tif"),
-        targets=result("twin", "truth/targets.csv"),
-        survey=result("twin", "observed/gcp_survey.csv"),
+        poses=eresult("flight", "truth/poses.csv"),
+        dsm=eresult("twin", "truth/dsm.tif"),
+        texture=eresult("twin", "truth/texture.tif"),
+        targets=eresult("twin", "truth/targets.csv"),
+        survey=eresult("twin", "observed/gcp_survey.csv"),
     output:
-        images=directory(result("flight", "observed/images")),
-        gcp_list=result("flight", "observed/gcp_list.txt"),
-        camera=result("flight", "truth/camera.json"),
-        gcp_pixels=result("flight", "truth/gcp_pixels.csv"),
-        coverage=result("flight", "images_per_ground_point.tif"),
-        image_stats=result("flight", "image_stats.csv"),
+        images=directory(eresult("flight", "observed/images")),
+        gcp_list=eresult("flight", "observed/gcp_list.txt"),
+        camera=eresult("flight", "truth/camera.json"),
+        gcp_pixels=eresult("flight", "truth/gcp_pixels.csv"),
+        coverage=eresult("flight", "images_per_ground_point.tif"),
+        image_stats=eresult("flight", "image_stats.csv"),
         summary=report(
-            result("flight", "flight_summary.csv"),
+            eresult("flight", "flight_summary.csv"),
             caption=caption("flight_summary"),
             category="Flight",
         ),
     params:
-        flight={k: FLIGHT[k] for k in FLIGHT_RENDER_KEYS if k in FLIGHT},
+        flight=epoch_section("flight", keys=FLIGHT_RENDER_KEYS),
         seed=config["seed"],
+        epoch=epoch_number,
         crs=config["site"]["crs"],
     threads: FLIGHT.get("threads", 2)
     log:
-        logfile("flight", "flight_render"),
+        elogfile("flight", "flight_render"),
     benchmark:
-        benchfile("flight", "flight_render")
+        ebenchfile("flight", "flight_render")
     script:
         "../scripts/flight_render.py"
 
@@ -75,30 +79,30 @@ rule flight_render:
 rule flight_figures:
     input:
         site=result("twin", "site.json"),
-        camera=result("flight", "truth/camera.json"),
-        poses=result("flight", "truth/poses.csv"),
-        image_stats=result("flight", "image_stats.csv"),
-        operator_track=result("flight", "truth/operator_track.csv"),
-        survey=result("twin", "observed/gcp_survey.csv"),
-        gcp_list=result("flight", "observed/gcp_list.txt"),
-        images=result("flight", "observed/images"),
+        camera=eresult("flight", "truth/camera.json"),
+        poses=eresult("flight", "truth/poses.csv"),
+        image_stats=eresult("flight", "image_stats.csv"),
+        operator_track=eresult("flight", "truth/operator_track.csv"),
+        survey=eresult("twin", "observed/gcp_survey.csv"),
+        gcp_list=eresult("flight", "observed/gcp_list.txt"),
+        images=eresult("flight", "observed/images"),
     output:
-        flight_map=report(result("flight", "flight_map.png"), caption=caption("flight_map"), category="Flight"),
-        samples=report(result("flight", "sample_images.png"), caption=caption("flight_samples"), category="Flight"),
+        flight_map=report(eresult("flight", "flight_map.png"), caption=caption("flight_map"), category="Flight"),
+        samples=report(eresult("flight", "sample_images.png"), caption=caption("flight_samples"), category="Flight"),
     params:
-        flight={k: FLIGHT[k] for k in FLIGHT_FIGURE_KEYS if k in FLIGHT},
+        flight=epoch_section("flight", keys=FLIGHT_FIGURE_KEYS),
     log:
-        logfile("flight", "flight_figures"),
+        elogfile("flight", "flight_figures"),
     script:
         "../scripts/flight_figures.py"
 
 
 if IS_TWIN and "flight" in config:
     add_targets(
-        result("flight", "observed/gcp_list.txt"),
-        result("flight", "observed/camera_gps.gpx"),
-        result("flight", "observed/operator_gps.gpx"),
-        result("flight", "flight_summary.csv"),
-        result("flight", "flight_map.png"),
-        result("flight", "sample_images.png"),
+        epoch_results("flight", "observed/gcp_list.txt"),
+        epoch_results("flight", "observed/camera_gps.gpx"),
+        epoch_results("flight", "observed/operator_gps.gpx"),
+        epoch_results("flight", "flight_summary.csv"),
+        epoch_results("flight", "flight_map.png"),
+        epoch_results("flight", "sample_images.png"),
     )

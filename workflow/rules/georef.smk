@@ -6,7 +6,7 @@ if "georef" in config and "sfm" in config:
     def georef_gcp_file(wildcards=None):
         """GCP file: config inputs for real sites, the flight stage's gcp_list.txt for twins."""
         if IS_TWIN:
-            return result("flight", "observed/gcp_list.txt")
+            return eresult("flight", "observed/gcp_list.txt")
         return config["inputs"]["gcp_file"]
 
     def georef_extra_inputs(wildcards=None):
@@ -15,20 +15,20 @@ if "georef" in config and "sfm" in config:
 
     rule georef_adjust:
         input:
-            model=result("sfm", "model"),
-            image_info=result("sfm", "image_info.json"),
+            model=eresult("sfm", "model"),
+            image_info=eresult("sfm", "image_info.json"),
             gcp=INPUTS_GCP,  # the checked copy (heights in metres) of georef_gcp_file()
             extra=georef_extra_inputs(),
         output:
-            model=directory(result("georef", "model")),
-            transform=result("georef", "transform.json"),
-            summary=report(result("georef", "summary.json"), caption=caption("georef_summary"), category="Georeferencing"),
-            residuals=report(result("georef", "gcp_residuals.csv"), caption=caption("georef_gcp_residuals"), category="Georeferencing"),
-            loo=report(result("georef", "loo_checkpoints.csv"), caption=caption("georef_loo_checkpoints"), category="Georeferencing"),
-            calibration=report(result("georef", "camera_calibration.csv"), caption=caption("georef_camera_calibration"), category="Georeferencing"),
-            cameras=result("georef", "camera_positions.gpkg"),
-            cloud=result("georef", "sparse_cloud.las"),
-            figure=report(result("georef", "gcp_residuals.png"), caption=caption("georef_residual_map"), category="Georeferencing"),
+            model=directory(eresult("georef", "model")),
+            transform=eresult("georef", "transform.json"),
+            summary=report(eresult("georef", "summary.json"), caption=caption("georef_summary"), category="Georeferencing"),
+            residuals=report(eresult("georef", "gcp_residuals.csv"), caption=caption("georef_gcp_residuals"), category="Georeferencing"),
+            loo=report(eresult("georef", "loo_checkpoints.csv"), caption=caption("georef_loo_checkpoints"), category="Georeferencing"),
+            calibration=report(eresult("georef", "camera_calibration.csv"), caption=caption("georef_camera_calibration"), category="Georeferencing"),
+            cameras=eresult("georef", "camera_positions.gpkg"),
+            cloud=eresult("georef", "sparse_cloud.las"),
+            figure=report(eresult("georef", "gcp_residuals.png"), caption=caption("georef_residual_map"), category="Georeferencing"),
         params:
             georef=config["georef"],
             sfm_frame=config["sfm"]["image_frame"],
@@ -37,19 +37,19 @@ if "georef" in config and "sfm" in config:
             attribution=config["site"].get("attribution"),
         threads: 2
         log:
-            logfile("georef", "georef_adjust"),
+            elogfile("georef", "georef_adjust"),
         benchmark:
-            benchfile("georef", "georef_adjust")
+            ebenchfile("georef", "georef_adjust")
         script:
             "../scripts/georef_adjust.py"
 
     add_targets(
-        result("georef", "gcp_residuals.csv"),
-        result("georef", "loo_checkpoints.csv"),
-        result("georef", "gcp_residuals.png"),
-        result("georef", "sparse_cloud.las"),
-        result("georef", "camera_positions.gpkg"),
-        result("georef", "camera_calibration.csv"),
+        epoch_results("georef", "gcp_residuals.csv"),
+        epoch_results("georef", "loo_checkpoints.csv"),
+        epoch_results("georef", "gcp_residuals.png"),
+        epoch_results("georef", "sparse_cloud.las"),
+        epoch_results("georef", "camera_positions.gpkg"),
+        epoch_results("georef", "camera_calibration.csv"),
     )
 
     if IS_TWIN:
@@ -57,18 +57,18 @@ if "georef" in config and "sfm" in config:
         rule georef_evaluate:
             """Evaluation only: reads the flight truth (camera poses, image GSD)."""
             input:
-                cameras=result("georef", "camera_positions.gpkg"),
-                residuals=result("georef", "gcp_residuals.csv"),
-                loo=result("georef", "loo_checkpoints.csv"),
-                sfm_summary=result("sfm", "summary.json"),
-                poses=result("flight", "truth/poses.csv"),
-                image_stats=result("flight", "image_stats.csv"),
+                cameras=eresult("georef", "camera_positions.gpkg"),
+                residuals=eresult("georef", "gcp_residuals.csv"),
+                loo=eresult("georef", "loo_checkpoints.csv"),
+                sfm_summary=eresult("sfm", "summary.json"),
+                poses=eresult("flight", "truth/poses.csv"),
+                image_stats=eresult("flight", "image_stats.csv"),
             output:
-                table=report(result("georef", "twin_camera_errors.csv"), caption=caption("georef_twin_evaluation"), category="Georeferencing"),
-                summary=result("georef", "twin_evaluation.json"),
+                table=report(eresult("georef", "twin_camera_errors.csv"), caption=caption("georef_twin_evaluation"), category="Georeferencing"),
+                summary=eresult("georef", "twin_evaluation.json"),
             log:
-                logfile("georef", "georef_evaluate"),
+                elogfile("georef", "georef_evaluate"),
             script:
                 "../scripts/georef_evaluate.py"
 
-        add_targets(result("georef", "twin_evaluation.json"))
+        add_targets(epoch_results("georef", "twin_evaluation.json"))

@@ -11,9 +11,9 @@ if "sfm" in config:
     def inputs_sources():
         """Files to check: config inputs for real sites, the flight and twin stages' observed files for twins."""
         if IS_TWIN:
-            src = dict(images=result("flight", "observed/images"), gcp=result("flight", "observed/gcp_list.txt"))
+            src = dict(images=eresult("flight", "observed/images"), gcp=eresult("flight", "observed/gcp_list.txt"))
             if "twin" in config:
-                src["checkpoints"] = result("twin", "observed/checkpoints.csv")
+                src["checkpoints"] = eresult("twin", "observed/checkpoints.csv")
             return src
         ins = config["inputs"]
         src = dict(images=ins["images_dir"], gcp=ins["gcp_file"])
@@ -35,15 +35,15 @@ if "sfm" in config:
     }
 
     INPUTS_SRC = inputs_sources()
-    INPUTS_GCP = result("inputs", "gcp_file" + Path(INPUTS_SRC["gcp"]).suffix)
-    INPUTS_CHECKPOINTS = result("inputs", "checkpoints.csv") if "checkpoints" in INPUTS_SRC else None
+    INPUTS_GCP = eresult("inputs", "gcp_file" + Path(INPUTS_SRC["gcp"]).suffix)  # per epoch (issue 17)
+    INPUTS_CHECKPOINTS = eresult("inputs", "checkpoints.csv") if "checkpoints" in INPUTS_SRC else None
 
     rule check_inputs:
         input:
             **INPUTS_SRC,
         output:
-            report=report(result("inputs", "report.md"), caption=caption("inputs_report"), category="Inputs"),
-            json=result("inputs", "report.json"),
+            report=report(eresult("inputs", "report.md"), caption=caption("inputs_report"), category="Inputs"),
+            json=eresult("inputs", "report.json"),
             gcp=INPUTS_GCP,
             **({"checkpoints": INPUTS_CHECKPOINTS} if INPUTS_CHECKPOINTS else {}),
         params:
@@ -56,8 +56,8 @@ if "sfm" in config:
             },
             site=SITE,
         log:
-            logfile("inputs", "check_inputs"),
+            elogfile("inputs", "check_inputs"),
         script:
             "../scripts/inputs_check.py"
 
-    add_targets(result("inputs", "report.json"))
+    add_targets(epoch_results("inputs", "report.json"))

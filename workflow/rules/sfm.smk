@@ -7,7 +7,7 @@ if "sfm" in config:
     def sfm_images_dir(wildcards=None):
         """Folder of the photographs: config inputs for real sites, flight outputs for twins."""
         if IS_TWIN:
-            return result("flight", "observed/images")
+            return eresult("flight", "observed/images")
         return config["inputs"]["images_dir"]
 
     def sfm_camera_log():
@@ -18,30 +18,30 @@ if "sfm" in config:
         if log == "flight":
             if not IS_TWIN:
                 raise WorkflowError("sfm.matching.camera_log: 'flight' is only valid on twin sites")
-            return [result("flight", "observed/camera_gps.gpx")]
+            return [eresult("flight", "observed/camera_gps.gpx")]
         return [log]
 
     rule sfm_reconstruct:
         input:
             images=sfm_images_dir(),
             camera_log=sfm_camera_log(),
-            checked=result("inputs", "report.json"),
+            checked=eresult("inputs", "report.json"),
         output:
-            work=directory(result("sfm", "work")),
-            model=directory(result("sfm", "model")),
-            summary=report(result("sfm", "summary.json"), caption=caption("sfm_summary"), category="Structure from motion"),
-            images_csv=report(result("sfm", "images.csv"), caption=caption("sfm_images"), category="Structure from motion"),
-            image_info=result("sfm", "image_info.json"),
+            work=directory(eresult("sfm", "work")),
+            model=directory(eresult("sfm", "model")),
+            summary=report(eresult("sfm", "summary.json"), caption=caption("sfm_summary"), category="Structure from motion"),
+            images_csv=report(eresult("sfm", "images.csv"), caption=caption("sfm_images"), category="Structure from motion"),
+            image_info=eresult("sfm", "image_info.json"),
         params:
             sfm=config["sfm"],
             seed=config["seed"],
             crs=config["site"]["crs"],
         threads: config["sfm"]["threads"]
         log:
-            logfile("sfm", "sfm_reconstruct"),
+            elogfile("sfm", "sfm_reconstruct"),
         benchmark:
-            benchfile("sfm", "sfm_reconstruct")
+            ebenchfile("sfm", "sfm_reconstruct")
         script:
             "../scripts/sfm_reconstruct.py"
 
-    add_targets(result("sfm", "summary.json"))
+    add_targets(epoch_results("sfm", "summary.json"))

@@ -10,7 +10,8 @@ from kitegully.twin import photograph_flight
 log = setup_script_logging(snakemake.log[0])
 inp, out, crs = snakemake.input, snakemake.output, snakemake.params.crs
 ph = photograph_flight(inp.poses, inp.dsm, inp.texture, inp.targets, inp.survey, read_extent(inp.site), out.images,
-                       snakemake.params.flight, snakemake.params.seed, crs, snakemake.threads)
+                       snakemake.params.flight, snakemake.params.seed, crs, snakemake.threads,
+                       epoch=snakemake.params.epoch)
 ph.camera.write_json(out.camera)
 write_table(ph.gcp_pixels, out.gcp_pixels)
 write_odm_gcp_list(out.gcp_list, crs, ph.gcp_observations, ph.survey)

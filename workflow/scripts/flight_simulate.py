@@ -10,7 +10,7 @@ log = setup_script_logging(snakemake.log[0])
 out, crs = snakemake.output, snakemake.params.crs
 dtm, grid = read_raster(snakemake.input.dtm)
 fl = fly_kite(read_extent(snakemake.input.site), dtm, grid, snakemake.params.flight, snakemake.params.tether,
-              snakemake.params.seed)
+              snakemake.params.seed, epoch=snakemake.params.epoch)
 write_table(fl.poses, out.poses)
 write_table(fl.camera_track, out.camera_track, markdown=False)
 write_table(fl.operator_track, out.operator_track, markdown=False)

@@ -54,3 +54,67 @@ def sheet_erosion(xs: np.ndarray, ys: np.ndarray, ecfg: dict, seed: int) -> np.n
     """Lowering (m, ≥ 0) of bare soil on a grid: mean ``sheet_erosion_m``, patchy."""
     n = fbm_grid(xs, ys, seed, np.array([ecfg["sheet_erosion_wavelength_m"]]), np.array([1.0]))
     return ecfg["sheet_erosion_m"] * np.clip(1.0 + ecfg["sheet_erosion_variability"] * n, 0.0, None)
+
+
+def disturb_targets(targets, ecfg: dict, seed: int, lc: np.ndarray, grid, open_classes: list[str]):
+    """Epoch-2 GCP targets: a few lost, a few moved, as happens between two field campaigns.
+
+    ``targets_lost`` targets (drawn at random) are gone: not painted, not surveyed, absent
+    from the epoch-2 tables. ``targets_moved`` others were knocked over and laid out again
+    ``target_move_m`` (range) away in a random direction on open ground (land cover in
+    ``open_classes``; a target with no open spot within 24 tries stays); the surveyor measures
+    them where they lie, so the survey is consistent with the painted target. Keys absent =
+    none lost or moved. Returns (targets, log table with gcp_id, fate, dx_m, dy_m).
+
+    Parameters
+    ----------
+    targets : pandas.DataFrame
+        Epoch-1 targets (``gcp_id, x, y, ...``).
+    ecfg : Mapping
+        ``twin.epoch2``.
+    seed : int
+    lc : numpy.ndarray
+        Epoch-2 land-cover codes on ``grid``.
+    grid : GridSpec
+    open_classes : list of str
+        Land-cover names a target may lie on (``twin.targets.classes``).
+    """
+    import pandas as pd
+
+    from kitegully.twin.landcover import CODE
+
+    n_lost = int(ecfg.get("targets_lost", 0) or 0)
+    n_moved = int(ecfg.get("targets_moved", 0) or 0)
+    lo, hi = ecfg.get("target_move_m", [2.0, 5.0])
+    if n_lost + n_moved > len(targets) - 4:
+        from kitegully import InputError
+        raise InputError(f"twin.epoch2: targets_lost + targets_moved ({n_lost + n_moved}) must leave at least 4 of the "
+                         f"{len(targets)} targets in place")
+    rng = rng_for(seed, "twin", "epoch2", "targets")
+    order = rng.permutation(len(targets))
+    lost, moved = order[:n_lost], order[n_lost:n_lost + n_moved]
+    ok_codes = np.array([CODE[c] for c in open_classes])
+    out = targets.copy().reset_index(drop=True)
+    fate = []
+    for i in moved:
+        x0, y0 = float(out.at[i, "x"]), float(out.at[i, "y"])
+        for _ in range(24):
+            d, a = rng.uniform(lo, hi), rng.uniform(0.0, 2.0 * np.pi)
+            x, y = x0 + d * np.sin(a), y0 + d * np.cos(a)
+            r, c = (int(v) for v in np.round(grid.rowcol(x, y)))
+            if 0 <= r < lc.shape[0] and 0 <= c < lc.shape[1] and np.isin(lc[r, c], ok_codes):
+                out.at[i, "x"], out.at[i, "y"] = x, y
+                fate.append({"gcp_id": out.at[i, "gcp_id"], "fate": "moved", "dx_m": x - x0, "dy_m": y - y0})
+                break
+    fate += [{"gcp_id": out.at[i, "gcp_id"], "fate": "lost", "dx_m": np.nan, "dy_m": np.nan} for i in lost]
+    out = out.drop(index=lost).reset_index(drop=True)
+    return out, pd.DataFrame(fate, columns=["gcp_id", "fate", "dx_m", "dy_m"])
+
+
+def texture_config(texture: dict, ecfg: dict | None) -> dict:
+    """``twin.texture`` for epoch 2: the second survey day's sun (``twin.epoch2.illumination``,
+    merged over ``texture.illumination``; the renderer bakes the sun into the texture)."""
+    ill = (ecfg or {}).get("illumination")
+    if not ill:
+        return texture
+    return {**texture, "illumination": {**texture["illumination"], **ill}}

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import logging
 import time
-import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ from scipy import ndimage
 from kitegully import InputError
 from kitegully.io.figures import new_figure
 from kitegully.io.raster import GridSpec
+from kitegully.seeds import epoch_rng, epoch_seed
 from kitegully.twin.camera import Camera, camera_from_config
 from kitegully.twin.flight import FlightSettings, pose_from_row, simulate_flight, tether_kite_offset
 from kitegully.twin.flight_gcps import digitise, target_pixels
@@ -53,6 +53,7 @@ def fly_kite(
     flight_cfg: Mapping[str, Any],
     tether_cfg: Mapping[str, Any],
     seed: int,
+    epoch: int = 1,
 ) -> KiteFlight:
     """Simulate the kite flight over a twin: true poses, tracks (1 s steps) and GPS logs.
 
@@ -67,6 +68,9 @@ def fly_kite(
         The line model keys of ``tether:`` (lines, kites, kite_model, atmosphere, segment_length_m).
     seed : int
         The run's seed.
+    epoch : int
+        Survey epoch (issue 17): its own random stream (:func:`kitegully.seeds.epoch_rng`;
+        epoch 1 keeps the stream it always had).
     """
     settings = FlightSettings.from_config(flight_cfg, flight_cfg["line_lengths_m"])
     camera = camera_from_config(flight_cfg["camera"])
@@ -78,7 +82,7 @@ def fly_kite(
         return ndimage.map_coordinates(dtm_filled, [np.asarray(r), np.asarray(c)], order=1, mode="nearest")
 
     offset = tether_kite_offset(tether_cfg, flight_cfg["material"], flight_cfg["kite"], flight_cfg["wind_speed_m_s"])
-    rng = np.random.default_rng([seed, zlib.crc32(b"flight.simulate")])
+    rng = epoch_rng(seed, epoch, "flight", "simulate")
     res = simulate_flight(extent, camera, settings, offset, ground_z, rng)
     log.info("%d strips, %d shots, %d kept, %.0f s of walking", len(res.strips), res.n_triggers, len(res.poses),
              res.summary["flight_duration_s"])
@@ -135,6 +139,7 @@ def photograph_flight(
     seed: int,
     crs: str,
     threads: int,
+    epoch: int = 1,
 ) -> FlightPhotos:
     """Render the flight's photos into ``images_dir``, digitise the GCPs and count the coverage.
 
@@ -155,6 +160,9 @@ def photograph_flight(
         Site CRS (coverage grid).
     threads : int
         Rendering threads (numba).
+    epoch : int
+        Survey epoch (issue 17): its own render and digitising streams
+        (:mod:`kitegully.seeds`; epoch 1 keeps the streams it always had).
 
     Returns
     -------
@@ -182,7 +190,7 @@ def photograph_flight(
     t1 = time.perf_counter()
     c1 = time.process_time()
     stats = render_flight(scene, camera, poses, images_dir, Photographic.from_config(rcfg),
-                          int(zlib.crc32(b"flight.render") ^ seed), channels, rcfg["supersampling"], bg,
+                          epoch_seed(seed, epoch, "flight", "render"), channels, rcfg["supersampling"], bg,
                           rcfg["jpeg_quality"])
     render_s = time.perf_counter() - t1
     render_cpu_s = time.process_time() - c1  # CPU seconds of all threads: independent of other load
@@ -192,7 +200,7 @@ def photograph_flight(
     _check_columns(targets_path, targets, ["gcp_id", "x", "y", "z", "size_m"])
     _check_columns(survey_path, survey, ["gcp_id", "x", "y", "z"])
     truth = target_pixels(camera, poses, targets, scene, gcfg["edge_margin_px"], gcfg["occlusion_tolerance_m"])
-    rng = np.random.default_rng([seed, zlib.crc32(b"flight.gcps")])
+    rng = epoch_rng(seed, epoch, "flight", "gcps")
     obs = digitise(truth, camera, rng, gcfg["click_sigma_px"], gcfg["max_images_per_target"])
     per_target = obs.groupby("gcp_id").size().reindex(targets["gcp_id"], fill_value=0)
     for g, n in per_target.items():

@@ -394,6 +394,11 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
         cps = survey.sample_checkpoints(scfg["checkpoints"], lc, dtm, g, centre, site.seed)
     else:
         gcps = fixed_points["targets"].copy()
+        if site.epoch == 2 and site.tw.epoch2:
+            gcps, fate = epochs.disturb_targets(gcps, dict(site.tw.epoch2), site.seed, lc, g, list(tcfg["classes"]))
+            for _, f in fate.iterrows():
+                log.info("epoch 2: target %s %s%s", f["gcp_id"], f["fate"],
+                         "" if f["fate"] == "lost" else f" by ({f['dx_m']:.2f}, {f['dy_m']:.2f}) m")
         gcps["z"] = tg.sample_bilinear(dsm, g, gcps["x"].to_numpy(), gcps["y"].to_numpy())
         cps = fixed_points["checkpoints"].copy()
         cps["z"] = tg.sample_bilinear(dtm, g, cps["x"].to_numpy(), cps["y"].to_numpy())
@@ -438,7 +443,7 @@ def write_texture(site: TwinSite, truth: Path, gcps: pd.DataFrame, lc_full: np.n
     g = site.grid
     size = site.tw.texture_tile_cells
     tiles = list(_tiles(g.height, g.width, size))
-    tcfg = site.tw.texture
+    tcfg = epochs.texture_config(dict(site.tw.texture), dict(site.tw.epoch2) if site.epoch == 2 and site.tw.epoch2 else None)
     seed = sub_seed(site.seed, "texture")
     t0 = time.perf_counter()
     with rasterio.open(truth / "dtm.tif") as sdtm, rasterio.open(truth / "dsm.tif") as sdsm, \
