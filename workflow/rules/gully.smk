@@ -8,7 +8,7 @@ if "gully" in config:
     GULLY_ATTRIBUTION = config["site"].get("attribution")
     if GULLY["dem"] == "truth_plus_noise" and not IS_TWIN:
         raise WorkflowError("Invalid configuration: gully.dem: truth_plus_noise needs a twin site; use dense")
-    if GULLY["heads_file"] is None and not IS_TWIN:
+    if GULLY["heads_file"] is None and not IS_TWIN and GULLY["heads"] != "automatic":
         raise WorkflowError("Invalid configuration: gully.heads_file: a real site must name its gully head file")
 
     def mapping_dem(wildcards=None):
@@ -19,6 +19,8 @@ if "gully" in config:
         return result("gully", "standin_dem_truth_plus_noise.tif")
 
     GULLY_HEADS = GULLY["heads_file"] or result("twin", "observed/gully_heads.gpkg")
+    # gully.heads: automatic needs no head file
+    GULLY_HEADS_INPUT = {} if GULLY["heads"] == "automatic" else {"heads": GULLY_HEADS}
     GULLY_REFERENCE = GULLY["reference_network_file"] or (
         result("twin", "observed/field_network.gpkg") if IS_TWIN else None
     )
@@ -44,8 +46,8 @@ if "gully" in config:
 
     rule gully_map:
         input:
+            unpack(lambda wc: GULLY_HEADS_INPUT),
             dem=mapping_dem(),
-            heads=GULLY_HEADS,
         output:
             depth=result("gully", "depth.tif"),
             smoothed=result("gully", "smoothed_dem.tif"),
@@ -164,7 +166,7 @@ if "gully" in config:
     # The gully stage needs the twin (truth DTM, heads, field network) or the dense DSM.
     # Until the stage that makes them has a rule file, leave the gully outputs out of `all`
     # (they can still be requested explicitly when the inputs exist).
-    _gully_needs = ["twin"] if IS_TWIN and GULLY["heads_file"] is None else []
+    _gully_needs = ["twin"] if IS_TWIN and GULLY["heads_file"] is None and GULLY["heads"] != "automatic" else []
     _gully_needs += ["dense"] if GULLY["dem"] == "dense" else ["twin"]
     _gully_missing = sorted({s for s in _gully_needs if not Path(f"workflow/rules/{s}.smk").exists()})
     if _gully_missing:

@@ -3,6 +3,7 @@
 import numpy as np
 import pandas as pd
 
+from kitegully.gully.heads import HeadDetectionParams
 from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads
 from kitegully.gully.pipeline import GullyParams, map_gullies
 from kitegully.io.raster import read_raster, write_raster
@@ -17,9 +18,13 @@ dem, grid = read_raster(snakemake.input.dem)
 check_dem(dem, snakemake.input.dem, grid.crs, snakemake.params.crs)
 if snakemake.params.dem_source == "truth_plus_noise":
     log.warning("mapping on the truth-plus-noise stand-in DEM: NOT the photogrammetric DSM (gully.dem)")
-hx, hy = read_heads(snakemake.input.heads, snakemake.params.crs)
-res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, GullyParams.from_config(cfg), workers=snakemake.threads)
-check_heads_on_dem(res.heads_inside, snakemake.input.heads)
+digitised = cfg["heads"] != "automatic"
+hx, hy = read_heads(snakemake.input.heads, snakemake.params.crs) if digitised else (np.zeros(0), np.zeros(0))
+auto = HeadDetectionParams.from_config(cfg["automatic_heads"]) if cfg["heads"] != "digitised" else None
+res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, GullyParams.from_config(cfg), workers=snakemake.threads,
+                  auto_heads=auto)
+if digitised:
+    check_heads_on_dem(res.heads_inside, snakemake.input.heads)
 if (~res.heads_inside).any():
     log.warning("%d of %d gully heads are off the DEM and were skipped", int((~res.heads_inside).sum()), hx.size)
 
@@ -40,7 +45,9 @@ rows = [
     ("DEM source", snakemake.params.dem_source),
     ("DEM cells", grid.width * grid.height),
     ("cell size (m)", grid.cell),
+    ("head source (gully.heads)", cfg["heads"]),
     ("gully heads", int(hx.size)),
+    ("automatic heads", int(res.auto_heads.size)),
     ("heads on the DEM", int(res.heads_inside.sum())),
     ("head snapping", f"{cfg['head_snap']} cell within {cfg['head_snap_radius_m']} m"),
     ("tracing DEM smoothing sigma (m)", cfg["trace_smoothing_m"]),
