@@ -18,7 +18,8 @@ import pandas as pd
 import yaml
 
 from kitegully.evaluate.gully_run import score_gully_run
-from kitegully.gully.heads import HeadDetectionParams
+from kitegully.evaluate.dem import read_checkpoints
+from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints
 from kitegully.gully.inputs import read_heads
 from kitegully.gully.pipeline import GullyParams, map_gullies
 from kitegully.gully.standin import noisy_dem
@@ -33,17 +34,17 @@ def run(cfg: dict, twin: str, heads_path: str | None, modes=("digitised", "autom
     if dem is None:
         dtm, grid = read_raster(f"{twin}/truth/dtm.tif")
         dem = noisy_dem(dtm, grid.cell, g["standin"]["noise_sd_m"], g["standin"]["noise_correlation_m"], cfg["seed"])
-        # the detector's noise level is that of the DEM it sees: here the stand-in's
-        g = dict(g, automatic_heads=dict(g["automatic_heads"], dsm_sigma_z_m=g["standin"]["noise_sd_m"]))
     ref = read_vector(f"{twin}/observed/field_network.gpkg", crs=crs)
     polys = read_vector(f"{twin}/truth/gully_polygons.gpkg", crs=crs)
     th = read_vector(f"{twin}/truth/gully_heads.gpkg", crs=crs)
     true_xy = np.column_stack([th.geometry.x, th.geometry.y])
     hx, hy = read_heads(heads_path or f"{twin}/observed/gully_heads.gpkg", crs)
+    # the detector's noise level is that of the DEM it sees, measured at the observed checkpoints
+    sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(f"{twin}/observed/checkpoints.csv"))
     rows = []
     for mode in modes:
         t0 = time.perf_counter()
-        auto = HeadDetectionParams.from_config(g["automatic_heads"]) if mode != "digitised" else None
+        auto = HeadDetectionParams.from_config(g["automatic_heads"], sz) if mode != "digitised" else None
         x, y = (hx, hy) if mode != "automatic" else (np.zeros(0), np.zeros(0))
         res = map_gullies(dem, grid, x, y, GullyParams.from_config(g), workers=1, auto_heads=auto)
         xs, ys = grid.cell_centres()
@@ -52,7 +53,7 @@ def run(cfg: dict, twin: str, heads_path: str | None, modes=("digitised", "autom
             used = np.column_stack([xs[c], ys[r]])
         else:
             used = np.column_stack([x, y])
-        row = {"heads": mode, "n_heads": len(used), "time_s": round(time.perf_counter() - t0, 1)}
+        row = {"heads": mode, "n_heads": len(used), "dsm_sigma_z_m": sz, "time_s": round(time.perf_counter() - t0, 1)}
         row.update(score_gully_run(res.gully, res.extracted_lines, np.isfinite(dem), grid, ref, polys,
                                    tolerances_m=(2.0, 5.0, 15.0), reference_join_m=g["validation"]["reference_join_m"],
                                    heads_xy=used, true_heads_xy=true_xy))

@@ -39,7 +39,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
 from kitegully.evaluate.gully_run import score_gully_run  # noqa: E402
-from kitegully.gully.heads import HeadDetectionParams  # noqa: E402
+from kitegully.evaluate.dem import read_checkpoints  # noqa: E402
+from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints  # noqa: E402
 from kitegully.gully.pipeline import GullyParams, map_gullies  # noqa: E402
 from kitegully.io.raster import read_raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
@@ -64,7 +65,7 @@ TARGETS = {
 
 #: Columns where larger is worse (the "worst" row takes the maximum); others take the minimum.
 WORSE_IF_LARGER = ("camera_rmse_m", "camera_max_m", "checkpoint_abs_mean_m", "checkpoint_sd_m", "gsd_median_m",
-                   "false_positive", "false_negative", "head_median_distance_m", "chain_wall_s")
+                   "false_positive", "false_negative", "head_median_distance_m", "chain_wall_s", "time_s", "mapping_s")
 NOT_SCORED = ("member", "seed", "base", "description", "checkpoint_mean_m")
 
 
@@ -185,8 +186,10 @@ def score_heads_both(cfg: dict, site: Path) -> dict:
         out.update({f"dig_{k}": v for k, v in s.items()})
     # automatic: same DSM, heads from the data alone
     t0 = time.perf_counter()
+    sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
+    out["dsm_sigma_z_at_checkpoints_m"] = sz
     res = map_gullies(dem, grid, np.zeros(0), np.zeros(0), GullyParams.from_config(g), workers=1,
-                      auto_heads=HeadDetectionParams.from_config(g["automatic_heads"]))
+                      auto_heads=HeadDetectionParams.from_config(g["automatic_heads"], sz))
     xs, ys = grid.cell_centres()
     r, c = np.divmod(res.auto_heads, grid.width)
     s = score_gully_run(res.gully, res.extracted_lines, valid, grid, ref, polys, TOLERANCES,

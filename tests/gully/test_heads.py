@@ -80,3 +80,21 @@ def test_from_config_names_the_missing_key():
         HeadDetectionParams.from_config({"scale_m": 2.0})
     with pytest.raises(InputError, match="must be > 0"):
         HeadDetectionParams.from_config(dict(P.__dict__, relief_k=0))
+
+
+def test_dsm_noise_from_checkpoints_feeds_a_null_sigma():
+    import pandas as pd
+
+    from kitegully.gully.heads import dsm_noise_at_checkpoints
+
+    grid = _grid(100)
+    rng = np.random.default_rng(3)
+    dsm = np.zeros((100, 100), np.float32)
+    pts = pd.DataFrame({"x": rng.uniform(1, 19, 400), "y": rng.uniform(1, 19, 400)})
+    pts["z"] = rng.normal(0, 0.2, len(pts))
+    sz = dsm_noise_at_checkpoints(dsm, grid, pts)
+    assert sz == pytest.approx(0.2, rel=0.15)
+    p = HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None), sz)
+    assert p.dsm_sigma_z_m == pytest.approx(sz)
+    with pytest.raises(InputError, match="dsm_sigma_z_m: null needs checkpoints"):
+        HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None))

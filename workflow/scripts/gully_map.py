@@ -3,7 +3,8 @@
 import numpy as np
 import pandas as pd
 
-from kitegully.gully.heads import HeadDetectionParams
+from kitegully.evaluate.dem import read_checkpoints
+from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints
 from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads
 from kitegully.gully.pipeline import GullyParams, map_gullies
 from kitegully.io.raster import read_raster, write_raster
@@ -20,7 +21,11 @@ if snakemake.params.dem_source == "truth_plus_noise":
     log.warning("mapping on the truth-plus-noise stand-in DEM: NOT the photogrammetric DSM (gully.dem)")
 digitised = cfg["heads"] != "automatic"
 hx, hy = read_heads(snakemake.input.heads, snakemake.params.crs) if digitised else (np.zeros(0), np.zeros(0))
-auto = HeadDetectionParams.from_config(cfg["automatic_heads"]) if cfg["heads"] != "digitised" else None
+sz = None
+if "checkpoints" in snakemake.input.keys():
+    sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(snakemake.input.checkpoints))
+    log.info("DSM noise at the checkpoints (automatic heads): SD %.3f m", sz)
+auto = HeadDetectionParams.from_config(cfg["automatic_heads"], sz) if cfg["heads"] != "digitised" else None
 res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, GullyParams.from_config(cfg), workers=snakemake.threads,
                   auto_heads=auto)
 if digitised:

@@ -53,7 +53,9 @@ class HeadDetectionParams:
         Incised where the head-scale depth ≥ ``relief_k``·``dsm_sigma_z_m``. [I] 3, as
         the operator's visibility rule (a 3σ step).
     dsm_sigma_z_m : float
-        Vertical noise of the DSM (m). [I] the DEM validation's checkpoint SD.
+        Vertical noise of the DSM (m). [I] ``null`` in the config = the SD of DSM minus
+        the RTK checkpoints (:func:`dsm_noise_at_checkpoints`): the DSM's own noise where
+        heads are (open ground), measured from observed data only.
     slope_window_m : float
         Slope S is measured on the DEM smoothed with this σ (m). [I] the dense-matching
         window: finer relief is noise.
@@ -77,11 +79,20 @@ class HeadDetectionParams:
     min_channel_length_m: float = 10.0
 
     @classmethod
-    def from_config(cls, cfg: Mapping[str, Any]) -> "HeadDetectionParams":
-        """Build from ``gully.automatic_heads`` (keys of the same names); InputError on a bad value."""
+    def from_config(cls, cfg: Mapping[str, Any], measured_sigma_z_m: float | None = None) -> "HeadDetectionParams":
+        """Build from ``gully.automatic_heads`` (keys of the same names); InputError on a bad value.
+
+        ``dsm_sigma_z_m: null`` takes ``measured_sigma_z_m`` (the DSM's own noise at the
+        checkpoints, :func:`dsm_noise_at_checkpoints`).
+        """
         missing = [k for k in cls.__dataclass_fields__ if k not in cfg]
         if missing:
             raise InputError(f"gully.automatic_heads: missing key(s) {', '.join(missing)}")
+        cfg = dict(cfg)
+        if cfg["dsm_sigma_z_m"] is None:
+            if measured_sigma_z_m is None or not np.isfinite(measured_sigma_z_m):
+                raise InputError("gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints to measure the DSM noise")
+            cfg["dsm_sigma_z_m"] = float(measured_sigma_z_m)
         vals = {k: float(cfg[k]) for k in cls.__dataclass_fields__}
         bad = [k for k, v in vals.items() if not v > 0]
         if bad:
@@ -233,3 +244,16 @@ def detect_heads(
     log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
              stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
     return heads, stats
+
+
+def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points) -> float:
+    """SD (ddof 1) of DSM minus checkpoint elevation over the checkpoints on the DSM (m).
+
+    ``points``: DataFrame with ``x, y, z`` (observed RTK checkpoints on open ground).
+    NaN when fewer than 2 fall on valid cells. O(points).
+    """
+    from kitegully.evaluate.dem import checkpoint_errors
+
+    e = checkpoint_errors(dsm, grid, points)["error_m"].to_numpy()
+    e = e[np.isfinite(e)]
+    return float(np.std(e, ddof=1)) if e.size > 1 else float("nan")
