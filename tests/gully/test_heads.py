@@ -90,7 +90,7 @@ def test_dsm_noise_from_checkpoints_feeds_a_null_sigma():
     grid = _grid(100)
     rng = np.random.default_rng(3)
     dsm = np.zeros((100, 100), np.float32)
-    pts = pd.DataFrame({"x": rng.uniform(1, 19, 400), "y": rng.uniform(1, 19, 400)})
+    pts = pd.DataFrame({"id": np.arange(400), "x": rng.uniform(1, 19, 400), "y": rng.uniform(1, 19, 400)})
     pts["z"] = rng.normal(0, 0.2, len(pts))
     sz = dsm_noise_at_checkpoints(dsm, grid, pts)
     assert sz == pytest.approx(0.2, rel=0.15)
