@@ -204,6 +204,9 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
     num = [c for c in df.columns if c not in NOT_SCORED and pd.api.types.is_numeric_dtype(df[c])]
     mean = {c: df[c].mean() for c in num}
     worst = {c: (df[c].max() if any(w in c for w in WORSE_IF_LARGER) else df[c].min()) for c in num}
+    if "checkpoint_mean_m" in df.columns and df["checkpoint_mean_m"].notna().any():  # signed: worst = largest |bias|
+        mean["checkpoint_mean_m"] = df["checkpoint_mean_m"].mean()
+        worst["checkpoint_mean_m"] = df["checkpoint_mean_m"].loc[df["checkpoint_mean_m"].abs().idxmax()]
     mean["member"], worst["member"] = "mean", "worst"
     return pd.concat([df, pd.DataFrame([mean, worst])], ignore_index=True)
 
