@@ -62,6 +62,26 @@ def run(cfg: dict, twin: str, heads_path: str | None, modes=("digitised", "autom
     return rows
 
 
+def sigma_table(cfg: dict, twin: str, heads_path: str | None, sigmas, thresholds) -> pd.DataFrame:
+    """Area and network scores over sigma x depth threshold (network traced once, digitised heads)."""
+    from kitegully.evaluate.network import footprint, rasterize_polygons
+    from kitegully.gully.network import network_lines
+    from kitegully.gully.sensitivity import sensitivity_table
+
+    g = cfg["gully"]
+    crs = cfg["site"]["crs"]
+    dtm, grid = read_raster(f"{twin}/truth/dtm.tif")
+    dem = noisy_dem(dtm, grid.cell, g["standin"]["noise_sd_m"], g["standin"]["noise_correlation_m"], cfg["seed"])
+    hx, hy = read_heads(heads_path or f"{twin}/observed/gully_heads.gpkg", crs)
+    res = map_gullies(dem, grid, hx, hy, GullyParams.from_config(g), workers=1)
+    ref = read_vector(f"{twin}/observed/field_network.gpkg", crs=crs)
+    truth = rasterize_polygons(read_vector(f"{twin}/truth/gully_polygons.gpkg", crs=crs), grid) & np.isfinite(dem)
+    dom = footprint(np.isfinite(dem), grid, near=[*ref.geometry, *network_lines(res.network, grid).geometry])
+    return sensitivity_table(dem, grid, res.network, sigmas, thresholds, g["min_patch_volume_m3"], g["buffer_m"],
+                             g["connectivity"], g["truncate_sigmas"], reference=ref,
+                             tolerance_m=g["validation"]["tolerance_m"], domain=dom, truth_mask=truth)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--config", required=True)
@@ -70,6 +90,9 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], help="gully key=value overrides (YAML value)")
     ap.add_argument("--modes", default="digitised,automatic")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--sigmas", default=None, help="comma list: also a sigma x threshold table (sensitivity_table) "
+                    "with the digitised heads' network, against the truth polygons and the unfiltered reference")
+    ap.add_argument("--thresholds", default="0.15,0.25")
     a = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     cfg = yaml.safe_load(open(a.config))
@@ -77,6 +100,10 @@ def main() -> None:
     for kv in a.set:
         k, v = kv.split("=", 1)
         cfg["gully"][k] = yaml.safe_load(v)
+    if a.sigmas:
+        print(sigma_table(cfg, a.twin, a.heads, [float(v) for v in a.sigmas.split(",")],
+                          [float(v) for v in a.thresholds.split(",")]).to_string())
+        return
     rows = run(cfg, a.twin, a.heads, a.modes.split(","))
     df = pd.DataFrame(rows)
     pd.set_option("display.width", 250)
