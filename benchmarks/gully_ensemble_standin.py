@@ -44,6 +44,7 @@ def main() -> None:
     ap.add_argument("--members", default=None)
     ap.add_argument("--out", default="results/ensemble_standin")
     ap.add_argument("--set", action="append", default=[], help="gully key=value overrides (YAML value)")
+    ap.add_argument("--mask-water", action="store_true", help="stand-in empty over open water, like the DSM")
     a = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     out = REPO / a.out
@@ -61,7 +62,7 @@ def main() -> None:
             site = build_site(cfg["twin"], cfg["site"]["crs"], cfg["seed"], epoch=1)
             generate_epoch(site, twin, texture=False)
             log.info("%s: twin generated in %.0f s", name, time.perf_counter() - t0)
-        for r in run_gully(cfg, str(twin), None):
+        for r in run_gully(cfg, str(twin), None, mask_water=a.mask_water):
             rows.append({"member": name, **r})
     df = pd.DataFrame(rows)
     out.mkdir(parents=True, exist_ok=True)

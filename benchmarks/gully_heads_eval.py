@@ -27,13 +27,22 @@ from kitegully.io.raster import read_raster
 from kitegully.io.vectors import read_vector
 
 
-def run(cfg: dict, twin: str, heads_path: str | None, modes=("digitised", "automatic"), dem=None, grid=None) -> list[dict]:
-    """One row per head source on one DEM."""
+def run(cfg: dict, twin: str, heads_path: str | None, modes=("digitised", "automatic"), dem=None, grid=None,
+        mask_water: bool = False) -> list[dict]:
+    """One row per head source on one DEM.
+
+    ``mask_water`` leaves the stand-in empty over open water (truth land cover), as dense
+    matching leaves the reservoir: the network then ends at the shore as on the DSM.
+    """
     g = cfg["gully"]
     crs = cfg["site"]["crs"]
     if dem is None:
         dtm, grid = read_raster(f"{twin}/truth/dtm.tif")
         dem = noisy_dem(dtm, grid.cell, g["standin"]["noise_sd_m"], g["standin"]["noise_correlation_m"], cfg["seed"])
+        if mask_water:
+            lc, _ = read_raster(f"{twin}/truth/landcover.tif")
+            classes = pd.read_csv(f"{twin}/truth/landcover_classes.csv")
+            dem[np.asarray(lc) == int(classes.loc[classes["name"] == "water", "code"].iloc[0])] = np.nan
     ref = read_vector(f"{twin}/observed/field_network.gpkg", crs=crs)
     polys = read_vector(f"{twin}/truth/gully_polygons.gpkg", crs=crs)
     th = read_vector(f"{twin}/truth/gully_heads.gpkg", crs=crs)
@@ -89,6 +98,7 @@ def main() -> None:
     ap.add_argument("--heads", default=None)
     ap.add_argument("--set", action="append", default=[], help="gully key=value overrides (YAML value)")
     ap.add_argument("--modes", default="digitised,automatic")
+    ap.add_argument("--mask-water", action="store_true", help="stand-in empty over open water, like the DSM")
     ap.add_argument("--out", default=None)
     ap.add_argument("--sigmas", default=None, help="comma list: also a sigma x threshold table (sensitivity_table) "
                     "with the digitised heads' network, against the truth polygons and the unfiltered reference")
@@ -104,7 +114,7 @@ def main() -> None:
         print(sigma_table(cfg, a.twin, a.heads, [float(v) for v in a.sigmas.split(",")],
                           [float(v) for v in a.thresholds.split(",")]).to_string())
         return
-    rows = run(cfg, a.twin, a.heads, a.modes.split(","))
+    rows = run(cfg, a.twin, a.heads, a.modes.split(","), mask_water=a.mask_water)
     df = pd.DataFrame(rows)
     pd.set_option("display.width", 250)
     print(df.T.to_string())
