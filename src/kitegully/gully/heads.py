@@ -30,7 +30,7 @@ from numba import njit
 
 from kitegully import InputError
 from kitegully.io.raster import GridSpec
-from kitegully.terrain.flow import D8_OFFSETS, END_MERGE, END_ON_NETWORK, NO_FLOW, trace_paths
+from kitegully.terrain.flow import D8_OFFSETS, END_MERGE, END_ON_NETWORK, trace_paths
 from kitegully.terrain.smoothing import gaussian_smooth_fft
 
 log = logging.getLogger(__name__)
