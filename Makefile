@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -42,6 +42,11 @@ report: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -n $(CORES) --dist loadgroup $(PYTEST_ARGS)
+
+# Whole chain on the default twin and the 5 twins of config/sites/ensemble/ (issue 15):
+# results/ensemble/summary.csv and summary.md (about 6 x 10 min on 2 idle cores).
+ensemble: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) $(ENSEMBLE_ARGS)
 
 clean-venv:
 	rm -rf $(VENV)

@@ -116,3 +116,27 @@ def test_synthetic_logs_recover_the_model_angle_within_gps_noise():
         # the spread of single fixes reflects GPS noise: larger on the short line
     spread = summary.set_index("line_length_m")
     assert (spread.loc[150, "p95_deg"] - spread.loc[150, "p05_deg"]) > (spread.loc[600, "p95_deg"] - spread.loc[600, "p05_deg"])
+
+
+def test_unmodelled_effects_move_the_camera_off_the_model():
+    """Kite lag, pendulum swing and walking-speed changes (issue 15) make the logs differ from the model."""
+    kite = Kite("delta10", 8.7, 0.15, 60.0, 2.7, 0.5)
+    line = LineMaterial("dyneema", 0.8e-3, 0.39e-3, 870.0)
+    sched = LineSchedule((0.0,), (300.0,), settle_s=30.0)
+    flight = SyntheticFlight("T", kite, line, 8.0, 1.0, 20.0, sched, 600, "2013-09-10T08:00:00Z")
+    atm = Atmosphere()
+    base = SyntheticLogSettings(X0, Y0, 100.0, 45.0, 135.0, 0.3, 3.0, 0.0, 0.0)
+    cam0, op0 = simulate_flight_logs(flight, base, atm, rng_for(2, "t"))
+    swing = SyntheticLogSettings(X0, Y0, 100.0, 45.0, 135.0, 0.3, 3.0, 0.0, 0.0, pendulum_rms_deg=10.0)
+    cam1, _ = simulate_flight_logs(flight, swing, atm, rng_for(2, "t"))
+    # same wind draw, so the only difference is the swing: RMS offset about L sin(10 deg) per axis
+    dxy = np.hypot(cam1["x"] - cam0["x"], cam1["y"] - cam0["y"])
+    assert 0.5 * 3.0 * np.sin(np.radians(10)) < float(np.sqrt(np.mean(dxy**2))) < 3 * 3.0 * np.sin(np.radians(10))
+    walk = SyntheticLogSettings(X0, Y0, 100.0, 45.0, 135.0, 0.3, 3.0, 0.0, 0.0, walking_speed_sd_m_s=0.3)
+    _, op2 = simulate_flight_logs(flight, walk, atm, rng_for(2, "t"))
+    step = np.hypot(np.diff(op2["x"]), np.diff(op2["y"]))
+    assert step.std() > 0.1 and step.min() >= 0.0 and np.hypot(np.diff(op0["x"]), np.diff(op0["y"])).std() < 1e-9
+    lag = SyntheticLogSettings(X0, Y0, 100.0, 45.0, 135.0, 0.3, 3.0, 0.0, 0.0, kite_response_s=5.0)
+    cam3, _ = simulate_flight_logs(flight, lag, atm, rng_for(2, "t"))
+    # the lag smooths the gust response: smaller second-to-second height changes
+    assert np.diff(cam3["z"]).std() < np.diff(cam0["z"]).std()

@@ -14,7 +14,7 @@ if "gully" in config:
     GULLY_ATTRIBUTION = config["site"].get("attribution")
     if GULLY["dem"] == "truth_plus_noise" and not IS_TWIN:
         raise WorkflowError("Invalid configuration: gully.dem: truth_plus_noise needs a twin site; use dense")
-    if GULLY["heads_file"] is None and not IS_TWIN:
+    if GULLY["heads_file"] is None and not IS_TWIN and GULLY["heads"] != "automatic":
         raise WorkflowError("Invalid configuration: gully.heads_file: a real site must name its gully head file")
 
     def mapping_dem(wildcards=None):
@@ -25,6 +25,14 @@ if "gully" in config:
         return result("gully", "standin_dem_truth_plus_noise.tif")
 
     GULLY_HEADS = GULLY["heads_file"] or result("twin", "observed/gully_heads.gpkg")
+    # gully.heads: automatic needs no head file
+    GULLY_HEADS_INPUT = {} if GULLY["heads"] == "automatic" else {"heads": GULLY_HEADS}
+    # automatic heads with dsm_sigma_z_m: null measure the DSM noise at the (observed) checkpoints
+    if GULLY["heads"] != "digitised" and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
+        _cps = result("twin", "observed/checkpoints.csv") if IS_TWIN else config.get("inputs", {}).get("checkpoints")
+        if not _cps:
+            raise WorkflowError("Invalid configuration: gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints (inputs.checkpoints)")
+        GULLY_HEADS_INPUT["checkpoints"] = _cps
     GULLY_REFERENCE = GULLY["reference_network_file"] or (
         result("twin", "observed/field_network.gpkg") if IS_TWIN else None
     )
@@ -50,8 +58,8 @@ if "gully" in config:
 
     rule gully_map:
         input:
+            unpack(lambda wc: GULLY_HEADS_INPUT),
             dem=mapping_dem(),
-            heads=GULLY_HEADS,
         output:
             depth=result("gully", "depth.tif"),
             smoothed=result("gully", "smoothed_dem.tif"),
@@ -65,6 +73,8 @@ if "gully" in config:
             summary=report(result("gully", "gully_summary.csv"), caption=caption("gully_summary"), category=GULLY_CAT),
         params:
             mapping=GULLY_MAPPING,
+            heads=GULLY["heads"],
+            automatic_heads=GULLY["automatic_heads"],
             dem_source=GULLY["dem"],
             crs=config["site"]["crs"],
         threads: GULLY["threads"]

@@ -2,8 +2,9 @@
 
 import numpy as np
 
-from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads
 from kitegully.gully import GullyParams, gully_summary, map_gullies, map_raster
+from kitegully.gully.heads import automatic_head_params
+from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
@@ -11,16 +12,16 @@ from kitegully.logs import setup_script_logging
 
 log = setup_script_logging(snakemake.log[0])
 inp, out, crs, source = snakemake.input, snakemake.output, snakemake.params.crs, snakemake.params.dem_source
-params = GullyParams.from_config(snakemake.params.mapping)
+params, heads = GullyParams.from_config(snakemake.params.mapping), snakemake.params.heads
 dem, grid = read_raster(inp.dem)
 check_dem(dem, inp.dem, grid.crs, crs)
 if source == "truth_plus_noise":
     log.warning("mapping on the truth-plus-noise stand-in DEM: NOT the photogrammetric DSM (gully.dem)")
-hx, hy = read_heads(inp.heads, crs)
-res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads)
-check_heads_on_dem(res.heads_inside, inp.heads)
-if (~res.heads_inside).any():
-    log.warning("%d of %d gully heads are off the DEM and were skipped", int((~res.heads_inside).sum()), hx.size)
+hx, hy = read_heads(inp.heads, crs) if heads != "automatic" else (np.zeros(0), np.zeros(0))
+auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"))
+res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads, auto_heads=auto)
+if heads != "automatic":
+    check_heads_on_dem(res.heads_inside, inp.heads)
 write_raster(out.depth, res.depth, grid)
 write_raster(out.smoothed, res.smoothed, grid)
 write_raster(out.gully_map, map_raster(res.gully, np.isfinite(dem)), grid, nodata=255)
@@ -30,6 +31,6 @@ write_vector(res.extracted_lines, out.mapped_network, layer="gully_network_mappe
 write_vector(res.polygons, out.polygons, layer="gully_polygons")
 res.network.save(out.network_cells)
 write_table(res.patch_table, out.patches, markdown=False)
-summary = gully_summary(res, grid, params, source, hx.size)
+summary = gully_summary(res, grid, params, source, hx.size, heads)
 write_table(summary, out.summary)
 log.info("gully map done: %s", "; ".join(f"{k} = {v}" for k, v in summary.itertuples(index=False)))

@@ -12,12 +12,14 @@ import numpy as np
 import pandas as pd
 
 from kitegully.gully.depth import depth_map
+from kitegully.gully.heads import HeadDetectionParams, detect_heads
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
 from kitegully.gully.patches import depth_patches
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.fill import priority_flood_fill
 from kitegully.terrain.flats import flow_directions
+from kitegully.terrain.flow import d8_directions
 from kitegully.terrain.holes import interpolate_holes
 from kitegully.terrain.smoothing import gaussian_smooth_fft
 
@@ -112,6 +114,8 @@ class GullyResult:
     n_raised: int
     n_flat_routed: int
     timings_s: dict[str, float] = field(default_factory=dict)
+    #: Flat indices of the automatically detected heads (empty unless ``auto_heads`` was given).
+    auto_heads: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def map_gullies(
@@ -121,6 +125,7 @@ def map_gullies(
     heads_y: np.ndarray,
     params: GullyParams,
     workers: int = 1,
+    auto_heads: HeadDetectionParams | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -136,6 +141,9 @@ def map_gullies(
         Method parameters.
     workers : int
         Threads for the FFTs.
+    auto_heads : HeadDetectionParams, optional
+        Also detect heads from the DEM (:func:`kitegully.gully.heads.detect_heads`) and
+        trace from them after the given heads (``gully.heads: automatic | both``).
 
     Returns
     -------
@@ -164,6 +172,7 @@ def map_gullies(
     inside_idx, inside = snap_heads(
         zi, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels
     )
+    z_heads = zi
     if params.trace_smoothing_m > 0:
         holes = ~np.isfinite(zi)
         zi = gaussian_smooth_fft(zi, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas, workers=workers)
@@ -180,6 +189,15 @@ def map_gullies(
         "%d cells left undrained, %.1f s",
         params.flat_routing, n_holes, params.water_min_area_m2, n_raised, n_flat, n_left, t["fill_s"],
     )
+
+    auto_idx = np.zeros(0, dtype=np.int64)
+    if auto_heads is not None:
+        t0 = time.perf_counter()
+        auto_idx, _ = detect_heads(z_heads, filled, dirs if dirs is not None else d8_directions(filled), grid, auto_heads,
+                                   workers)
+        inside_idx = np.concatenate([inside_idx, auto_idx])
+        t["auto_heads_s"] = time.perf_counter() - t0
+    del z_heads
 
     t0 = time.perf_counter()
     network = trace_network(filled, inside_idx, dirs)
@@ -207,7 +225,7 @@ def map_gullies(
     )
     return GullyResult(
         smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised,
-        n_flat, t,
+        n_flat, t, auto_idx,
     )
 
 
@@ -218,7 +236,8 @@ def map_raster(mask: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return m
 
 
-def gully_summary(res: GullyResult, grid: GridSpec, params: GullyParams, dem_source: str, n_heads: int) -> pd.DataFrame:
+def gully_summary(res: GullyResult, grid: GridSpec, params: GullyParams, dem_source: str, n_heads: int,
+                  heads: str = "digitised") -> pd.DataFrame:
     """The ``gully_summary.csv`` table of a :func:`map_gullies` run: ``quantity, value`` (text).
 
     Parameters
@@ -233,12 +252,16 @@ def gully_summary(res: GullyResult, grid: GridSpec, params: GullyParams, dem_sou
         ``gully.dem``: which DEM was mapped.
     n_heads : int
         Number of digitised gully heads given.
+    heads : str
+        ``gully.heads``: where the heads came from (digitised, automatic or both).
     """
     rows = [
         ("DEM source", dem_source),
         ("DEM cells", grid.width * grid.height),
         ("cell size (m)", grid.cell),
+        ("head source (gully.heads)", heads),
         ("gully heads", int(n_heads)),
+        ("automatic heads", int(res.auto_heads.size)),
         ("heads on the DEM", int(res.heads_inside.sum())),
         ("head snapping", f"{params.head_snap} cell within {params.head_snap_radius_m} m"),
         ("tracing DEM smoothing sigma (m)", params.trace_smoothing_m),

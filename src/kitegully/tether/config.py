@@ -110,6 +110,9 @@ def synthetic_flights_from_config(cfg: Mapping[str, Any]) -> tuple[list[Syntheti
         rig_drop_m=syn["rig_drop_m"],
         gps_horizontal_sd_m=syn["gps_horizontal_sd_m"],
         gps_vertical_sd_m=syn["gps_vertical_sd_m"],
+        kite_response_s=syn.get("kite_response_s", 0.0),
+        pendulum_rms_deg=syn.get("pendulum_rms_deg", 0.0),
+        walking_speed_sd_m_s=syn.get("walking_speed_sd_m_s", 0.0),
     )
     return flights, settings
 

@@ -6,6 +6,9 @@ with a ``time`` column and either ``lat, lon, ele`` (WGS84) or ``x, y, z`` (site
 
 The module also writes synthetic logs for twin sites: the operator walks a straight path,
 the kite sits where the line model puts it for a gusty wind, and both positions get GPS noise.
+So that Fig. 7 on a twin tests something, the simulation can add what the quasi-static line
+model lacks: the kite's lag behind gusts, the camera's pendulum swing below the kite, and the
+operator's varying walking speed (apparent wind).
 """
 
 from __future__ import annotations
@@ -207,19 +210,66 @@ class SyntheticLogSettings:
     rig_drop_m: float
     gps_horizontal_sd_m: float
     gps_vertical_sd_m: float
+    #: Effects the quasi-static line model does not have (0 = off). The kite follows its
+    #: equilibrium position for the current wind with a first-order lag of this time
+    #: constant (s) instead of jumping to it.
+    kite_response_s: float = 0.0
+    #: RMS swing angle (degrees) of the camera on its pendulum of length ``rig_drop_m``
+    #: below the kite: a narrow-band random swing at the natural period 2π√(L/g).
+    pendulum_rms_deg: float = 0.0
+    #: SD (m/s) of the operator's walking speed around ``walking_speed_m_s`` (AR(1) with
+    #: the gust time constant, stops at 0): the kite flies in the wind relative to the
+    #: walking operator, so the line model is evaluated at the apparent wind.
+    walking_speed_sd_m_s: float = 0.0
 
 
-def _gusty_wind(mean: float, sd: float, tau: float, n: int, rng: np.random.Generator) -> np.ndarray:
-    """AR(1) wind speed series at 1 Hz with standard deviation ``sd`` and time constant ``tau``."""
+def _ar1(mean: float, sd: float, tau: float, n: int, rng: np.random.Generator) -> np.ndarray:
+    """AR(1) series at 1 Hz with mean ``mean``, standard deviation ``sd`` and time constant ``tau``."""
     if sd <= 0 or n == 0:
-        return np.full(n, mean)
+        return np.full(n, float(mean))
     phi = math.exp(-1.0 / max(tau, 1e-6))
     e = rng.normal(0.0, sd * math.sqrt(1 - phi**2), n)
     g = np.empty(n)
     g[0] = rng.normal(0.0, sd)
     for i in range(1, n):
         g[i] = phi * g[i - 1] + e[i]
-    return np.maximum(mean + g, 0.5)
+    return mean + g
+
+
+def _gusty_wind(mean: float, sd: float, tau: float, n: int, rng: np.random.Generator) -> np.ndarray:
+    """AR(1) wind speed series at 1 Hz with standard deviation ``sd`` and time constant ``tau`` (≥ 0.5 m/s)."""
+    return np.maximum(_ar1(mean, sd, tau, n, rng), 0.5)
+
+
+def _lag(x: np.ndarray, tau: float) -> np.ndarray:
+    """First-order lag (time constant ``tau`` s) of a 1 Hz series; NaN (line on the ground) passes through."""
+    a = 1.0 - math.exp(-1.0 / tau)
+    out = np.array(x, dtype=float)
+    for i in range(1, out.size):
+        if np.isfinite(out[i]) and np.isfinite(out[i - 1]):
+            out[i] = out[i - 1] + a * (x[i] - out[i - 1])
+    return out
+
+
+def _pendulum(length_m: float, rms_deg: float, n: int, rng: np.random.Generator, damping: float = 0.1,
+              dt: float = 0.05) -> np.ndarray:
+    """Swing angle (rad) at 1 Hz of a randomly forced damped pendulum of ``length_m``, RMS ``rms_deg``.
+
+    θ'' + 2ζω₀θ' + ω₀²θ = white noise, ω₀ = √(g/L), integrated at ``dt`` (semi-implicit
+    Euler) and rescaled to the RMS; O(n/dt).
+    """
+    w0 = math.sqrt(9.81 / length_m)
+    k = int(round(1.0 / dt))
+    f = rng.normal(0.0, 1.0, n * k)
+    th = np.empty(n * k)
+    x = v = 0.0
+    for i in range(n * k):
+        v += dt * (-2.0 * damping * w0 * v - w0 * w0 * x + f[i] / math.sqrt(dt))
+        x += dt * v
+        th[i] = x
+    th = th[::k]
+    sd = float(th.std())
+    return th * (math.radians(rms_deg) / sd) if sd > 0 else th
 
 
 def simulate_flight_logs(
@@ -240,6 +290,14 @@ def simulate_flight_logs(
     n = int(flight.duration_s)
     t = np.arange(n, dtype=float)
     wind = _gusty_wind(flight.mean_wind_m_s, flight.gust_sd_m_s, flight.gust_time_constant_s, n, rng)
+    walk = math.radians(settings.walk_azimuth_deg)
+    wto = math.radians(settings.wind_to_azimuth_deg)
+    speed = np.full(n, settings.walking_speed_m_s)
+    if settings.walking_speed_sd_m_s > 0:
+        speed = np.maximum(_ar1(settings.walking_speed_m_s, settings.walking_speed_sd_m_s,
+                                flight.gust_time_constant_s, n, rng), 0.0)
+        # apparent wind at the kite: the operator walking downwind slackens the line
+        wind = np.maximum(wind - speed * math.cos(walk - wto), 0.5)
     lengths = np.asarray(flight.schedule.lengths_m, dtype=float)
     grid = np.arange(max(0.5, wind.min() - wind_step_m_s), wind.max() + 2 * wind_step_m_s, wind_step_m_s)
     sol = solve_line(flight.material, flight.kite, grid, float(lengths.max()), atmosphere)
@@ -254,15 +312,21 @@ def simulate_flight_logs(
         sel = idx == j
         d[sel] = np.interp(wind[sel], grid, down[:, j])
         h[sel] = np.interp(wind[sel], grid, up[:, j])
-    walk = math.radians(settings.walk_azimuth_deg)
-    wto = math.radians(settings.wind_to_azimuth_deg)
-    s = settings.walking_speed_m_s * t
+    if settings.kite_response_s > 0:
+        d, h = _lag(d, settings.kite_response_s), _lag(h, settings.kite_response_s)
+    s = np.concatenate([[0.0], np.cumsum(speed[:-1])])  # 1 s steps
     ox = settings.origin_x + s * math.sin(walk)
     oy = settings.origin_y + s * math.cos(walk)
     oz = np.full(n, settings.ground_z + 1.0)  # logger held at hand height
     cx = ox + d * math.sin(wto)
     cy = oy + d * math.cos(wto)
     cz = oz + h - settings.rig_drop_m
+    if settings.pendulum_rms_deg > 0 and settings.rig_drop_m > 0:
+        th_a, th_c = (_pendulum(settings.rig_drop_m, settings.pendulum_rms_deg, n, rng) for _ in range(2))
+        L = settings.rig_drop_m
+        cx = cx + L * (np.sin(th_a) * math.sin(wto) + np.sin(th_c) * math.cos(wto))
+        cy = cy + L * (np.sin(th_a) * math.cos(wto) - np.sin(th_c) * math.sin(wto))
+        cz = cz + L * (2.0 - np.cos(th_a) - np.cos(th_c))
     start = pd.Timestamp(flight.start_time)
     start = start.tz_localize("UTC") if start.tzinfo is None else start.tz_convert("UTC")
     times = start + pd.to_timedelta(t, unit="s")

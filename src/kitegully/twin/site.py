@@ -425,7 +425,9 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
     sv = scfg["field_network"]
     write_vector(survey.field_network(site.network, sv, gcfg["min_depth_m"], site.crs, sub_seed(site.seed, "field", ep),
                                       water=lc == lcm.CODE["water"], grid=g), obs / "field_network.gpkg")
-    write_vector(survey.digitised_heads(site.network, scfg["heads_sigma_m"], site.crs, sub_seed(site.seed, "heads", ep)), obs / "gully_heads.gpkg")
+    write_vector(survey.digitised_heads(site.network, scfg["heads_sigma_m"], site.crs, sub_seed(site.seed, "heads", ep),
+                                        scfg["heads_visibility"], gcfg["u_shape_exponent"], landcover=lc, grid=g),
+                 obs / "gully_heads.gpkg")
     total = time.perf_counter() - t0
     stats = site_statistics(site, cl, counts, (zmin, zmax), len(gcps), len(cps), t_terrain, t_texture, total)
     write_table(stats, truth / "site_statistics.csv")

@@ -6,7 +6,11 @@
   Feurer et al. (2018, Fig. 1c) and the rest spread over the site.
 * The field network is the truth split into sections at confluences and where the width
   changes by more than ``section_width_ratio``, displaced by a smooth mapping error.
-* Gully heads are digitised with a normal error of ``heads_sigma_m`` per axis.
+* Gully heads are digitised as an operator sees them on the hillshade of the
+  photogrammetric DSM: only where the incision is visible at the DSM's noise and
+  resolution (:func:`digitised_heads` states the rule), marginal ones missed at a stated
+  rate, a few false heads on tracks and furrows, and a normal error of ``heads_sigma_m``
+  (the accuracy the operator claims) per axis.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import logging
 import geopandas as gpd
 import numpy as np
 import pandas as pd
+from scipy.spatial import cKDTree
 from shapely.geometry import LineString, Point
 
 from kitegully.io.raster import GridSpec
@@ -153,13 +158,126 @@ def field_network(gullies: list[Gully], scfg: dict, min_depth: float, crs: str, 
     return gpd.GeoDataFrame(recs, geometry="geometry", crs=crs)
 
 
-def digitised_heads(gullies: list[Gully], sigma: float, crs: str, seed: int) -> gpd.GeoDataFrame:
-    """Gully heads as digitised on a shaded DEM: truth heads plus normal error (m)."""
+# ------------------------------------------------------------------ digitised heads
+#: Keys of ``twin.survey.heads_visibility`` (see :func:`digitised_heads`).
+HEAD_VISIBILITY_KEYS = ("dsm_sigma_z_m", "dsm_resolution_m", "relief_k", "min_run_cells", "marginal_miss_rate",
+                        "false_heads_per_km2", "false_head_classes", "false_head_clearance_m")
+
+
+def shape_factor(shape: str, u_exponent: float) -> float:
+    """Cross-section area / (depth · width) of the twin's profiles ``D·(1 − (d/h)^p)``: p/(p+1).
+
+    V sections (p = 1) hold half the rectangle, U sections (p = ``u_exponent``) ``p/(p+1)``.
+    """
+    p = u_exponent if shape == "U" else 1.0
+    return p / (p + 1.0)
+
+
+def resolved_relief(depth: np.ndarray, width: np.ndarray, factor: float, resolution_m: float) -> np.ndarray:
+    """Relief (m) of a channel cross-section as a DSM of horizontal resolution ``resolution_m`` shows it.
+
+    Dense matching averages heights over its window (``resolution_m`` wide), so a channel
+    narrower than the window keeps its cross-section area ``a = factor·depth·width`` but
+    spreads it over the window: its apparent depth is ``a / resolution_m``; a wider channel
+    keeps its depth. Hence ``min(depth, a / resolution_m)``: depth × width is what decides.
+    """
+    a = factor * np.asarray(depth, dtype=float) * np.asarray(width, dtype=float)
+    return np.minimum(np.asarray(depth, dtype=float), a / resolution_m)
+
+
+def visible_head_index(s: np.ndarray, relief: np.ndarray, threshold_m: float, min_run_m: float) -> int:
+    """Index of the first vertex of the first run where ``relief ≥ threshold_m`` over ``≥ min_run_m``.
+
+    Returns -1 when no run is long enough (the incision is never seen). ``s`` is the
+    distance along the channel from the head (m), increasing.
+    """
+    vis = np.asarray(relief) >= threshold_m
+    d = np.diff(np.concatenate([[0], vis.astype(np.int8), [0]]))
+    for a, b in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]):
+        if s[b - 1] - s[a] >= min_run_m:
+            return int(a)
+    return -1
+
+
+def digitised_heads(gullies: list[Gully], sigma: float, crs: str, seed: int, vis: dict, u_exponent: float,
+                    landcover: np.ndarray | None = None, grid: GridSpec | None = None) -> gpd.GeoDataFrame:
+    """Gully heads as an operator digitises them on the hillshade of the photogrammetric DSM.
+
+    Visibility rule (``vis`` = ``twin.survey.heads_visibility``). The DSM has vertical
+    noise ``σ_z`` (``dsm_sigma_z_m``) and horizontal resolution ``W`` (``dsm_resolution_m``,
+    the dense-matching window). A channel reach shows in the hillshade when
+
+    1. its resolved relief (:func:`resolved_relief`, ``min(D, a/W)`` with ``a`` the
+       cross-section area, i.e. depth × width) is at least ``k·σ_z`` (``relief_k``, 3: a
+       3σ step is exceeded by noise in 0.13 % of cells, and the hillshade contrast of a
+       slope scales with sin(zenith) for signal and noise alike, so the SNR, not the sun
+       elevation, decides to first order), and
+    2. it does so over at least ``n`` resolution cells along the channel
+       (``min_run_cells`` × ``W``; n = 3: a line, not a dot, and the chance that noise
+       makes a 3σ step in 3 independent cells in a row is ~1e-9).
+
+    The operator digitises the upstream end of the first visible run (a tapering head is
+    placed downstream of the true head; a gully never visible is missed). Heads whose
+    largest resolved relief over that run stays below ``2·k·σ_z`` are marginal and are
+    missed with probability ``marginal_miss_rate``. Positions carry a normal error of
+    ``sigma`` (the accuracy the operator claims) per axis. ``false_heads_per_km2`` false
+    heads (Poisson) fall on cells of ``false_head_classes`` (tracks, ploughed furrows and
+    plot-edge dead furrows look like incisions in a hillshade) that are at least
+    ``false_head_clearance_m`` from every gully vertex. Only ``head_id`` reaches the file.
+    """
     rng = rng_for(seed, "twin", "digitised_heads")
-    heads = [(g.x[0], g.y[0]) for g in gullies if g.kind != "wadi"]
-    if not heads:
+    thr = vis["relief_k"] * vis["dsm_sigma_z_m"]
+    res_m = vis["dsm_resolution_m"]
+    min_run = vis["min_run_cells"] * res_m
+    pts = []
+    n_missed = n_marginal = 0
+    for g in gullies:
+        if g.kind == "wadi" or len(g.x) < 2:
+            continue
+        rel = resolved_relief(g.depth, g.width, shape_factor(g.shape, u_exponent), res_m)
+        i = visible_head_index(g.s, rel, thr, min_run)
+        if i < 0:
+            n_missed += 1
+            continue
+        run = rel[i:]
+        stop = np.argmax(run < thr) if (run < thr).any() else run.size
+        if run[:stop].max() < 2.0 * thr and rng.uniform() < vis["marginal_miss_rate"]:
+            n_marginal += 1
+            continue
+        pts.append((g.x[i], g.y[i]))
+    n_true = len(pts)
+    false_pts = _false_heads(gullies, vis, landcover, grid, rng)
+    pts += false_pts
+    log.info("digitised heads: %d seen, %d never visible (relief < %.2f m over %.1f m), %d marginal missed, %d false",
+             n_true, n_missed, thr, min_run, n_marginal, len(false_pts))
+    if not pts:
         return gpd.GeoDataFrame({"head_id": []}, geometry=[], crs=crs)
-    h = np.asarray(heads)
+    h = np.asarray(pts, dtype=float)
     order = np.argsort(h[:, 0] + 1e-3 * h[:, 1])
     h = h[order] + rng.normal(0.0, sigma, h.shape)
     return gpd.GeoDataFrame({"head_id": np.arange(1, len(h) + 1)}, geometry=[Point(p) for p in h], crs=crs)
+
+
+def _false_heads(gullies: list[Gully], vis: dict, landcover: np.ndarray | None, grid: GridSpec | None,
+                 rng: np.random.Generator) -> list[tuple[float, float]]:
+    """False heads on cells of ``false_head_classes`` away from the gullies (Poisson count)."""
+    if landcover is None or grid is None or vis["false_heads_per_km2"] <= 0:
+        return []
+    area_km2 = grid.width * grid.height * grid.cell**2 / 1e6
+    n = int(rng.poisson(vis["false_heads_per_km2"] * area_km2))
+    if n == 0:
+        return []
+    step = max(1, int(round(1.0 / grid.cell)))  # candidates on a ~1 m lattice
+    codes = [CODE[c] for c in vis["false_head_classes"]]
+    r, c = np.nonzero(np.isin(landcover[::step, ::step], codes))
+    if r.size == 0:
+        return []
+    xs, ys = grid.cell_centres()
+    cx, cy = xs[::step][c], ys[::step][r]
+    verts = np.concatenate([np.column_stack([g.x, g.y]) for g in gullies if len(g.x)])
+    far = cKDTree(verts).query(np.column_stack([cx, cy]), k=1)[0] >= vis["false_head_clearance_m"]
+    cx, cy = cx[far], cy[far]
+    if cx.size == 0:
+        return []
+    pick = rng.choice(cx.size, size=min(n, cx.size), replace=False)
+    return [(float(cx[k]), float(cy[k])) for k in pick]

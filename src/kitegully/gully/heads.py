@@ -1,0 +1,289 @@
+"""Automatic gully-head detection from the DEM alone (scored by :mod:`kitegully.evaluate.heads`).
+
+After the channel-head literature: a channel begins where concentrated flow has enough
+contributing area A on a steep enough slope S to incise (Montgomery & Dietrich 1988,
+1992: an area–slope threshold; Vandekerckhove et al. 2000 give ``S ≥ a·A^-b`` for gully
+heads on Mediterranean cropland) and where the surface is concave across the flow
+(Passalacqua et al. 2010 use curvature after smoothing; Clubb et al. 2014 the upstream end
+of the concave, channelised reach). Here:
+
+1. Concavity: a depth map at the scale of a gully head (``D_h = G_σh ∗ Z − Z``, the
+   Gaussian depth of Fig. 3 a-d with a small σ, which is −σ²/2·∇²Z for smooth relief:
+   a plan/profile curvature) deeper than ``k·σ_z`` (the DSM noise) marks incised cells.
+2. Flow: D8 directions on the filled DEM, contributing area A (m²), slope S along the
+   flow measured over the DSM's resolution.
+3. Channel cells: incised cells with ``S ≥ a·A_ha^-b``.
+4. Heads: channel cells with no channel cell upstream whose path downstream stays in
+   channel cells over most of ``min_channel_length_m`` (a channel, not a pit). Traced
+   highest first; a candidate whose path joins one traced before within
+   ``min_channel_length_m`` is a bank-side twin of that channel and is dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+from numba import njit
+
+from kitegully import InputError
+from kitegully.io.raster import GridSpec
+from kitegully.terrain.flow import D8_OFFSETS, END_MERGE, END_ON_NETWORK, trace_paths
+from kitegully.terrain.smoothing import gaussian_smooth_fft
+
+log = logging.getLogger(__name__)
+
+#: Values of ``gully.heads``.
+HEAD_SOURCES = ("digitised", "automatic", "both")
+
+
+@dataclass(frozen=True)
+class HeadDetectionParams:
+    """Parameters of :func:`detect_heads` (the ``gully.automatic_heads`` config section).
+
+    Attributes
+    ----------
+    scale_m : float
+        σ (m) of the head-scale depth map. [I] 2 m: twice the widest gully head of the
+        site (≤ 1.5 m wide), so the depth of a head is resolved while field-scale
+        relief (≥ 10 m) is smoothed away.
+    relief_k : float
+        Incised where the head-scale depth ≥ ``relief_k``·``dsm_sigma_z_m``. [I] 3, as
+        the operator's visibility rule (a 3σ step).
+    dsm_sigma_z_m : float
+        Vertical noise of the DSM (m). [I] ``null`` in the config = the SD of DSM minus
+        the RTK checkpoints (:func:`dsm_noise_at_checkpoints`): the DSM's own noise where
+        heads are (open ground), measured from observed data only.
+    slope_window_m : float
+        Slope S is measured on the DEM smoothed with this σ (m). [I] the dense-matching
+        window: finer relief is noise.
+    area_slope_a : float
+        ``a`` of ``S ≥ a·A^-b`` (A in ha). [I] 0.025, the lower envelope for gully heads
+        on Mediterranean cropland (Vandekerckhove et al. 2000).
+    area_slope_b : float
+        ``b`` of the threshold. [I] 0.4 (ibid.).
+    min_channel_length_m : float
+        A head's path must run in channel cells for at least half of this length, and a
+        path joining another within it is a side branch of the same channel. [I] 10 m:
+        2× the 5 m matching tolerance of the network validation.
+    """
+
+    scale_m: float = 2.0
+    relief_k: float = 3.0
+    dsm_sigma_z_m: float = 0.05
+    slope_window_m: float = 1.0
+    area_slope_a: float = 0.025
+    area_slope_b: float = 0.4
+    min_channel_length_m: float = 10.0
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any], measured_sigma_z_m: float | None = None) -> "HeadDetectionParams":
+        """Build from ``gully.automatic_heads`` (keys of the same names); InputError on a bad value.
+
+        ``dsm_sigma_z_m: null`` takes ``measured_sigma_z_m`` (the DSM's own noise at the
+        checkpoints, :func:`dsm_noise_at_checkpoints`).
+        """
+        missing = [k for k in cls.__dataclass_fields__ if k not in cfg]
+        if missing:
+            raise InputError(f"gully.automatic_heads: missing key(s) {', '.join(missing)}")
+        cfg = dict(cfg)
+        if cfg["dsm_sigma_z_m"] is None:
+            if measured_sigma_z_m is None or not np.isfinite(measured_sigma_z_m):
+                raise InputError("gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints to measure the DSM noise")
+            cfg["dsm_sigma_z_m"] = float(measured_sigma_z_m)
+        vals = {k: float(cfg[k]) for k in cls.__dataclass_fields__}
+        bad = [k for k, v in vals.items() if not v > 0]
+        if bad:
+            raise InputError(f"gully.automatic_heads: {', '.join(bad)} must be > 0")
+        return cls(**vals)
+
+
+@njit(cache=True)
+def _accumulate(dirs, valid, offs, cell_area):
+    """Contributing area (m²) of every cell along D8 ``dirs`` (Kahn order). O(n)."""
+    h, w = dirs.shape
+    n = h * w
+    indeg = np.zeros(n, np.int32)
+    recv = np.full(n, -1, np.int64)
+    for r in range(h):
+        for c in range(w):
+            d = dirs[r, c]
+            if d == 255 or not valid[r, c]:
+                continue
+            rr = r + offs[d, 0]
+            cc = c + offs[d, 1]
+            if 0 <= rr < h and 0 <= cc < w and valid[rr, cc]:
+                recv[r * w + c] = rr * w + cc
+                indeg[rr * w + cc] += 1
+    area = np.zeros(n)
+    stack = np.empty(n, np.int64)
+    top = 0
+    for i in range(n):
+        if valid.flat[i]:
+            area[i] = cell_area
+            if indeg[i] == 0:
+                stack[top] = i
+                top += 1
+    while top > 0:
+        top -= 1
+        i = stack[top]
+        j = recv[i]
+        if j >= 0:
+            area[j] += area[i]
+            indeg[j] -= 1
+            if indeg[j] == 0:
+                stack[top] = j
+                top += 1
+    return area.reshape(h, w), recv
+
+
+@njit(cache=True)
+def _heads(channel, recv, n_steps, min_frac):
+    """Channel cells without a channel donor whose next ``n_steps`` cells are mostly channel."""
+    n = channel.size
+    has_donor = np.zeros(n, np.bool_)
+    for i in range(n):
+        if channel[i] and recv[i] >= 0:
+            has_donor[recv[i]] = True
+    out = np.zeros(n, np.bool_)
+    for i in range(n):
+        if not channel[i] or has_donor[i]:
+            continue
+        j = i
+        hits = 0
+        k = 0
+        while k < n_steps and j >= 0:
+            if channel[j]:
+                hits += 1
+            j = recv[j]
+            k += 1
+        if hits >= min_frac * n_steps:
+            out[i] = True
+    return out
+
+
+def flow_accumulation(dirs: np.ndarray, cell_m: float, valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Contributing area (m², the cell included) along D8 codes of :mod:`kitegully.terrain.flow`.
+
+    ``valid`` (default: every cell) marks the cells that hold area; code 255 cells
+    (outlets, undrained) receive flow but pass none on. Returns the area raster and the
+    flat index of each cell's receiver (-1: none). O(n) time and memory.
+    """
+    if valid is None:
+        valid = np.ones(dirs.shape, dtype=np.bool_)
+    return _accumulate(np.ascontiguousarray(dirs, np.uint8), np.ascontiguousarray(valid, np.bool_), D8_OFFSETS,
+                       float(cell_m**2))
+
+
+def detect_heads(
+    z: np.ndarray,
+    filled: np.ndarray,
+    dirs: np.ndarray,
+    grid: GridSpec,
+    params: HeadDetectionParams,
+    workers: int = 1,
+) -> tuple[np.ndarray, dict[str, float]]:
+    """Gully-head cells from the DEM alone (see the module docstring).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata (holes may be interpolated).
+    filled : ndarray (H, W)
+        Its depression-free version (the tracing surface).
+    dirs : ndarray (H, W) uint8
+        D8 codes on ``filled`` (255 = outlet/nodata/undrained).
+    grid : GridSpec
+        The grid.
+    params : HeadDetectionParams
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    heads : ndarray int64
+        Flat indices of the head cells, highest first.
+    stats : dict
+        Counts of incised and channel cells and candidates, for the log and summary.
+
+    Notes
+    -----
+    O(n log n) for the two FFT smoothings, O(n) for accumulation and candidate search,
+    O(L) for the tracing. Memory: a few float32/float64 rasters.
+    """
+    cell = grid.cell
+    valid = np.isfinite(z)
+    zs = gaussian_smooth_fft(z, params.scale_m / cell, workers=workers)
+    incised = np.zeros(z.shape, bool)
+    with np.errstate(invalid="ignore"):
+        incised[valid] = (zs - z)[valid] >= params.relief_k * params.dsm_sigma_z_m
+    del zs
+    zsl = gaussian_smooth_fft(z, params.slope_window_m / cell, workers=workers)
+    gy, gx = np.gradient(zsl, cell)
+    slope = np.hypot(gx, gy)
+    del zsl, gx, gy
+    area, recv = flow_accumulation(dirs, cell, valid)
+    a_ha = area / 1e4
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steep = slope >= params.area_slope_a * np.power(a_ha, -params.area_slope_b)
+    channel = (incised & steep & valid).ravel()
+    n_steps = max(1, int(round(params.min_channel_length_m / cell)))
+    cand = np.flatnonzero(_heads(channel, recv, n_steps, 0.5))
+    if cand.size == 0:
+        return cand, {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": 0}
+    fz = filled.ravel()[cand]
+    cand = cand[np.argsort(-fz, kind="stable")]
+    cells, _down, starts, ends = trace_paths(filled, cand, dirs)
+    lengths = np.diff(starts) * cell  # cells before joining / ending (D8 steps ~ cell)
+    joined_short = ((ends == END_MERGE) & (lengths < params.min_channel_length_m)) | (ends == END_ON_NETWORK)
+    heads = cand[~joined_short]
+    stats = {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": int(cand.size),
+             "heads": int(heads.size)}
+    log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
+             stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
+    return heads, stats
+
+
+def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points) -> float:
+    """SD (ddof 1) of DSM minus checkpoint elevation over the checkpoints on the DSM (m).
+
+    ``points``: DataFrame with ``x, y, z`` (observed RTK checkpoints on open ground).
+    NaN when fewer than 2 fall on valid cells. O(points).
+    """
+    from kitegully.evaluate.dem import checkpoint_errors
+
+    e = checkpoint_errors(dsm, grid, points)["error_m"].to_numpy()
+    e = e[np.isfinite(e)]
+    return float(np.std(e, ddof=1)) if e.size > 1 else float("nan")
+
+
+def automatic_head_params(heads: str, cfg: Mapping[str, Any], dem: np.ndarray, grid: GridSpec,
+                          checkpoints_csv: str | None = None) -> "HeadDetectionParams | None":
+    """Parameters of the automatic head detection for ``gully.heads`` (None for ``digitised``).
+
+    Parameters
+    ----------
+    heads : str
+        ``gully.heads``: ``digitised``, ``automatic`` or ``both``.
+    cfg : mapping
+        The ``gully.automatic_heads`` section.
+    dem, grid : array and GridSpec
+        The mapping DEM.
+    checkpoints_csv : str, optional
+        Observed checkpoints; with ``dsm_sigma_z_m: null`` the DSM noise is measured there.
+
+    Returns
+    -------
+    HeadDetectionParams or None
+    """
+    if heads == "digitised":
+        return None
+    sz = None
+    if checkpoints_csv:
+        from kitegully.evaluate.dem import read_checkpoints
+
+        sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(checkpoints_csv))
+        log.info("DSM noise at the checkpoints (automatic heads): SD %.3f m", sz)
+    return HeadDetectionParams.from_config(cfg, sz)

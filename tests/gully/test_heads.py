@@ -1,0 +1,100 @@
+"""Automatic gully-head detection on constructed DEMs (gully/heads.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kitegully import InputError
+from kitegully.gully.heads import HeadDetectionParams, detect_heads, flow_accumulation
+from kitegully.io.raster import GridSpec
+from kitegully.terrain.fill import priority_flood_fill
+from kitegully.terrain.flats import flow_directions
+
+CELL = 0.2
+P = HeadDetectionParams(scale_m=2.0, relief_k=3.0, dsm_sigma_z_m=0.05, slope_window_m=1.0, area_slope_a=0.025,
+                        area_slope_b=0.4, min_channel_length_m=10.0)
+
+
+def _grid(n):
+    return GridSpec(x0=0.0, y0=n * CELL, cell=CELL, width=n, height=n, crs="EPSG:32632")
+
+
+def _valley(n=400, head_y=60.0, depth=0.8, width=2.0, noise=0.01, seed=0):
+    """A 10 % slope draining south into a hollow (5 % side slopes, as channel heads sit at the foot of
+    convergent hollows) with a V channel along x = 40 m from y = head_y down to the edge."""
+    grid = _grid(n)
+    xs, ys = grid.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    z = 0.1 * Y + 0.05 * np.abs(X - 40.0)  # the hollow: all the slope above the head drains to x = 40 m
+    d = depth * np.clip(1 - np.abs(X - 40.0) / (width / 2), 0, None) * np.clip((head_y - Y) / 0.4, 0, 1)
+    z = z - d + np.random.default_rng(seed).normal(0, noise, z.shape)
+    return z.astype(np.float32), grid
+
+
+def _detect(z, grid):
+    filled, _ = priority_flood_fill(z, 0.0)
+    dirs, _, _ = flow_directions(filled)
+    idx, stats = detect_heads(z, filled, dirs, grid, P)
+    xs, ys = grid.cell_centres()
+    r, c = np.divmod(idx, grid.width)
+    return np.column_stack([xs[c], ys[r]]), stats
+
+
+def test_channel_head_found_at_its_known_start():
+    z, grid = _valley()
+    heads, _ = _detect(z, grid)
+    assert len(heads) >= 1
+    d = np.hypot(heads[:, 0] - 40.0, heads[:, 1] - 60.0)
+    assert d.min() < 2.0  # the head within 2 m of where the channel starts
+    # nothing starts on the open slope far from the channel
+    assert np.all(np.abs(heads[:, 0] - 40.0) < 3.0)
+
+
+def test_no_head_on_a_plane_or_in_a_round_pit():
+    grid = _grid(300)
+    xs, ys = grid.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    plane = (0.1 * Y + np.random.default_rng(1).normal(0, 0.01, X.shape)).astype(np.float32)
+    assert len(_detect(plane, grid)[0]) == 0
+    pit = plane - 0.8 * np.clip(1 - np.hypot(X - 30, Y - 30) / 1.5, 0, None)
+    assert len(_detect(pit.astype(np.float32), grid)[0]) == 0
+
+
+def test_shallow_channel_below_the_noise_threshold_is_not_a_head():
+    # 4 cm deep: with the hollow's own concavity (~0.08 m at sigma 2 m) still below 3 x 0.05 m
+    z, grid = _valley(depth=0.04)
+    assert len(_detect(z, grid)[0]) == 0
+
+
+def test_flow_accumulation_counts_upstream_cells():
+    dirs = np.full((1, 5), 4, dtype=np.uint8)  # every cell drains east
+    dirs[0, 4] = 255
+    area, recv = flow_accumulation(dirs, 2.0)
+    assert area.ravel().tolist() == [4.0, 8.0, 12.0, 16.0, 20.0]
+    assert recv.tolist() == [1, 2, 3, 4, -1]
+
+
+def test_from_config_names_the_missing_key():
+    with pytest.raises(InputError, match="gully.automatic_heads: missing key"):
+        HeadDetectionParams.from_config({"scale_m": 2.0})
+    with pytest.raises(InputError, match="must be > 0"):
+        HeadDetectionParams.from_config(dict(P.__dict__, relief_k=0))
+
+
+def test_dsm_noise_from_checkpoints_feeds_a_null_sigma():
+    import pandas as pd
+
+    from kitegully.gully.heads import dsm_noise_at_checkpoints
+
+    grid = _grid(100)
+    rng = np.random.default_rng(3)
+    dsm = np.zeros((100, 100), np.float32)
+    pts = pd.DataFrame({"id": np.arange(400), "x": rng.uniform(1, 19, 400), "y": rng.uniform(1, 19, 400)})
+    pts["z"] = rng.normal(0, 0.2, len(pts))
+    sz = dsm_noise_at_checkpoints(dsm, grid, pts)
+    assert sz == pytest.approx(0.2, rel=0.15)
+    p = HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None), sz)
+    assert p.dsm_sigma_z_m == pytest.approx(sz)
+    with pytest.raises(InputError, match="dsm_sigma_z_m: null needs checkpoints"):
+        HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None))
