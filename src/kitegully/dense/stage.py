@@ -4,7 +4,7 @@
 true orthophoto and relief shading; :class:`DenseParams` holds the ``dense`` config section.
 
 Products (all in the site CRS): ``dsm.tif`` (float32, NaN nodata), ``correlation.tif``
-(NCC at the chosen elevation), ``orthophoto.tif`` (uint8 bands, 0 = nodata),
+(NCC at the chosen elevation), ``orthophoto.tif`` (uint8 bands, an internal mask band marks cells no image sees; their values stay 0),
 ``hillshade.png``, ``openness.png`` and ``dense_summary.csv`` (coverage, speed, memory).
 """
 
@@ -314,11 +314,12 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
     write_raster(out["correlation"], res.ncc, grid, tags={"units": "NCC (-1..1)"})
     oc = params.orthophoto
     t1 = time.perf_counter()
-    img, og, _ = orthophoto(views, res.dsm, grid, oc.upsample, oc.tile_cells, oc.overlap_m,
-                            oc.occlusion_tolerance_m, params.max_cached_images)
+    img, og, source = orthophoto(views, res.dsm, grid, oc.upsample, oc.tile_cells, oc.overlap_m,
+                                 oc.occlusion_tolerance_m, params.max_cached_images)
     t_ortho = time.perf_counter() - t1
     names = ["R", "G", "B", "NIR"][: img.shape[0]] if img.shape[0] >= 3 else ["grey"] * img.shape[0]
-    write_raster(out["orthophoto"], img, og, nodata=0, band_names=names)
+    # cells no image sees are masked (internal mask band), not declared by a 0 nodata value
+    write_raster(out["orthophoto"], img, og, band_names=names, mask=source >= 0, overview_resampling="average")
     shading_figures(res.dsm, grid, params.shading, params.figure_max_px, out["hillshade"], out["openness"])
     cells = grid.width * grid.height
     summary = {
