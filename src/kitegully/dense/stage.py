@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import resource
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -22,6 +22,7 @@ import pandas as pd
 
 from kitegully import InputError
 from kitegully.config import config_section
+from kitegully.dense.cell import choose_cell
 from kitegully.dense.matching import MatchParams
 from kitegully.dense.ortho import orthophoto
 from kitegully.dense.shading import hillshade, openness
@@ -108,8 +109,10 @@ class DenseParams:
 
     Attributes
     ----------
-    cell_m : float
-        DSM cell size (m; [P] 0.20 m in Feurer et al. 2018).
+    cell_m : float or "auto"
+        DSM cell size (m; [P] 0.20 m in Feurer et al. 2018), or ``auto`` = 2 × the GSD
+        measured on the oriented model, rounded to one significant digit ([I] see
+        :mod:`kitegully.dense.cell`; the matching window, in cells, scales with it).
     extent : None, "site" or dict
         DSM extent: None = the tie points' extent trimmed by ``extent_percentile``;
         ``site`` = the twin's ``site.json`` extent; else ``{xmin, ymin, xmax, ymax}`` in
@@ -135,7 +138,7 @@ class DenseParams:
         Threads of the rule (Snakemake ``threads:``; the script passes the granted count).
     """
 
-    cell_m: float
+    cell_m: float | str
     extent: Any
     extent_percentile: float
     tile_cells: int
@@ -151,7 +154,8 @@ class DenseParams:
     def from_config(cls, cfg: Mapping[str, Any]) -> "DenseParams":
         """Build from the ``dense`` config section; raises InputError naming a bad key."""
         config_section(cfg, "dense", cls.__dataclass_fields__)
-        _positive(cfg, "cell_m", "dense")
+        if cfg["cell_m"] != "auto":
+            _positive(cfg, "cell_m", "dense")
         ext = cfg["extent"]
         if ext is not None and ext != "site":
             config_section(ext, "dense.extent", ("xmin", "ymin", "xmax", "ymax"))
@@ -190,7 +194,8 @@ def read_site_extent(site_json: str | Path) -> dict[str, float]:
 
 
 def site_grid(views: ViewSet, params: DenseParams, crs: str, site_json: str | Path | None = None) -> GridSpec:
-    """DSM grid: the configured extent, the site's extent (``extent: site``, from
+    """DSM grid of ``params.cell_m`` metres (``auto`` is resolved before, by
+    :func:`kitegully.dense.cell.choose_cell`): the configured extent, the site's extent (``extent: site``, from
     ``site_json``) or the trimmed tie-point extent (``extent: null``); origin snapped to
     whole multiples of the cell (so it aligns with any grid of the same cell)."""
     cell = float(params.cell_m)
@@ -300,8 +305,10 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
         raise InputError(f"{model_dir}: not a COLMAP model folder (no images.bin or images.txt)")
     rec = pycolmap.Reconstruction(str(model_dir))
     views = views_from_reconstruction(rec, image_dir, read_offset(transform_json), where=str(model_dir))
-    grid = site_grid(views, params, crs, site_json)
     mp = params.matching
+    cell = choose_cell(params.cell_m, views, mp.window_half_cells)
+    params = replace(params, cell_m=cell.cell_m)
+    grid = site_grid(views, params, crs, site_json)
     log.info("dense: %d images, grid %d x %d cells of %.3f m (%.2f ha), %d levels",
              len(views.images), grid.width, grid.height, grid.cell, grid.width * grid.height * grid.cell ** 2 / 1e4,
              mp.levels)
@@ -323,7 +330,7 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
     shading_figures(res.dsm, grid, params.shading, params.figure_max_px, out["hillshade"], out["openness"])
     cells = grid.width * grid.height
     summary = {
-        "images": len(views.images), "cell_m": grid.cell, "width_cells": grid.width, "height_cells": grid.height,
+        "images": len(views.images), "cell_m": grid.cell, "gsd_measured_m": cell.gsd_m, "width_cells": grid.width, "height_cells": grid.height,
         "area_km2": cells * grid.cell ** 2 / 1e6, "tiles": res.tiles,
         "seen_by_2_or_more_pct": 100.0 * float((res.nseen >= 2).mean()),
         "valid_pct": 100.0 * float(np.isfinite(res.dsm).mean()),
