@@ -54,6 +54,21 @@ def test_explicit_cell_is_used_unchanged():
         choose_cell("auto", few, window_half_cells=2)
 
 
+def test_dense_params_take_a_number_or_auto():
+    import copy
+
+    from kitegully.config import load_yaml
+    from kitegully.dense import DenseParams
+    from snakemake_utils import REPO
+
+    dense = load_yaml(REPO / "config/sites/tiny_twin.yaml")["dense"]
+    for ok in ("auto", 0.2):
+        assert DenseParams.from_config({**copy.deepcopy(dense), "cell_m": ok}).cell_m == ok
+    for bad, msg in (("Auto", "must be a number of metres or 'auto'"), (0, "must be above 0")):
+        with pytest.raises(InputError, match=f"dense.cell_m: {msg}"):
+            DenseParams.from_config({**copy.deepcopy(dense), "cell_m": bad})
+
+
 def test_schema_takes_a_number_or_auto():
     import jsonschema
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tiny_sfm import copy_results, flight_photos, run_sfm, sfm_tables
+from .tiny_sfm import copy_results, flight_photos, run_sfm, sfm_tables
 
 
 @pytest.fixture(scope="session")

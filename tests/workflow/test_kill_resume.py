@@ -17,7 +17,7 @@ import time
 import pytest
 
 from snakemake_utils import REPO
-from tiny_sfm import SITE, copy_results, env, run_sfm, sfm_command, sfm_log, sfm_tables
+from .tiny_sfm import SITE, copy_results, env, run_sfm, sfm_command, sfm_log, sfm_tables
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("tiny_sfm")]
 

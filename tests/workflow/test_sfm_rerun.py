@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tiny_sfm import copy_results, run_sfm, sfm_tables
+from .tiny_sfm import copy_results, run_sfm, sfm_tables
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("tiny_sfm")]
 

@@ -155,6 +155,8 @@ class DenseParams:
         """Build from the ``dense`` config section; raises InputError naming a bad key."""
         config_section(cfg, "dense", cls.__dataclass_fields__)
         if cfg["cell_m"] != "auto":
+            if isinstance(cfg["cell_m"], (str, bool)) or cfg["cell_m"] is None:
+                raise InputError(f"dense.cell_m: must be a number of metres or 'auto', got {cfg['cell_m']!r}")
             _positive(cfg, "cell_m", "dense")
         ext = cfg["extent"]
         if ext is not None and ext != "site":
