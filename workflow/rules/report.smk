@@ -1,10 +1,12 @@
 # Products that open everywhere (issue 14): a QGIS project of the site's products,
 # results/<site>/<site>.qgs, written as plain XML (no QGIS needed). Its inputs are only the
 # products the site's other rules make (a rule file that does not apply leaves its layer out).
+# Rules of the survey chain run per epoch ({epoch}); the project shows epoch 1, the site's
+# first survey (its paths are those of a one-epoch site).
 
 _DEFINED_RULES = {r.name for r in workflow.rules}
 _QGIS_PRODUCTS = {
-    key: getattr(getattr(rules, rule).output, name)
+    key: expand(getattr(getattr(rules, rule).output, name), epoch=epoch_dir(1))[0]
     for key, rule, name in (
         ("dsm", "dense_match", "dsm"),
         ("orthophoto", "dense_match", "orthophoto"),
