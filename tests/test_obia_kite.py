@@ -110,13 +110,19 @@ def test_grass_only_site_is_not_forced_into_two_classes(tmp_path):
     assert np.all(classes == GRASS)
 
 
-def test_nodata_in_orthophoto_and_dsm_is_nodata_in_the_map(tmp_path, site_files):
+@pytest.mark.parametrize("how", ["mask", "nodata"])
+def test_nodata_in_orthophoto_and_dsm_is_nodata_in_the_map(tmp_path, site_files, how):
     _, grid, rgb, dsm, _ = site_files
     rgb = rgb.copy()
-    rgb[:, :20, :] = 0  # orthophoto nodata = 0 (outside the mosaic)
+    rgb[:, :20, :] = 0  # outside the mosaic
     dsm = dsm.copy()
     dsm[-30:, -30:] = np.nan
-    write_raster(tmp_path / "orthophoto.tif", rgb, grid, nodata=0)
+    if how == "mask":  # the dense stage's orthophoto: internal mask band, no nodata value
+        seen = np.ones(rgb.shape[1:], bool)
+        seen[:20] = False
+        write_raster(tmp_path / "orthophoto.tif", rgb, grid, mask=seen)
+    else:  # an orthophoto from other software: 0 declared as nodata
+        write_raster(tmp_path / "orthophoto.tif", rgb, grid, nodata=0)
     write_raster(tmp_path / "dsm.tif", dsm, grid)
     _, classes, _ = _run(tmp_path, "nodata", tile=128)
     assert np.all(classes[:20] == NODATA)
@@ -158,7 +164,7 @@ def test_bad_inputs_raise_input_error(tmp_path, site_files, problem, match):
     write_raster(tmp_path / "orthophoto.tif", ortho, ortho_grid, nodata=None)
     write_raster(tmp_path / "dsm.tif", dsm, dsm_grid)
     if problem == "rotated":
-        with rasterio.open(tmp_path / "dsm.tif", "r+") as dst:
+        with rasterio.open(tmp_path / "dsm.tif", "r+", IGNORE_COG_LAYOUT_BREAK="YES") as dst:  # products are COGs
             dst.transform = rasterio.Affine(grid.cell, 0.01, grid.x0, 0.01, -grid.cell, grid.y0)
     dsm_name = "nothere.tif" if problem == "missing" else "dsm.tif"
     with pytest.raises(InputError, match=match) as err:

@@ -23,6 +23,7 @@ PARAMS = {
     "max_tie_points": 0,
     "tie_grid": None,
     "figure": {"arrow_scale": None},
+    "cloud_format": "laz",
     "method": "gcp_bundle",
     "gcp_pixel_frame": "stored",
     "gcp_pixel_scale": 1.0,

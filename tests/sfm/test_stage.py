@@ -24,7 +24,7 @@ PARAMS = {
         "method": "exhaustive", "overlap": 10, "exhaustive_max_images": 60, "camera_log": None,
         "log_time_offset_s": 0.0, "log_max_gap_s": 5.0, "gps_sigma_m": 3.0,
         "spatial_max_distance_m": 250.0, "spatial_max_neighbors": 20,
-    }, "threads": 2,
+    }, "threads": 2, "deterministic": False,
 }
 
 

@@ -31,7 +31,13 @@ def test_tiny_twin_dense_and_validation(tmp_path):
         dsm = src.read(1)
         assert np.isfinite(dsm).any() and np.isnan(dsm).any()
     with rasterio.open(site / "dense" / "orthophoto.tif") as src:
-        assert src.count >= 3 and src.dtypes[0] == "uint8" and src.nodata == 0
+        assert src.count >= 3 and src.dtypes[0] == "uint8" and src.nodata is None
+        assert src.mask_flag_enums[0] == [rasterio.enums.MaskFlags.per_dataset]  # mask band, not 0 as nodata
+        seen = src.dataset_mask() > 0
+        assert seen.any() and np.all(src.read()[:, ~seen] == 0)
+    from rio_cogeo.cogeo import cog_validate
+    for name in ("dsm.tif", "correlation.tif", "orthophoto.tif"):
+        assert cog_validate(site / "dense" / name, quiet=True)[0], name
     for name in ("correlation.tif", "hillshade.png", "openness.png", "dense_summary.csv"):
         assert (site / "dense" / name).exists(), name
     gsd = pd.read_csv(site / "flight" / "flight_summary.csv").set_index("quantity").loc["gsd_median", "value"]

@@ -31,7 +31,7 @@ def test_tiny_twin_end_to_end(tmp_path):
     assert list(res.columns) == ["gcp_id", "n_obs", "dx_m", "dy_m", "dz_m", "d3_m", "reproj_px", "used", "flag"]
     loo = pd.read_csv(site / "georef" / "loo_checkpoints.csv")
     assert list(loo.columns) == list(res.columns)
-    for name in ("camera_positions.gpkg", "sparse_cloud.las", "gcp_residuals.png", "camera_calibration.csv"):
+    for name in ("camera_positions.gpkg", "sparse_cloud.laz", "gcp_residuals.png", "camera_calibration.csv"):
         assert (site / "georef" / name).exists(), name
     assert (site / "georef" / "model" / "cameras.bin").exists()
     ev = json.loads((site / "georef" / "twin_evaluation.json").read_text())

@@ -16,6 +16,7 @@ STAGES = [
     "polygons",
     "obia",
     "change",
+    "report",
 ]
 
 RESULTS = Path(config["results_dir"]) / SITE

@@ -27,7 +27,7 @@ if "georef" in config and "sfm" in config:
             loo=report(eresult("georef", "loo_checkpoints.csv"), caption=caption("georef_loo_checkpoints"), category="Georeferencing"),
             calibration=report(eresult("georef", "camera_calibration.csv"), caption=caption("georef_camera_calibration"), category="Georeferencing"),
             cameras=eresult("georef", "camera_positions.gpkg"),
-            cloud=eresult("georef", "sparse_cloud.las"),
+            cloud=eresult("georef", f"sparse_cloud.{config['georef']['cloud_format']}"),
             figure=report(eresult("georef", "gcp_residuals.png"), caption=caption("georef_residual_map"), category="Georeferencing"),
         params:
             georef=config["georef"],
@@ -47,7 +47,7 @@ if "georef" in config and "sfm" in config:
         epoch_results("georef", "gcp_residuals.csv"),
         epoch_results("georef", "loo_checkpoints.csv"),
         epoch_results("georef", "gcp_residuals.png"),
-        epoch_results("georef", "sparse_cloud.las"),
+        epoch_results("georef", f"sparse_cloud.{config['georef']['cloud_format']}"),
         epoch_results("georef", "camera_positions.gpkg"),
         epoch_results("georef", "camera_calibration.csv"),
     )

@@ -36,7 +36,7 @@ if "sfm" in config:
             sfm=config["sfm"],
             seed=config["seed"],
             crs=config["site"]["crs"],
-        threads: config["sfm"]["threads"]
+        threads: 1 if config["sfm"]["deterministic"] else config["sfm"]["threads"]  # deterministic: one thread
         log:
             elogfile("sfm", "sfm_reconstruct"),
         benchmark:

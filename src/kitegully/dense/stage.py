@@ -4,7 +4,7 @@
 true orthophoto and relief shading; :class:`DenseParams` holds the ``dense`` config section.
 
 Products (all in the site CRS): ``dsm.tif`` (float32, NaN nodata), ``correlation.tif``
-(NCC at the chosen elevation), ``orthophoto.tif`` (uint8 bands, 0 = nodata),
+(NCC at the chosen elevation), ``orthophoto.tif`` (uint8 bands, an internal mask band marks cells no image sees; their values stay 0),
 ``hillshade.png``, ``openness.png`` and ``dense_summary.csv`` (coverage, speed, memory).
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import resource
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -22,6 +22,7 @@ import pandas as pd
 
 from kitegully import InputError
 from kitegully.config import config_section
+from kitegully.dense.cell import choose_cell
 from kitegully.dense.matching import MatchParams
 from kitegully.dense.ortho import orthophoto
 from kitegully.dense.shading import hillshade, openness
@@ -108,8 +109,10 @@ class DenseParams:
 
     Attributes
     ----------
-    cell_m : float
-        DSM cell size (m; [P] 0.20 m in Feurer et al. 2018).
+    cell_m : float or "auto"
+        DSM cell size (m; [P] 0.20 m in Feurer et al. 2018), or ``auto`` = 2 × the GSD
+        measured on the oriented model, rounded to one significant digit ([I] see
+        :mod:`kitegully.dense.cell`; the matching window, in cells, scales with it).
     extent : None, "site" or dict
         DSM extent: None = the tie points' extent trimmed by ``extent_percentile``;
         ``site`` = the twin's ``site.json`` extent; else ``{xmin, ymin, xmax, ymax}`` in
@@ -135,7 +138,7 @@ class DenseParams:
         Threads of the rule (Snakemake ``threads:``; the script passes the granted count).
     """
 
-    cell_m: float
+    cell_m: float | str
     extent: Any
     extent_percentile: float
     tile_cells: int
@@ -151,7 +154,10 @@ class DenseParams:
     def from_config(cls, cfg: Mapping[str, Any]) -> "DenseParams":
         """Build from the ``dense`` config section; raises InputError naming a bad key."""
         config_section(cfg, "dense", cls.__dataclass_fields__)
-        _positive(cfg, "cell_m", "dense")
+        if cfg["cell_m"] != "auto":
+            if isinstance(cfg["cell_m"], (str, bool)) or cfg["cell_m"] is None:
+                raise InputError(f"dense.cell_m: must be a number of metres or 'auto', got {cfg['cell_m']!r}")
+            _positive(cfg, "cell_m", "dense")
         ext = cfg["extent"]
         if ext is not None and ext != "site":
             config_section(ext, "dense.extent", ("xmin", "ymin", "xmax", "ymax"))
@@ -190,7 +196,8 @@ def read_site_extent(site_json: str | Path) -> dict[str, float]:
 
 
 def site_grid(views: ViewSet, params: DenseParams, crs: str, site_json: str | Path | None = None) -> GridSpec:
-    """DSM grid: the configured extent, the site's extent (``extent: site``, from
+    """DSM grid of ``params.cell_m`` metres (``auto`` is resolved before, by
+    :func:`kitegully.dense.cell.choose_cell`): the configured extent, the site's extent (``extent: site``, from
     ``site_json``) or the trimmed tie-point extent (``extent: null``); origin snapped to
     whole multiples of the cell (so it aligns with any grid of the same cell)."""
     cell = float(params.cell_m)
@@ -300,8 +307,10 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
         raise InputError(f"{model_dir}: not a COLMAP model folder (no images.bin or images.txt)")
     rec = pycolmap.Reconstruction(str(model_dir))
     views = views_from_reconstruction(rec, image_dir, read_offset(transform_json), where=str(model_dir))
-    grid = site_grid(views, params, crs, site_json)
     mp = params.matching
+    cell = choose_cell(params.cell_m, views, mp.window_half_cells)
+    params = replace(params, cell_m=cell.cell_m)
+    grid = site_grid(views, params, crs, site_json)
     log.info("dense: %d images, grid %d x %d cells of %.3f m (%.2f ha), %d levels",
              len(views.images), grid.width, grid.height, grid.cell, grid.width * grid.height * grid.cell ** 2 / 1e4,
              mp.levels)
@@ -314,15 +323,16 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
     write_raster(out["correlation"], res.ncc, grid, tags={"units": "NCC (-1..1)"})
     oc = params.orthophoto
     t1 = time.perf_counter()
-    img, og, _ = orthophoto(views, res.dsm, grid, oc.upsample, oc.tile_cells, oc.overlap_m,
-                            oc.occlusion_tolerance_m, params.max_cached_images)
+    img, og, source = orthophoto(views, res.dsm, grid, oc.upsample, oc.tile_cells, oc.overlap_m,
+                                 oc.occlusion_tolerance_m, params.max_cached_images)
     t_ortho = time.perf_counter() - t1
     names = ["R", "G", "B", "NIR"][: img.shape[0]] if img.shape[0] >= 3 else ["grey"] * img.shape[0]
-    write_raster(out["orthophoto"], img, og, nodata=0, band_names=names)
+    # cells no image sees are masked (internal mask band), not declared by a 0 nodata value
+    write_raster(out["orthophoto"], img, og, band_names=names, mask=source >= 0, overview_resampling="average")
     shading_figures(res.dsm, grid, params.shading, params.figure_max_px, out["hillshade"], out["openness"])
     cells = grid.width * grid.height
     summary = {
-        "images": len(views.images), "cell_m": grid.cell, "width_cells": grid.width, "height_cells": grid.height,
+        "images": len(views.images), "cell_m": grid.cell, "gsd_measured_m": cell.gsd_m, "width_cells": grid.width, "height_cells": grid.height,
         "area_km2": cells * grid.cell ** 2 / 1e6, "tiles": res.tiles,
         "seen_by_2_or_more_pct": 100.0 * float((res.nseen >= 2).mean()),
         "valid_pct": 100.0 * float(np.isfinite(res.dsm).mean()),

@@ -1,5 +1,5 @@
 """Writing the georeferenced products: COLMAP model, calibration table, camera positions,
-sparse cloud (LAS) and the residual-vector figure.
+sparse cloud (LAZ, or LAS as an option) and the residual-vector figure.
 
 The COLMAP model is written in the *local* frame: site CRS coordinates minus the offset
 stored in ``transform.json`` (``offset_m``), so single-precision consumers (dense
@@ -101,7 +101,28 @@ def camera_positions(block: Block, index: ModelIndex, offset: np.ndarray, crs: s
 
 
 def write_las(rec: pycolmap.Reconstruction, offset: np.ndarray, crs: str, path: str | Path) -> int:
-    """Sparse cloud as LAS 1.4 (point format 7: xyz, RGB, and the track length as intensity)."""
+    """Sparse cloud as LAS 1.4 (point format 7: xyz, RGB, and the track length as intensity).
+
+    Parameters
+    ----------
+    rec
+        The georeferenced model (points in the local frame).
+    offset
+        Local-frame offset added to every point (site CRS, m).
+    crs
+        Site CRS, stored in the header (WKT VLR).
+    path
+        Output file; a ``.laz`` suffix compresses with LASzip (laspy's ``lazrs``
+        backend), ``.las`` writes it uncompressed. The points are the same either way.
+
+    Returns
+    -------
+    int
+        Number of points written.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in (".las", ".laz"):
+        raise ValueError(f"{path}: point cloud files end in .laz or .las")
     pts = list(rec.points3D.values())
     xyz = np.array([p.xyz for p in pts]).reshape(-1, 3) + offset
     rgb = np.array([p.color for p in pts], dtype=np.uint16).reshape(-1, 3) * 257
@@ -114,8 +135,11 @@ def write_las(rec: pycolmap.Reconstruction, offset: np.ndarray, crs: str, path: 
     las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     las.red, las.green, las.blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
     las.intensity = tl
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    las.write(str(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix.lower() == ".laz":
+        las.write(str(path), do_compress=True, laz_backend=laspy.LazBackend.Lazrs)
+    else:
+        las.write(str(path), do_compress=False)
     return len(xyz)
 
 

@@ -157,6 +157,10 @@ class GeorefParams:
     arrow_scale : float or None
         Map metres per metre of residual for the residual figure's arrows
         (``georef.figure.arrow_scale``); None = automatic.
+    cloud_format : str
+        File format of the sparse cloud: ``laz`` (LAS 1.4 compressed with LASzip, laspy's
+        ``lazrs`` backend; opens in QGIS, CloudCompare, PDAL) or ``las`` (the same points
+        uncompressed). The rule names the output ``sparse_cloud.<cloud_format>``.
     """
 
     gcp_format: str
@@ -173,13 +177,14 @@ class GeorefParams:
     qa: GeorefQA
     bundle: BundleSettings
     arrow_scale: float | None
+    cloud_format: str
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "GeorefParams":
         """Build from the ``georef`` config section; raises InputError naming a bad key."""
         config_section(cfg, "georef", ("gcp_format", "csv_crs", "gcp_pixel_frame", "gcp_pixel_scale",
                                        "gcp_pixel_offset_px", "method", "tape_file", "sigma_gcp_xy_m", "sigma_gcp_z_m",
-                                       "max_tie_points", "tie_grid", "qa", "bundle", "figure"))
+                                       "max_tie_points", "tie_grid", "qa", "bundle", "figure", "cloud_format"))
         method = _choice(cfg["method"], METHODS, "georef.method")
         if method == "tape_horn" and not cfg["tape_file"]:
             raise InputError("georef.tape_file: the tape_horn method needs a file of taped distances")
@@ -206,6 +211,7 @@ class GeorefParams:
             qa=GeorefQA.from_config(cfg["qa"]),
             bundle=bundle_settings_from_config(cfg["bundle"], sxy, sz),
             arrow_scale=None if fig["arrow_scale"] is None else float(fig["arrow_scale"]),
+            cloud_format=_choice(cfg["cloud_format"], ("laz", "las"), "georef.cloud_format"),
         )
 
 

@@ -1,7 +1,11 @@
 """GeoTIFF reading and writing with the project's conventions.
 
 Elevation rasters are float32 with NaN as nodata; every raster is tiled (256×256)
-and DEFLATE-compressed, in the site's projected CRS.
+and DEFLATE-compressed, in the site's projected CRS. Products are written as
+Cloud-Optimised GeoTIFF (GDAL's COG driver: tiled, compressed, internal overviews,
+image data after the header and overviews) so that QGIS, GDAL, web viewers and cloud
+readers open them fast at any zoom; a raster whose cells can be legitimately 0 in every
+band (an orthophoto) carries an internal mask band instead of a nodata value.
 """
 
 from __future__ import annotations
@@ -187,9 +191,10 @@ class Raster:
         data, grid, nodata = _read(path, band)
         return cls(data, grid, nodata)
 
-    def write(self, path: str | Path, band_names: list[str] | None = None, tags: dict[str, str] | None = None) -> None:
-        """Write as a tiled, compressed GeoTIFF (see :func:`write_raster`)."""
-        write_raster(path, self.data, self.grid, nodata=self.nodata, band_names=band_names, tags=tags)
+    def write(self, path: str | Path, band_names: list[str] | None = None, tags: dict[str, str] | None = None,
+              mask: np.ndarray | None = None) -> None:
+        """Write as a Cloud-Optimised GeoTIFF (see :func:`write_raster`)."""
+        write_raster(path, self.data, self.grid, nodata=self.nodata, band_names=band_names, tags=tags, mask=mask)
 
     @property
     def transform(self) -> Affine:
@@ -224,7 +229,22 @@ class Raster:
         return Raster(data, self.grid, nodata)
 
 
-def _profile(grid: GridSpec, count: int, dtype: str, nodata) -> dict:
+def _profile(grid: GridSpec, count: int, dtype: str, nodata, cog: bool = False) -> dict:
+    """Creation profile: a tiled, compressed GeoTIFF, or with ``cog=True`` a COG.
+
+    The plain GTiff profile allows streaming windowed writes of rasters larger than
+    memory (twin truth rasters); the COG profile is for products (GDAL's COG driver is
+    copy-only, so rasterio buffers the whole raster in memory and copies it on close).
+    """
+    if cog:
+        return dict(
+            driver="COG", width=grid.width, height=grid.height, count=count, dtype=dtype,
+            crs=CRS.from_user_input(grid.crs), transform=grid.transform, nodata=nodata,
+            compress="deflate", predictor="yes" if np.dtype(dtype).itemsize > 1 or np.dtype(dtype).kind == "f" else "no",
+            blocksize=256, overviews="auto", bigtiff="IF_SAFER",
+            # overviews of continuous fields average; class and id rasters keep their codes
+            overview_resampling="average" if np.dtype(dtype).kind == "f" else "nearest",
+        )
     tiled = grid.width >= 256 and grid.height >= 256
     profile = dict(
         driver="GTiff",
@@ -254,10 +274,35 @@ def write_raster(
     nodata: float | int | None = None,
     band_names: list[str] | None = None,
     tags: dict[str, str] | None = None,
+    mask: np.ndarray | None = None,
+    overview_resampling: str | None = None,
 ) -> None:
-    """Write a 2-D (one band) or 3-D (bands first) array as a tiled, compressed GeoTIFF.
+    """Write a 2-D (one band) or 3-D (bands first) array as a Cloud-Optimised GeoTIFF.
 
-    Float arrays get NaN as nodata unless ``nodata`` is given.
+    Parameters
+    ----------
+    path
+        Output file (parent folders are created).
+    data
+        ``(rows, cols)`` or ``(bands, rows, cols)`` array; written unchanged.
+    grid
+        Its grid; the shape must match.
+    nodata
+        Nodata value; float arrays get NaN unless given. Leave ``None`` with ``mask``.
+    band_names, tags
+        Band descriptions and dataset metadata.
+    mask
+        Optional ``(rows, cols)`` boolean array, True where the cell has data; written as
+        the file's internal mask band (per-dataset, GDAL ``GDAL_TIFF_INTERNAL_MASK``), which
+        QGIS and GDAL show as transparent. Use it instead of a nodata value for rasters
+        whose valid cells may take any value (an orthophoto).
+    overview_resampling
+        GDAL resampling of the internal overviews; default ``average`` for float and
+        ``nearest`` for integer rasters (class codes stay codes).
+
+    Written with GDAL's COG driver (one CreateCopy of an in-memory dataset: tiles of
+    256 × 256, DEFLATE with the matching predictor, overviews halving down to one tile).
+    Cost: O(cells) time and one in-memory copy of the raster.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -266,10 +311,17 @@ def write_raster(
         arr = arr[None]
     if arr.shape[1:] != (grid.height, grid.width):
         raise ValueError(f"{path}: array shape {arr.shape[1:]} does not match grid {(grid.height, grid.width)}")
-    if nodata is None and arr.dtype.kind == "f":
+    if nodata is None and arr.dtype.kind == "f" and mask is None:
         nodata = float("nan")
-    with rasterio.open(path, "w", **_profile(grid, arr.shape[0], arr.dtype.name, nodata)) as dst:
+    if mask is not None and np.shape(mask) != (grid.height, grid.width):
+        raise ValueError(f"{path}: mask shape {np.shape(mask)} does not match grid {(grid.height, grid.width)}")
+    profile = _profile(grid, arr.shape[0], arr.dtype.name, nodata, cog=True)
+    if overview_resampling:
+        profile["overview_resampling"] = overview_resampling
+    with rasterio.open(path, "w", **profile) as dst:
         dst.write(arr)
+        if mask is not None:
+            dst.write_mask(np.where(np.asarray(mask, bool), 255, 0).astype(np.uint8))
         if band_names:
             dst.descriptions = tuple(band_names)
         if tags:

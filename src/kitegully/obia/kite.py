@@ -33,6 +33,8 @@ def _read_tile(ortho, dsm, window):
         valid &= ortho.read(4, window=window) > 0
     if ortho.nodata is not None:
         valid &= ~np.all(rgb == ortho.nodata, axis=0)
+    if rasterio.enums.MaskFlags.per_dataset in ortho.mask_flag_enums[0]:
+        valid &= ortho.dataset_mask(window=window) > 0  # internal mask band (COG orthophoto)
     valid &= np.all(np.isfinite(rgb), axis=0)
     t = ortho.window_transform(window)
     dem = np.full(rgb.shape[1:], np.nan, dtype=np.float32)
@@ -97,7 +99,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         thr = find_thresholds(counts, centres, params.min_class_fraction, params.max_valley_ratio)
         log.info("global threshold: valley %s, Otsu %s (%s)", thr.valley, thr.otsu, thr.reason)
         unimodal = 0 if params.unimodal_class == "grass" else 1
-        profile = _profile(grid, 1, "uint8", NODATA)
+        profile = _profile(grid, 1, "uint8", NODATA, cog=True)
         Path(out_path).parent.mkdir(parents=True, exist_ok=True)
         with rasterio.open(out_path, "w", **profile) as dst:
             for i, (read, core) in enumerate(tiles):

@@ -111,6 +111,7 @@ def match_features(
     n_priors: int = 0,
     spatial_max_distance_m: float = 250.0,
     spatial_max_neighbors: int = 20,
+    seed: int | None = None,
 ) -> str:
     """Match features: exhaustive, sequential by capture order, or spatial by GPS position.
 
@@ -120,25 +121,34 @@ def match_features(
     ``spatial_max_neighbors`` nearest images within ``spatial_max_distance_m``, in 3-D),
     else sequentially with ``overlap`` neighbours (quadratic overlap). Exhaustive matching
     costs O(n²) image pairs; spatial and sequential O(n·k). Returns the method used.
+
+    ``seed`` (deterministic mode) seeds the RANSAC of the two-view verification; COLMAP
+    otherwise seeds each worker thread's generator from the system's entropy.
     """
     method = choose_matching_method(method, n_images, exhaustive_max_images, n_priors)
     mopt = pycolmap.FeatureMatchingOptions()
     mopt.num_threads = num_threads
+    vopt = pycolmap.TwoViewGeometryOptions()
+    if seed is not None:
+        vopt.ransac.random_seed = int(seed)
+        vopt.ransac.num_threads = 1
     if method == "exhaustive":
-        pycolmap.match_exhaustive(database, matching_options=mopt, device=pycolmap.Device.cpu)
+        pycolmap.match_exhaustive(database, matching_options=mopt, verification_options=vopt, device=pycolmap.Device.cpu)
     elif method == "sequential":
         popt = pycolmap.SequentialPairingOptions()
         popt.overlap = overlap
         popt.quadratic_overlap = True
         popt.num_threads = num_threads
-        pycolmap.match_sequential(database, matching_options=mopt, pairing_options=popt, device=pycolmap.Device.cpu)
+        pycolmap.match_sequential(database, matching_options=mopt, pairing_options=popt, verification_options=vopt,
+                                  device=pycolmap.Device.cpu)
     else:  # spatial
         popt = pycolmap.SpatialPairingOptions()
         popt.ignore_z = False
         popt.max_distance = spatial_max_distance_m
         popt.max_num_neighbors = spatial_max_neighbors
         popt.num_threads = num_threads
-        pycolmap.match_spatial(database, matching_options=mopt, pairing_options=popt, device=pycolmap.Device.cpu)
+        pycolmap.match_spatial(database, matching_options=mopt, pairing_options=popt, verification_options=vopt,
+                               device=pycolmap.Device.cpu)
     return method
 
 
@@ -196,6 +206,7 @@ def incremental_map(
     opts.ba_refine_principal_point = refine_principal_point
     opts.ba_refine_extra_params = True
     opts.num_threads = num_threads
+    opts.mapper.num_threads = num_threads
     opts.random_seed = seed
     opts.mapper.random_seed = seed
     opts.triangulation.random_seed = seed
@@ -231,8 +242,17 @@ def run_sfm(
     """Features, matching and mapping; returns the largest model and timings (s).
 
     ``positions`` (SfM file name → approximate camera position, m) enables spatial matching.
+    With ``params.deterministic`` every step runs on one thread and every random
+    choice (RANSAC of the two-view verification, the mapper's initial pair and image
+    registration, triangulation) takes ``seed``: the same images and config then give
+    the same model, bit for bit. COLMAP's worker threads otherwise draw their own seeds
+    and finish in varying order, so a multi-threaded rerun differs slightly.
     """
     image_dir, work_dir, model_dir = Path(image_dir), Path(work_dir), Path(model_dir)
+    deterministic = bool(params.deterministic)
+    if deterministic:
+        num_threads = 1
+        log.info("deterministic SfM: one thread, seed %d", seed)
     work_dir.mkdir(parents=True, exist_ok=True)
     database = work_dir / "database.db"
     if database.exists():
@@ -248,7 +268,7 @@ def run_sfm(
     n_priors = write_position_priors(database, positions, m.gps_sigma_m) if positions else 0
     used = match_features(
         database, len(infos), m.method, m.overlap, m.exhaustive_max_images, num_threads,
-        n_priors, m.spatial_max_distance_m, m.spatial_max_neighbors,
+        n_priors, m.spatial_max_distance_m, m.spatial_max_neighbors, seed if deterministic else None,
     )
     t2 = time.perf_counter()
     rec = incremental_map(
@@ -258,7 +278,7 @@ def run_sfm(
     t3 = time.perf_counter()
     timings = {
         "features_s": t1 - t0, "matching_s": t2 - t1, "mapping_s": t3 - t2, "matching_method": used,
-        "n_position_priors": n_priors,
+        "n_position_priors": n_priors, "deterministic": deterministic,
     }
     log.info("features %.1f s, matching (%s) %.1f s, mapping %.1f s", t1 - t0, used, t2 - t1, t3 - t2)
     return rec, timings

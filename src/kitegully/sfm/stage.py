@@ -122,6 +122,10 @@ class SfmParams:
         Pair selection and camera log (``sfm.matching``).
     threads : int
         CPU threads of the rule (Snakemake ``threads:``; the script passes the granted count).
+    deterministic : bool
+        Reruns give the same model bit for bit: features, matching and mapping on one
+        thread with every random choice seeded from the config's seed ([I] on for twins,
+        whose numbers are compared between runs; ``threads`` is then ignored).
     """
 
     image_frame: str
@@ -136,6 +140,7 @@ class SfmParams:
     min_num_matches: int
     matching: SfmMatching
     threads: int
+    deterministic: bool
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "SfmParams":
@@ -151,6 +156,8 @@ class SfmParams:
             raise InputError("sfm.jpeg_quality must be at most 100 and sfm.first_octave at most 2")
         if not cfg["default_focal_factor"] > 0:
             raise InputError(f"sfm.default_focal_factor: must be positive, got {cfg['default_focal_factor']!r}")
+        if not isinstance(cfg["deterministic"], bool):
+            raise InputError(f"sfm.deterministic: must be true or false, got {cfg['deterministic']!r}")
         values = {k: cfg[k] for k in cls.__dataclass_fields__ if k != "matching"}
         return cls(matching=SfmMatching.from_config(cfg["matching"]), **values)
 
