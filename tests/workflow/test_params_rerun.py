@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from snakemake_utils import run_snakemake
-from test_gully_workflow import GULLY_RULES, SITE, fabricate_twin
+from .test_gully import GULLY_RULES, SITE, fabricate_twin
 
 TARGETS = ("gully_summary.csv", "network_validation.csv", "gully_sensitivity.csv", "gully_section.png")
 

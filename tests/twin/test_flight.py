@@ -23,7 +23,7 @@ from kitegully.twin.render_flight import core_mask, coverage
 
 from snakemake_utils import run_snakemake
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 TINY = REPO / "config" / "sites" / "tiny_twin.yaml"
 X0, Y0 = 578800.0, 4081500.0  # tiny tile origin (lower-left), UTM 32N
 EXTENT = (X0, Y0, X0 + 200.0, Y0 + 200.0)

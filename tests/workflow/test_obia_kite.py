@@ -14,7 +14,7 @@ from PIL import Image
 
 from kitegully.io.raster import GridSpec, read_raster, write_raster
 from snakemake_utils import REPO, run_snakemake
-from test_obia_kite import CRS, _site
+from obia.test_kite import CRS, _site
 
 SITE = REPO / "config" / "sites" / "tiny_twin.yaml"
 CLASSES = ["bare_eroded", "ploughed", "grass", "shrub", "tree", "track", "building", "water", "gully"]
