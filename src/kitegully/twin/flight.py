@@ -256,6 +256,11 @@ def simulate_flight(
     """Simulate the walk, the camera's motion, the shots and the GPS logs.
 
     Returns truth (poses of the kept shots, continuous tracks) and observed GPS logs.
+
+    Kept as one function (over ~80 lines) on purpose: its phases (jitter, pendulum, shot
+    triggers, GPS errors) all draw from the one ``rng`` stream in a fixed order, and every
+    twin's photos and logs depend on that order; a split would have to hand the stream on
+    in exactly the same order, which one linear body makes plain to read and to keep.
     """
     strips = plan_strips(extent, camera, settings, kite_offset)
     dt = settings.time_step_s
