@@ -66,10 +66,9 @@ class TetherParams:
     kites_by_reading : dict of KiteModel to dict of str to Kite
         The same kites under each reading (the Table 2 check compares both).
     atmosphere : Atmosphere
-        ``atmosphere``: air density and gravity. [I] standard air at the site's height.
+        ``atmosphere``: air density and gravity. [P]
     segment_length_m : float
-        ``segment_length_m``: discretisation of the line (m). [I] short against the line
-        lengths so the catenary is resolved.
+        ``segment_length_m``: length of the line's elements (m). [P]
     simulation_kite, reference_line : str or None
         The survey kite and the reference line (Fig. 5, dashed); ``None`` when not passed.
     sweep : mapping or None
