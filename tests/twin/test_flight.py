@@ -266,3 +266,13 @@ def test_same_seed_same_flight_and_bad_inputs(tmp_path):
     write_raster(tmp_path / "nan.tif", np.full((200, 200), np.nan, np.float32), grid)
     with pytest.raises(InputError, match="nan.tif: DSM is all nodata"):
         load_scene(tmp_path / "nan.tif", twin / "truth" / "texture.tif", ["R"], 16)
+
+
+def test_flight_settings_name_a_missing_or_unknown_key():
+    cfg = tiny_flight_cfg()
+    assert FlightSettings.from_config(cfg, cfg["line_lengths_m"]).walk_speed_m_s == float(cfg["walk_speed_m_s"])
+    del cfg["walk_speed_m_s"]
+    with pytest.raises(InputError, match="flight: missing key 'walk_speed_m_s'"):
+        FlightSettings.from_config(cfg, [50.0])
+    with pytest.raises(InputError, match="flight: unknown key 'walk_sped_m_s'"):
+        FlightSettings.from_config({**tiny_flight_cfg(), "walk_sped_m_s": 1.0}, [50.0])

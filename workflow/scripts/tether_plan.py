@@ -2,9 +2,9 @@
 
 from kitegully.io.tables import write_table
 from kitegully.logs import setup_script_logging
-from kitegully.tether import plan_flights
+from kitegully.tether import TetherParams, plan_flights
 
 log = setup_script_logging(snakemake.log[0])
-plan, lengths = plan_flights(snakemake.params.tether)
+plan, lengths = plan_flights(TetherParams.from_config(snakemake.params.tether))
 write_table(plan, snakemake.output.plan)
 write_table(lengths, snakemake.output.lengths)

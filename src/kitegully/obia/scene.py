@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.obia.classify import ERODED, GRASS, NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.features import normalise_features
 from kitegully.obia.indices import EXG_RANGE, excess_green, gaussian_blur
@@ -44,6 +45,24 @@ class ObiaParams:
 
     @classmethod
     def from_config(cls, obia: dict) -> "ObiaParams":
+        """Parameters from the ``obia:`` method sub-sections (the others may be present).
+
+        Raises
+        ------
+        InputError
+            Naming a missing or unknown key (:func:`kitegully.config.config_section`).
+        """
+        config_section(obia, "obia", ("features", "seeds", "growing", "exg_blur", "threshold", "classification"),
+                       optional=("scenes", "kite_scale"))
+        for where, keys, optional in (
+            ("features", ("slope_window_cells",), ()),
+            ("seeds", ("bandwidth_cells",), ()),
+            ("growing", ("position_weight", "reference"), ()),
+            ("exg_blur", ("sigma_cells", "radius_cells"), ()),
+            ("threshold", ("bins", "min_class_fraction", "max_valley_ratio", "unimodal_class"), ()),
+            ("classification", ("segment_feature", "min_area_m2"), ("marker_mask_factor",)),
+        ):
+            config_section(obia[where], f"obia.{where}", keys, optional=optional)
         return cls(
             slope_window_cells=int(obia["features"]["slope_window_cells"]),
             seed_bandwidth_cells=int(obia["seeds"]["bandwidth_cells"]),

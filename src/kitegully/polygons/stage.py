@@ -232,6 +232,9 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     -----
     Dominated by the sort of the MFD routing and the two priority floods, O(n log n) in
     the n cells of the stage grid; ~1 M cells for a 600 × 400 m site at 0.5 m.
+
+    Over ~80 lines on purpose: it is orchestration only, each block one call of a named
+    phase function (tested on its own) plus that phase's timing in ``timings``.
     """
     p = params
     T: dict[str, float] = {}

@@ -10,7 +10,7 @@ synthetic logs), ``config`` (building the model objects from a site config), ``p
 from importlib import import_module
 
 _EXPORTS = {"simulate_tether": "stage", "plan_flights": "stage", "synthetic_gps_logs": "stage",
-            "observed_flight_angles": "stage"}
+            "observed_flight_angles": "stage", "TetherParams": "stage"}
 __all__ = sorted(_EXPORTS)
 
 

@@ -24,7 +24,13 @@ import numpy as np
 import pandas as pd
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.twin.camera import Camera, Pose, nadir_rotation, rotation_to_quaternion
+
+#: ``flight:`` keys :meth:`FlightSettings.from_config` accepts besides its own (read by other
+#: parts of the flight stage; ``time_step_s`` has a default).
+FLIGHT_OTHER_KEYS = ("time_step_s", "material", "kite", "line_lengths_m", "camera", "render", "gcps", "coverage",
+                     "figures", "threads", "epochs")
 
 #: Kite position relative to the operator's hand for a line length: (downwind_m, height_m).
 KiteOffset = Callable[[float], tuple[float, float]]
@@ -66,7 +72,17 @@ class FlightSettings:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any], line_lengths_m: Sequence[float]) -> "FlightSettings":
+        """Settings from the ``flight:`` section (or the keys a rule passes of it).
+
+        Raises
+        ------
+        InputError
+            Naming a missing or unknown key (:func:`kitegully.config.config_section`), or a
+            ``start_time`` that is not an ISO date-time.
+        """
         names = [n for n in cls.__dataclass_fields__ if n not in ("line_lengths_m", "start_time", "gravity_m_s2")]
+        required = [n for n in names if n != "time_step_s"] + ["start_time"]
+        config_section(cfg, "flight", required, optional=FLIGHT_OTHER_KEYS)
         kw = {n: float(cfg[n]) for n in names if n in cfg}
         try:
             start = datetime.fromisoformat(str(cfg["start_time"]))
@@ -256,6 +272,11 @@ def simulate_flight(
     """Simulate the walk, the camera's motion, the shots and the GPS logs.
 
     Returns truth (poses of the kept shots, continuous tracks) and observed GPS logs.
+
+    Kept as one function (over ~80 lines) on purpose: its phases (jitter, pendulum, shot
+    triggers, GPS errors) all draw from the one ``rng`` stream in a fixed order, and every
+    twin's photos and logs depend on that order; a split would have to hand the stream on
+    in exactly the same order, which one linear body makes plain to read and to keep.
     """
     strips = plan_strips(extent, camera, settings, kite_offset)
     dt = settings.time_step_s

@@ -173,6 +173,10 @@ def photograph_flight(
     Notes
     -----
     Rendering is O(images × pixels × supersampling²) ray casts (numba, ``threads``).
+
+    Over ~80 lines with its docstring on purpose: it is orchestration only (read the
+    truth, render, digitise GCPs, count coverage, write the summary), each step one call of
+    a function of :mod:`kitegully.twin` in the order the seeded streams expect.
     """
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     rcfg, gcfg, ccfg = flight_cfg["render"], flight_cfg["gcps"], flight_cfg["coverage"]

@@ -193,6 +193,10 @@ def _cast(ox, oy, oz, dx, dy, dz, dsm, x0, y0, cell, bmax, block, smax, sblock, 
     length) while the ray's lowest point in the step stays above the dilated maximum;
     inside candidate blocks the ray is sampled every cell and the crossing refined by
     the Illinois variant of regula falsi.
+
+    Kept as one function (~200 lines) on purpose: it is the whole compiled numba loop of one
+    ray, and splitting it into helper calls adds per-ray call overhead inside the hot loop
+    of :func:`_cast_many` (millions of rays per image).
     """
     if dz >= -1e-9 and oz >= zmax:
         return -1.0
