@@ -26,6 +26,7 @@ def plot_dod_map(dod: np.ndarray, grid: GridSpec, path: str | Path, limit_m: flo
     fig.colorbar(im, ax=ax, label="elevation change (m)", shrink=0.8, extend="both")
     ax.set_xlabel("easting (m)")
     ax.set_ylabel("northing (m)")
+    ax.ticklabel_format(useOffset=False, style="plain")
     ax.set_title(title)
     ax.grid(False)
     save_figure(fig, path, attribution)
