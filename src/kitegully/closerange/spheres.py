@@ -39,6 +39,7 @@ import pandas as pd
 from scipy import ndimage
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.twin.camera import Camera
 
 
@@ -88,9 +89,7 @@ class SphereDetection:
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "SphereDetection":
         """Build from a config mapping (keys as the attributes); bad keys or values raise InputError."""
-        unknown = set(cfg) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise InputError(f"sphere detection: unknown key(s) {', '.join(sorted(unknown))}")
+        config_section(cfg, "sphere detection", (), optional=cls.__dataclass_fields__)
         values = {k: (tuple(float(x) for x in v) if k == "radius_px" else type(getattr(cls, k))(v)) for k, v in cfg.items()}
         p = cls(**values)
         if not 0 < p.radius_px[0] < p.radius_px[1]:

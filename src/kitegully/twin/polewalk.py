@@ -40,6 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 from kitegully.twin.camera import Camera, Pose
 from kitegully.twin.closerange import CloseRangeScene
@@ -94,9 +95,7 @@ class PoleWalk:
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "PoleWalk":
         """Build from a config mapping; unknown keys and impossible values raise InputError."""
-        unknown = set(cfg) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise InputError(f"pole walk: unknown key(s) {', '.join(sorted(unknown))}")
+        config_section(cfg, "pole walk", (), optional=cls.__dataclass_fields__)
         p = cls(**{k: type(getattr(cls, k))(v) for k, v in cfg.items()})
         if p.n_images < 3:
             raise InputError(f"pole walk: n_images is {p.n_images}, at least 3 are needed for a ring of views")
