@@ -222,3 +222,62 @@ def test_metre_grade_coordinates_are_told_apart_from_a_bad_file():
     assert rep["diagnosis"] != "inconsistent_with_photos"
     r = georeference(*_setup()[:4], PARAMS, "stored")
     assert r.report["diagnosis"] == "trusted" and r.report["flagged_gcps"] == []
+
+
+def _hilly(xy):
+    """Ground with relief that no plane explains (the feet check needs it)."""
+    return 100.0 + 0.05 * xy[:, 0] - 0.03 * xy[:, 1] + 4.0 * np.sin(xy[:, 0] / 25.0) * np.cos(xy[:, 1] / 30.0)
+
+
+def test_placeholder_heights_give_a_plan_only_block_that_says_so():
+    model, gcps, infos, rows = _setup()
+    true_z = np.array([g.xyz[2] for g in gcps])
+    for g in gcps:
+        g.xyz[2] = 0.0
+    r = georeference(model, gcps, infos, rows, PARAMS, "stored")
+    res = r.residuals
+    assert r.report["plan_only"] and r.report["height_datum"] == "relative"
+    assert r.report["method"] == "similarity" and not r.report["trusted"] and r.report["diagnosis"] == "plan_only"
+    assert "placeholders" in r.report["trust_reasons"][0] and "plan only" in r.report["diagnosis_text"]
+    assert np.sqrt(np.mean(res["dx_m"] ** 2 + res["dy_m"] ** 2)) <= 2 * GSD  # plan position still from the GCPs
+    assert np.isnan(r.report["gcp_rmse_z_m"])
+    # heights are relative: up to a constant, the block's GCP heights follow the terrain to the levelling error
+    from kitegully.georef.control import triangulate_gcps, collect_observations
+    obs = collect_observations(gcps, infos, rows, "stored", "stored", 1.0, 0.05)
+    X, _ = triangulate_gcps(r.block, obs)
+    dz = X[:, 2] - (true_z - true_z.mean())
+    assert np.nanstd(dz) < 0.5  # 120 m block, mean axis of 20 cameras tilted 0.03 rad each: ~0.4 deg
+
+
+def test_heights_in_feet_are_refused_from_the_photos_alone(monkeypatch):
+    import georef.test_bundle as tb
+    monkeypatch.setattr(tb, "_ground", _hilly)
+    from kitegully.georef.control import collect_observations, height_ratio, triangulate_gcps
+    model, gcps, infos, rows = _setup()
+    obs = collect_observations(gcps, infos, rows, "stored", "stored", 1.0, 0.05)
+    X, _ = triangulate_gcps(model, obs)
+    survey = np.array([g.xyz for g in gcps]) - [340000.0, 5500000.0, 0.0]
+    k, se, n = height_ratio(model, obs, X, survey)  # metres: the block's own height differences
+    assert n == 7 and abs(k - 1.0) < 0.05 and se < 0.05
+    for g in gcps:
+        g.xyz[2] = g.xyz[2] / 0.3048
+    with pytest.raises(InputError, match=r"^GCP file: the GCP height differences are 3\.\d\d times those the photos show "
+                                         r"\(fitted over 7 GCPs\), as if the heights were in feet; set inputs.z_units: ft"):
+        georeference(model, gcps, infos, rows, PARAMS, "stored")
+
+
+def test_level_rotation_and_plan_similarity():
+    from kitegully.georef.similarity import Similarity, level_rotation, plan_similarity
+    d = np.array([0.1, -0.2, -0.9])
+    assert np.allclose(level_rotation(d) @ (d / np.linalg.norm(d)), [0, 0, -1])
+    assert np.allclose(level_rotation(np.array([0, 0, 1.0])) @ [0, 0, 1.0], [0, 0, -1])
+    rng = np.random.default_rng(0)
+    R = rotvec_to_matrix(np.array([[0.2, -0.1, 1.3]]))[0]
+    truth = Similarity(3.0, R, np.array([5.0, -2.0, 40.0]))
+    a = rng.normal(size=(6, 3)) * [30, 30, 3]
+    b = truth.apply(a)
+    s = plan_similarity(a, b[:, :2], R.T @ [0, 0, -1.0], z0=7.0)
+    assert np.isclose(s.scale, 3.0) and np.allclose(s.apply(a)[:, :2], b[:, :2])
+    assert np.allclose(s.apply(a)[:, 2] - np.median(s.apply(a)[:, 2]), b[:, 2] - np.median(b[:, 2]))
+    with pytest.raises(InputError, match="share one plan position"):
+        plan_similarity(a[:2], np.zeros((2, 2)), [0, 0, -1.0])

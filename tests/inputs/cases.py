@@ -74,7 +74,6 @@ GCPS = [
      lambda s: (_all_photos(s, gps=None), _gcp(s, gcp_lines(_rows(lambda i, j, r: [r[0] + 20000] + r[1:] if i == 3 else r)))), {}),
     ("gcp_heights_in_feet", lambda s: _gcp(s, gcp_lines(_rows(lambda i, j, r: r[:2] + [round(r[2] / 0.3048, 2)] + r[3:]))), {}),
     ("gcp_heights_impossible", lambda s: _gcp(s, gcp_lines(_rows(lambda i, j, r: r[:2] + [r[2] * 40] + r[3:]))), {}),
-    ("gcp_heights_all_placeholder", lambda s: _gcp(s, gcp_lines(_rows(lambda i, j, r: r[:2] + [0.0] + r[3:]))), {}),
     ("gcp_duplicate_rows", lambda s: _gcp(s, gcp_lines(_rows(lambda i, j, r: r) + _rows(lambda i, j, r: r if (i, j) == (1, 1) else None))), {}),
     ("gcp_fewer_than_three", lambda s: _gcp(s, gcp_lines(_rows(lambda i, j, r: r if i < 2 else None))), {}),
     ("gcp_image_name_case_near_miss",

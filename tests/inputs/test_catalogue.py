@@ -51,7 +51,6 @@ EXPECTED = {
     'gcp_one_point_far_from_the_others': '{root}/gcp_list.txt: line 8: GCP lies 20.0 km from the middle of the others; a photo block is far smaller, so check its coordinates',
     'gcp_heights_in_feet': "{root}/gcp_list.txt: GCP heights (median 990.0 m) lie above the cameras' EXIF GPS altitude (median 400.0 m); in feet they would be 302 m, below the cameras; set inputs.z_units: ft (or us_ft) so they are converted",
     'gcp_heights_impossible': '{root}/gcp_list.txt: GCP heights up to 12120.0 cannot be metres; if they are feet, set inputs.z_units: ft (or us_ft) so they are converted',
-    'gcp_heights_all_placeholder': '{root}/gcp_list.txt: all 8 GCP heights are 0, which looks like a placeholder, not surveyed heights; give surveyed heights (plan-only georeferencing is not supported)',
     'gcp_duplicate_rows': '{root}/gcp_list.txt: duplicate row(s): line 10 repeats line 5; remove the repeats',
     'gcp_fewer_than_three': '{root}/gcp_list.txt: only 2 GCP(s); georeferencing needs at least 3',
     'gcp_image_name_case_near_miss': "{root}/gcp_list.txt: line 3: image 'IMG_1.JPG' is not in the photo folder, but 'img_1.jpg' is (the names differ only in upper/lower case); write the names exactly as the files are named (4 rows affected)",
@@ -67,7 +66,7 @@ EXPECTED = {
     'checkpoints_in_degrees': '{root}/checkpoints.csv: checkpoint coordinates look like degrees (x 9.5 to 9.5, y 36.901 to 36.903) but EPSG:32632 is in metres; give projected coordinates or declare the geographic CRS',
     'checkpoints_swapped': '{root}/checkpoints.csv: easting and northing look swapped: line 2 has x 4083930.000, y 544530.000, which lies outside EPSG:32632 (Between 6°E and 12°E, northern hemisphere between equator and 84°N, onshore and offshore), but swapped every checkpoint falls inside it',
     'checkpoints_duplicate_id': "{root}/checkpoints.csv: duplicate checkpoint id 'c1' on lines 2 and 4",
-    'checkpoints_heights_placeholder': '{root}/checkpoints.csv: all 3 checkpoint heights are 0, which looks like a placeholder, not surveyed heights; give surveyed heights (plan-only georeferencing is not supported)',
+    'checkpoints_heights_placeholder': '{root}/checkpoints.csv: all 3 checkpoint heights are 0, which looks like a placeholder, not surveyed heights; checkpoints validate heights, so give surveyed heights or leave the checkpoint file out',
     'checkpoints_heights_in_feet': "{root}/checkpoints.csv: checkpoint heights (median 987.5 m) lie above the cameras' EXIF GPS altitude (median 400.0 m); in feet they would be 301 m, below the cameras; set inputs.z_units: ft (or us_ft) so they are converted",
     'raster_missing': '{root}/dem.tif: raster named in inputs.rasters not found',
     'raster_not_a_raster': "{root}/dem.tif: not a readable raster ('{root}/dem.tif' not recognized as being in a supported file format.)",
@@ -119,6 +118,18 @@ def test_valid_site_is_accepted_and_copies_written(tmp_path):
     assert out["gcp"].read_text() == site["gcp"].read_text()
     assert json.loads(out["json"].read_text())["verdict"] == "accepted"
     assert "Verdict: accepted" in out["report"].read_text()
+
+
+def test_placeholder_gcp_heights_are_accepted_for_plan_only_georeferencing(tmp_path):
+    from cases import _rows
+    site = make_site(tmp_path / "site")
+    site["gcp"].write_text(gcp_lines(_rows(lambda i, j, r: r[:2] + [0.0] + r[3:])))
+    found, out = _run(site)
+    assert found.ok and found.facts["plan_only"]
+    warn = [f.line for f in found.of("warning")]
+    assert f"{site['gcp']}: all 8 GCP heights are 0, which looks like a placeholder, not surveyed heights; the block will be " \
+           "georeferenced in plan only and its heights will be relative" in warn
+    assert "plan only" in out["report"].read_text()
 
 
 def test_heights_in_feet_are_converted_when_declared(tmp_path):

@@ -35,6 +35,7 @@ if "georef" in config and "sfm" in config:
             crs=config["site"]["crs"],
             seed=config["seed"],
             attribution=config["site"].get("attribution"),
+            gcp_source=lambda w: georef_gcp_file().replace("{epoch}", w.epoch),
         threads: 2
         log:
             elogfile("georef", "georef_adjust"),

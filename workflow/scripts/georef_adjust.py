@@ -17,4 +17,5 @@ georeference(
     seed=int(rng_for(snakemake.params.seed, "georef").integers(2**31 - 1)),
     out=out,
     attribution=snakemake.params.attribution,
+    gcp_source=snakemake.params.gcp_source,
 )

@@ -57,6 +57,78 @@ def umeyama(a: np.ndarray, b: np.ndarray, with_scale: bool = True, weights: np.n
     return Similarity(s, R, t)
 
 
+def level_rotation(down: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking the direction ``down`` (3,) onto ``(0, 0, -1)``.
+
+    Parameters
+    ----------
+    down : (3,) array
+        A direction in the source frame (need not be unit length).
+
+    Returns
+    -------
+    (3, 3) array
+        Rotation matrix ``R`` with ``R @ down / |down| = (0, 0, -1)``.
+    """
+    d = np.asarray(down, float)
+    d = d / np.linalg.norm(d)
+    target = np.array([0.0, 0.0, -1.0])
+    v = np.cross(d, target)
+    c = float(d @ target)
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1.0 + c)
+
+
+def plan_similarity(a: np.ndarray, b_xy: np.ndarray, down: np.ndarray, z0: float = 0.0) -> Similarity:
+    """Similarity from plan coordinates only: levelled by ``down``, fitted in x and y. O(n).
+
+    For ground control whose heights are unknown (placeholders): the model is first
+    rotated so that ``down`` points to -z, then scale, rotation about the vertical and the
+    horizontal shift are fitted to the points' plan coordinates by least squares (2-D
+    Procrustes); the vertical shift puts the points' median height at ``z0``. Heights of
+    the result are therefore relative, with a tilt as good as ``down``.
+
+    Parameters
+    ----------
+    a : (n, 3) array
+        Model points, n >= 2 and not all at one plan position.
+    b_xy : (n, 2) array
+        Their plan coordinates in the target frame (m).
+    down : (3,) array
+        The vertical (downwards) direction in the model frame.
+    z0 : float
+        Height given to the points' median (the placeholder height of the file).
+
+    Returns
+    -------
+    Similarity
+        ``b = scale * R @ a + t``.
+    """
+    a, b = np.asarray(a, float), np.asarray(b_xy, float)
+    if len(a) < 2:
+        raise InputError(f"a plan-only similarity needs at least 2 points, got {len(a)}")
+    R0 = level_rotation(down)
+    al = a @ R0.T
+    ma, mb = al[:, :2].mean(axis=0), b.mean(axis=0)
+    A, B = al[:, :2] - ma, b - mb
+    var_a = float(np.sum(A * A))
+    if var_a <= 0 or float(np.sum(B * B)) <= 0:
+        raise InputError("the GCPs share one plan position; a plan-only similarity is undetermined")
+    U, D, Vt = np.linalg.svd(B.T @ A)
+    E = np.diag([1.0, np.sign(np.linalg.det(U) * np.linalg.det(Vt)) or 1.0])
+    R2 = U @ E @ Vt
+    s = float(np.trace(np.diag(D) @ E) / var_a)
+    Rz = np.eye(3)
+    Rz[:2, :2] = R2
+    R = Rz @ R0
+    t = np.zeros(3)
+    t[:2] = mb - s * R2 @ ma
+    t[2] = z0 - s * float(np.median(al[:, 2]))
+    return Similarity(s, R, t)
+
+
 def horn_quaternion(a: np.ndarray, b: np.ndarray) -> Similarity:
     """Horn's (1987) quaternion absolute orientation, rotation and translation only.
 

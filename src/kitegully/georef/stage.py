@@ -217,7 +217,7 @@ class GeorefParams:
 
 def georeference(
     model_dir: str | Path, image_info_json: str | Path, gcp_file: str | Path, sfm_frame: str, params: GeorefParams,
-    crs: str, seed: int, out: Mapping[str, str | Path], attribution: str | None = None,
+    crs: str, seed: int, out: Mapping[str, str | Path], attribution: str | None = None, gcp_source: str | None = None,
 ) -> dict:
     """Georeference the SfM model with the GCPs and write the stage's products.
 
@@ -242,6 +242,9 @@ def georeference(
         cameras, cloud, figure.
     attribution : str, optional
         Data attribution printed on the figure.
+    gcp_source : str, optional
+        The GCP file as the user gave it (``gcp_file`` may be its checked copy), named in
+        error messages.
 
     Returns
     -------
@@ -268,7 +271,7 @@ def georeference(
         rec, params.max_tie_points, seed, params.tie_grid,
     )
     rows = {name.split("/")[-1]: k for k, name in enumerate(index.image_names)}
-    res = georeference_block(block, gcps, infos, rows, params, sfm_frame, tape)
+    res = georeference_block(block, gcps, infos, rows, params, sfm_frame, tape, str(gcp_source or gcp_file))
 
     rec = export.write_model(rec, res.block, index, res.offset, out["model"])
     export.write_transform(out["transform"], crs, res.offset, res.transform.as_dict(), res.report)

@@ -30,9 +30,14 @@ def check_heights(z: np.ndarray, units: str, photos: list[Photo], found: Finding
     if np.nanmax(np.abs(z_m)) > MAX_HEIGHT_M:
         found.error(src, f"{what} heights up to {np.nanmax(z):.1f} cannot be {units_name(units)}; if they are feet, {hint}")
         return False
-    if len(z) >= 2 and np.ptp(z) == 0.0:
+    if heights_are_placeholders(z):
+        if what == "GCP":
+            found.warning(src, f"all {len(z)} GCP heights are {z[0]:g}, which looks like a placeholder, not surveyed "
+                               "heights; the block will be georeferenced in plan only and its heights will be relative")
+            found.facts["plan_only"] = True
+            return True
         found.error(src, f"all {len(z)} {what} heights are {z[0]:g}, which looks like a placeholder, not surveyed heights; "
-                         "give surveyed heights (plan-only georeferencing is not supported)")
+                         "checkpoints validate heights, so give surveyed heights or leave the checkpoint file out")
         return False
     alt = np.array([p.alt for p in photos], float)
     alt = alt[np.isfinite(alt)]
@@ -46,6 +51,22 @@ def check_heights(z: np.ndarray, units: str, photos: list[Photo], found: Finding
             found.error(src, f"{what} heights (median {med:.1f} m) lie above the cameras' EXIF GPS altitude (median {cam:.1f} m); {tail}")
             ok = False
     return ok
+
+
+def heights_are_placeholders(z: np.ndarray) -> bool:
+    """True when two or more heights are all one value (0.0, -9999, ...): not surveyed heights.
+
+    Parameters
+    ----------
+    z : array
+        Heights as read from a control file (one per row).
+
+    Returns
+    -------
+    bool
+    """
+    z = np.asarray(z, float)
+    return len(z) >= 2 and bool(np.all(np.isfinite(z))) and float(np.ptp(z)) == 0.0
 
 
 def units_name(units: str) -> str:
