@@ -95,3 +95,45 @@ def test_only_the_products_a_site_makes_are_listed(site):
     ids = [ml.findtext("id") for ml in ET.parse(qgs).getroot().iter("maplayer")]
     assert ids == ["gully_network", "gully_polygons"]
     assert all(p.exists() for p in layer_paths(qgs))
+
+
+def test_further_products_are_listed_unticked_with_their_styles(site, tmp_path):
+    import laspy
+
+    root, products = site
+    x0, y0 = GRID.x0, GRID.y0
+    dod = np.sin(np.arange(400)[None, :] / 30.0) * np.ones((300, 1), np.float32) - 0.2
+    write_raster(root / "change" / "dod.tif", dod.astype(np.float32), GRID)
+    write_raster(root / "change" / "stable_ground.tif", (dod > 0).astype(np.uint8), GRID, nodata=255)
+    write_vector(gpd.GeoDataFrame({"width_m": [3.0]}, geometry=[LineString([(x0 + 30, y0 - 30), (x0 + 40, y0 - 35)])], crs=CRS),
+                 root / "polygons" / "cross_sections.gpkg")
+    write_vector(gpd.GeoDataFrame({"area_m2": [50.0]}, geometry=[Polygon([(x0 + 20, y0 - 20), (x0 + 40, y0 - 20), (x0 + 40, y0 - 40)])], crs=CRS),
+                 root / "polygons" / "gully_polygons_t0.5.gpkg")
+    header = laspy.LasHeader(point_format=3, version="1.4")
+    header.offsets, header.scales = [x0, y0 - 150, 0.0], [0.001] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = x0 + np.arange(10.0), y0 - np.arange(10.0), 120 + np.zeros(10)
+    (root / "georef").mkdir(parents=True, exist_ok=True)
+    las.write(root / "georef" / "sparse_cloud.laz")
+    further = {"dod": root / "change" / "dod.tif", "dod_thresholded_probabilistic": root / "change" / "dod.tif",
+               "stable_ground": root / "change" / "stable_ground.tif", "cross_sections": root / "polygons" / "cross_sections.gpkg",
+               "hoefle_polygons_t0.5": root / "polygons" / "gully_polygons_t0.5.gpkg",
+               "sparse_cloud": root / "georef" / "sparse_cloud.laz", "orthophoto_epoch2": products["orthophoto"]}
+    qgs = root / "demo.qgs"
+    write_qgis_project(qgs, "demo", CRS, {**products, **further}, checkpoint_gpkg=root / "report" / "cp.gpkg")
+    doc = ET.parse(qgs).getroot()
+    layers = {ml.findtext("id"): ml for ml in doc.iter("maplayer")}
+    assert list(layers)[7:] == list(further)
+    ticked = {n.get("id"): n.get("checked") for n in doc.iter("layer-tree-layer")}
+    assert all(ticked[k] == "Qt::Unchecked" for k in further) and ticked["dsm"] == "Qt::Checked"
+    assert all(p.exists() for p in layer_paths(qgs))
+    # the DoD on a diverging ramp centred on 0: symmetric limits, white-ish middle
+    items = layers["dod"].findall("pipe/rasterrenderer/rastershader/colorrampshader/item")
+    lo, hi = float(items[0].get("value")), float(items[-1].get("value"))
+    assert lo == -hi and hi > 0.5 and float(items[4].get("value")) == 0.0
+    assert "Höfle" in layers["hoefle_polygons_t0.5"].findtext("layername")
+    assert layers["sparse_cloud"].get("type") == "point-cloud" and layers["sparse_cloud"].findtext("provider") == "pdal"
+    assert layers["stable_ground"].find("pipe/rasterrenderer").get("type") == "paletted"
+    assert layers["cross_sections"].find("renderer-v2/symbols/symbol").get("type") == "line"
+    with pytest.raises(ValueError, match="unknown product key"):
+        write_qgis_project(qgs, "demo", CRS, {**products, "mystery": root / "change" / "dod.tif"}, checkpoint_gpkg=root / "report" / "cp.gpkg")

@@ -5,18 +5,50 @@
 # first survey (its paths are those of a one-epoch site).
 
 _DEFINED_RULES = {r.name for r in workflow.rules}
-_QGIS_PRODUCTS = {
-    key: expand(getattr(getattr(rules, rule).output, name), epoch=epoch_dir(1))[0]
-    for key, rule, name in (
-        ("dsm", "dense_match", "dsm"),
-        ("orthophoto", "dense_match", "orthophoto"),
-        ("gully_network", "gully_map", "network"),
-        ("gully_polygons", "gully_map", "polygons"),
-        ("bare_soil", "obia_kite_scale", "bare_soil"),
-        ("checkpoint_errors", "validate_checkpoints", "errors"),
-    )
-    if rule in _DEFINED_RULES and (rule != "obia_kite_scale" or config["obia"]["kite_scale"]["enabled"])
-}
+
+
+def _qgis_products():
+    """Product key -> path of every map product the site's rules make (epoch 1, then epoch 2)."""
+    out = {}
+
+    def add(key, rule, name, n=1):
+        if rule in _DEFINED_RULES:
+            out[key] = expand(getattr(getattr(rules, rule).output, name), epoch=epoch_dir(n))[0]
+
+    add("dsm", "dense_match", "dsm")
+    add("orthophoto", "dense_match", "orthophoto")
+    add("gully_network", "gully_map", "network")
+    add("gully_polygons", "gully_map", "polygons")
+    if "obia" in config and config["obia"]["kite_scale"]["enabled"]:
+        add("bare_soil", "obia_kite_scale", "bare_soil")
+        add("bare_soil_polygons", "obia_kite_scale", "polygons")
+    add("checkpoint_errors", "validate_checkpoints", "errors")
+    # further products, unticked in the project: every other map the stages write
+    add("gully_depth", "gully_map", "depth")
+    for n in SURVEY_EPOCHS:
+        sfx = "" if n == 1 else f"_epoch{n}"
+        if n != 1:
+            add(f"dsm{sfx}", "dense_match", "dsm", n)
+            add(f"orthophoto{sfx}", "dense_match", "orthophoto", n)
+        add(f"camera_positions{sfx}", "georef_adjust", "cameras", n)
+        add(f"sparse_cloud{sfx}", "georef_adjust", "cloud", n)
+    if "polygons_map" in _DEFINED_RULES:
+        for path in rules.polygons_map.output.polygons:
+            out["hoefle_polygons_t" + Path(path).stem.removeprefix("gully_polygons_t")] = path
+        for key, name in (("hoefle_dem", "dem"), ("tci", "tci"), ("fill_depth", "fill_depth"), ("breaklines", "breaklines"),
+                          ("thalweg", "thalweg"), ("transects", "transects"), ("medial_axes", "axes"),
+                          ("cross_sections", "sections")):
+            add(key, "polygons_map", name)
+    if "change_detect" in _DEFINED_RULES:
+        for key, name in (("dod", "dod"), ("sigma_dod", "sigma_dod"), ("stable_ground", "stable")):
+            add(key, "change_detect", name)
+        for name in rules.change_detect.output.keys():
+            if name.startswith("thresholded_"):
+                add("dod_" + name, "change_detect", name)
+    return out
+
+
+_QGIS_PRODUCTS = _qgis_products()
 
 if _QGIS_PRODUCTS:
 

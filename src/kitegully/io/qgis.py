@@ -171,14 +171,14 @@ def dsm_layers(path: Path, project_dir: Path, crs: str, azimuth_deg: float, alti
     return [Layer("hillshade", "Hillshade of the DSM", path, "raster", hs_ml), dsm]
 
 
-def orthophoto_layer(path: Path, project_dir: Path, crs: str) -> Layer:
+def orthophoto_layer(path: Path, project_dir: Path, crs: str, key: str = "orthophoto", name: str = "Orthophoto") -> Layer:
     """True-colour orthophoto (bands 1–3, 0–255); its mask band hides cells no image sees."""
     extent, src = _raster_extent(path)
     with src:
         count = src.count
     if count < 3:
         raise InputError(f"{path}: orthophoto needs 3 bands (R, G, B) for the QGIS project, has {count}")
-    ml = _maplayer("orthophoto", "Orthophoto", _rel(path, project_dir), "raster", "gdal", crs, extent)
+    ml = _maplayer(key, name, _rel(path, project_dir), "raster", "gdal", crs, extent)
     r = ET.Element("rasterrenderer", dict(type="multibandcolor", redBand="1", greenBand="2", blueBand="3",
                                          opacity="1", alphaBand="-1", nodataColor=""))
     _sub(r, "rasterTransparency")
@@ -188,7 +188,7 @@ def orthophoto_layer(path: Path, project_dir: Path, crs: str) -> Layer:
         _sub(ce, "maxValue", "255")
         _sub(ce, "algorithm", "StretchToMinimumMaximum")
     _raster_pipe(ml, r)
-    return Layer("orthophoto", "Orthophoto", path, "raster", ml)
+    return Layer(key, name, path, "raster", ml)
 
 
 def bare_soil_layer(path: Path, project_dir: Path, crs: str) -> Layer:
@@ -272,6 +272,139 @@ def checkpoint_errors_layer(path: Path, project_dir: Path, crs: str, limit_m: fl
     return Layer("checkpoint_errors", "Checkpoint errors (DSM − checkpoint, m)", path, "vector", ml)
 
 
+@dataclass(frozen=True)
+class ProductStyle:
+    """How a further product of the site is shown.
+
+    Attributes
+    ----------
+    name : str
+        Layer name.
+    style : str
+        ``ramp`` (continuous raster on a colour map), ``diverging`` (continuous raster on a
+        colour map centred on 0, symmetric limits), ``mask`` (0/1 raster, 1 coloured),
+        ``rgb`` (3-band image), ``line``, ``polygon``, ``point`` (vectors),
+        ``pointcloud`` (LAS/LAZ, QGIS's PDAL provider).
+    colour : str
+        Matplotlib colour map (rasters) or ``r,g,b,a`` (vectors, masks).
+    """
+
+    name: str
+    style: str
+    colour: str = "8,81,156,255"
+
+
+def product_style(key: str) -> ProductStyle:
+    """The style of a further product key (see :data:`FURTHER_PRODUCTS`); ``KeyError`` if unknown."""
+    if key.startswith("hoefle_polygons_t"):
+        return ProductStyle(f"Höfle gully polygons, fill depth > {key.removeprefix('hoefle_polygons_t')} m", "polygon",
+                            "240,140,60,90")
+    if key.startswith("dod_thresholded_"):
+        return ProductStyle(f"DoD above the {key.removeprefix('dod_thresholded_')} threshold (m)", "diverging", "RdBu")
+    return FURTHER_PRODUCTS[key]
+
+
+#: Further products shown (unticked) below the main ones: key -> style. Epoch-2 products
+#: carry the suffix ``_epoch2``; per-threshold products are styled by :func:`product_style`.
+FURTHER_PRODUCTS: dict[str, ProductStyle] = {
+    "dsm_epoch2": ProductStyle("DSM epoch 2 (elevation, m)", "ramp", "terrain"),
+    "orthophoto_epoch2": ProductStyle("Orthophoto epoch 2", "rgb"),
+    "gully_depth": ProductStyle("Gully depth map (m below the smoothed surface)", "ramp", "Blues"),
+    "bare_soil_polygons": ProductStyle("Bare soil polygons (OBIA)", "polygon", "215,48,31,80"),
+    "camera_positions": ProductStyle("Camera positions (georeferenced)", "point", "20,20,20,255"),
+    "camera_positions_epoch2": ProductStyle("Camera positions epoch 2", "point", "90,90,90,255"),
+    "sparse_cloud": ProductStyle("Sparse point cloud (SfM tie points)", "pointcloud"),
+    "sparse_cloud_epoch2": ProductStyle("Sparse point cloud epoch 2", "pointcloud"),
+    "hoefle_dem": ProductStyle("Höfle DEM (minimum-z, m)", "ramp", "terrain"),
+    "tci": ProductStyle("Topographic convergence index ln(a / tan b)", "ramp", "viridis"),
+    "fill_depth": ProductStyle("Fill depth of the conditioned DEM (m)", "ramp", "Blues"),
+    "breaklines": ProductStyle("Breaklines (upper gully edges)", "line", "120,60,20,255"),
+    "thalweg": ProductStyle("Thalweg (TCI skeleton)", "line", "30,120,200,255"),
+    "transects": ProductStyle("Transects", "line", "150,150,150,255"),
+    "medial_axes": ProductStyle("Gully medial axes", "line", "60,60,160,255"),
+    "cross_sections": ProductStyle("Cross-sections (width, depth, area)", "line", "200,30,120,255"),
+    "dod": ProductStyle("DEM of difference, epoch 2 - epoch 1 (m)", "diverging", "RdBu"),
+    "sigma_dod": ProductStyle("Uncertainty of the DoD, 1 sd (m)", "ramp", "magma_r"),
+    "stable_ground": ProductStyle("Stable ground used for co-registration", "mask", "120,120,120,110"),
+}
+
+
+def further_layer(key: str, path: Path, project_dir: Path, crs: str) -> Layer:
+    """A layer of a further product, styled as :func:`product_style` says (unticked)."""
+    st = product_style(key)
+    if st.style in ("ramp", "diverging"):
+        return _ramp_raster_layer(path, project_dir, crs, key, st.name, st.colour, st.style == "diverging")
+    if st.style == "mask":
+        extent, src = _raster_extent(path)
+        src.close()
+        ml = _maplayer(key, st.name, _rel(path, project_dir), "raster", "gdal", crs, extent)
+        r = ET.Element("rasterrenderer", dict(type="paletted", band="1", opacity="1", alphaBand="-1", nodataColor=""))
+        _sub(r, "rasterTransparency")
+        pal = _sub(r, "colorPalette")
+        rgba = st.colour.split(",")
+        _sub(pal, "paletteEntry", value="0", color="#ffffff", alpha="0", label="no")
+        _sub(pal, "paletteEntry", value="1", color="#{:02x}{:02x}{:02x}".format(*map(int, rgba[:3])), alpha=rgba[3], label="yes")
+        _raster_pipe(ml, r)
+        return Layer(key, st.name, path, "raster", ml, visible=False)
+    if st.style == "rgb":
+        lay = orthophoto_layer(path, project_dir, crs, key=key, name=st.name)
+        return Layer(key, st.name, path, "raster", lay.element, visible=False)
+    if st.style == "pointcloud":
+        ml = _maplayer(key, st.name, _rel(path, project_dir), "point-cloud", "pdal", crs, _cloud_extent(path))
+        return Layer(key, st.name, path, "pointcloud", ml, visible=False)
+    geometry = {"line": "Line", "polygon": "Polygon", "point": "Point"}[st.style]
+    ml, _ = _vector_layer(path, project_dir, crs, key, st.name, geometry)
+    rend = _sub(ml, "renderer-v2", type="singleSymbol", symbollevels="0", enableorderby="0", forceraster="0")
+    props = {"line": {"line_color": st.colour, "line_width": "0.4", "line_width_unit": "MM", "line_style": "solid"},
+             "polygon": {"color": st.colour, "style": "solid", "outline_color": st.colour.rsplit(",", 1)[0] + ",255",
+                         "outline_width": "0.3", "outline_width_unit": "MM", "outline_style": "solid"},
+             "point": {"name": "circle", "color": st.colour, "size": "1.8", "size_unit": "MM"}}[st.style]
+    _symbol(_sub(rend, "symbols"), {"polygon": "fill", "point": "marker"}.get(st.style, "line"), "0", props)
+    return Layer(key, st.name, path, "vector", ml, visible=False)
+
+
+def _cloud_extent(path: Path) -> list[float]:
+    import laspy
+
+    try:
+        with laspy.open(path) as fh:
+            h = fh.header
+            return [float(h.mins[0]), float(h.mins[1]), float(h.maxs[0]), float(h.maxs[1])]
+    except Exception as exc:  # laspy raises LaspyException and OSError subclasses
+        raise InputError(f"{path}: cannot open point cloud for the QGIS project ({exc})") from None
+
+
+def _ramp_raster_layer(path: Path, project_dir: Path, crs: str, key: str, name: str, cmap_name: str,
+                       centred: bool) -> Layer:
+    """Single-band raster on a colour map over its 2-98 % range (centred: symmetric about 0)."""
+    extent, src = _raster_extent(path)
+    with src:
+        step = max(1, int(np.ceil(max(src.width, src.height) / 1000)))
+        z = src.read(1, out_shape=(int(np.ceil(src.height / step)), int(np.ceil(src.width / step))), masked=True)
+    z = np.asarray(z.filled(np.nan), float)
+    finite = z[np.isfinite(z)]
+    if centred:
+        m = float(np.percentile(np.abs(finite), 98)) if finite.size else 1.0
+        lo, hi = -(m or 1.0), (m or 1.0)
+    else:
+        lo, hi = np.percentile(finite, [2, 98]) if finite.size else (0.0, 1.0)
+        hi = hi if hi > lo else lo + 1.0
+    ml = _maplayer(key, name, _rel(path, project_dir), "raster", "gdal", crs, extent)
+    r = ET.Element("rasterrenderer", dict(type="singlebandpseudocolor", band="1", opacity="1", alphaBand="-1",
+                                         classificationMin=repr(float(lo)), classificationMax=repr(float(hi)),
+                                         nodataColor=""))
+    _sub(r, "rasterTransparency")
+    shader = _sub(_sub(r, "rastershader"), "colorrampshader", colorRampType="INTERPOLATED", classificationMode="1",
+                  clip="0", minimumValue=repr(float(lo)), maximumValue=repr(float(hi)), labelPrecision="2")
+    cmap = matplotlib.colormaps[cmap_name]
+    for t in np.linspace(0.0, 1.0, 9):
+        v = lo + t * (hi - lo)
+        # RdBu runs red -> blue; erosion (negative) red, deposition blue as in the change figures
+        _sub(shader, "item", alpha="255", value=repr(float(v)), label=f"{v:.2f}", color=_hex(cmap(t)))
+    _raster_pipe(ml, r)
+    return Layer(key, name, path, "raster", ml, visible=False)
+
+
 def checkpoint_points(errors_csv: str | Path, crs: str, out_gpkg: str | Path) -> Path:
     """Checkpoint error table (``id, x_m, y_m, z_ref_m, z_model_m, error_m``) as a GeoPackage of points."""
     import geopandas as gpd
@@ -304,7 +437,9 @@ def write_qgis_project(project: str | Path, site: str, crs: str, products: Mappi
         Site name (project title) and its projected CRS (project and layer CRS).
     products
         Any of ``dsm``, ``orthophoto``, ``gully_network``, ``gully_polygons``, ``bare_soil``,
-        ``checkpoint_errors`` (the CSV table); missing keys are layers the site does not make.
+        ``checkpoint_errors`` (the CSV table), shown ticked; and any further product of
+        :func:`product_style` (epoch 2, polygons stage, change stage, cameras, clouds), shown
+        unticked below them. Missing keys are layers the site does not make.
     error_limit_m
         Colour limit of the checkpoint errors (``validate.error_limit_m``).
     azimuth_deg, altitude_deg
@@ -313,12 +448,19 @@ def write_qgis_project(project: str | Path, site: str, crs: str, products: Mappi
         Where the checkpoint errors are written as points (needed with ``checkpoint_errors``).
 
     Layers from top to bottom: checkpoint errors, gully network, gully polygons, bare soil,
-    hillshade, DSM, orthophoto. Cost: one decimated read of the DSM (≤ 1000² cells).
+    hillshade, DSM, orthophoto, then the further products in the order given. Cost: one decimated read of the DSM (≤ 1000² cells).
     """
     project = Path(project)
     pdir = project.parent
     pdir.mkdir(parents=True, exist_ok=True)
-    unknown = set(products) - {"dsm", "orthophoto", "gully_network", "gully_polygons", "bare_soil", "checkpoint_errors"}
+    main = {"dsm", "orthophoto", "gully_network", "gully_polygons", "bare_soil", "checkpoint_errors"}
+    further = [k for k in products if k not in main]
+    unknown = []
+    for k in further:
+        try:
+            product_style(k)
+        except KeyError:
+            unknown.append(k)
     if unknown:
         raise ValueError(f"unknown product key(s) for the QGIS project: {sorted(unknown)}")
     layers: list[Layer] = []
@@ -337,6 +479,8 @@ def write_qgis_project(project: str | Path, site: str, crs: str, products: Mappi
         layers.extend(dsm_layers(Path(products["dsm"]), pdir, crs, azimuth_deg, altitude_deg))
     if "orthophoto" in products:
         layers.append(orthophoto_layer(Path(products["orthophoto"]), pdir, crs))
+    for k in further:
+        layers.append(further_layer(k, Path(products[k]), pdir, crs))
     if not layers:
         raise ValueError(f"site {site}: no product to put in the QGIS project")
 
