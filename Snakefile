@@ -7,6 +7,7 @@
 # config/config.yaml names the default site file; a site file given with --configfile
 # replaces it. Every loaded file is validated against config/schema before any job runs.
 
+import sys
 from pathlib import Path
 
 from kitegully import InputError
@@ -55,3 +56,12 @@ rule all:
     input:
         all_targets(),
     default_target: True
+
+
+onerror:
+    # Snakemake ends a failed run with its own "Error in rule" blocks: end the console with
+    # each failed job's last log line (for bad input, the one sentence saying what is wrong).
+    from kitegully.logs import failed_job_lines
+
+    for _line in failed_job_lines(log):
+        print(_line, file=sys.stderr)

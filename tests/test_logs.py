@@ -32,3 +32,15 @@ def test_a_bug_keeps_its_traceback(tmp_path):
     assert "Traceback" in proc.stderr and "KeyError: 'bug'" in proc.stderr
     text = (tmp_path / "r.log").read_text()
     assert "Traceback" in text and "KeyError: 'bug'" in text
+
+
+def test_failed_job_lines_name_each_failed_rule_and_its_last_log_line(tmp_path):
+    from kitegully.logs import failed_job_lines
+
+    good = tmp_path / "a.log"
+    good.write_text("2026 INFO start\n/data/gcp.txt: heights look like feet\n")
+    main = tmp_path / "snakemake.log"
+    main.write_text(f"Error in rule check_inputs:\n    jobid: 1\n    log: {good} (check log file(s) for error details)\n"
+                    f"[date]\nError in rule sfm:\n    log: {tmp_path / 'absent.log'}\n")
+    assert failed_job_lines([str(main)]) == ["rule check_inputs: /data/gcp.txt: heights look like feet"]
+    assert failed_job_lines(tmp_path / "none.log") == []

@@ -52,3 +52,48 @@ def setup_script_logging(log_path: str | Path | None, name: str = "kitegully") -
     logging.captureWarnings(True)
     sys.excepthook = _input_error_hook
     return logging.getLogger(name)
+
+
+def failed_job_lines(snakemake_log: str | Path | list) -> list[str]:
+    """The last line of each failed job's log, as ``rule <name>: <line>``, from Snakemake's main log.
+
+    Snakemake ends a failed run with its own "Error in rule" blocks; the workflow's
+    ``onerror`` handler prints these lines after them, so the console ends with the
+    sentence that says what is wrong (an :class:`InputError` is the last line of its
+    rule's log; a bug's last line is its exception).
+
+    Parameters
+    ----------
+    snakemake_log : path or list of paths
+        Snakemake's main log file(s) of the run (``onerror``'s ``log``: a list in Snakemake 9).
+
+    Returns
+    -------
+    list of str
+        One line per failed job whose log file exists and is not empty.
+    """
+    import re
+
+    paths = [snakemake_log] if isinstance(snakemake_log, (str, Path)) else list(snakemake_log or [])
+    text = ""
+    for p in paths:
+        try:
+            text += Path(p).read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            continue
+    out = []
+    for block in re.split(r"(?m)^.*Error in rule ", text)[1:]:
+        rule = block.split(":", 1)[0].strip()
+        m = re.search(r"(?m)^\s*log:\s*(\S+)", block)
+        if not m:
+            continue
+        path = Path(m.group(1))
+        try:
+            lines = [ln for ln in path.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
+        except OSError:
+            continue
+        if lines:
+            line = f"rule {rule}: {lines[-1].strip()}"
+            if line not in out:
+                out.append(line)
+    return out

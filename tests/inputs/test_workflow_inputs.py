@@ -41,6 +41,10 @@ def test_bad_gcp_file_stops_at_check_inputs_with_one_line(tmp_path):
     assert log.read_text().splitlines()[-1] == line
     assert line in proc.stderr and "Traceback" not in proc.stderr
     assert "Error in rule check_inputs" in proc.stderr
+    # onerror repeats it after Snakemake's "Error in rule" block: only Snakemake's closing summary follows
+    tail = proc.stderr.split("Error in rule check_inputs")[-1].splitlines()
+    k = tail.index(f"rule check_inputs: {line}")
+    assert all(ln.startswith(("Complete log", "Elapsed time", "WorkflowError", "At least one job")) for ln in tail[k + 1:] if ln.strip())
     assert not (results / "mini" / "sfm").exists()  # SfM never started
     assert elapsed < 90, elapsed
 
