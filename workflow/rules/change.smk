@@ -15,6 +15,7 @@ if "change" in config:
                                 "with twin.epoch2 and the dense stage; other sites give their epochs as DEM files")
         CHANGE["epochs"] = [
             {"name": f"epoch{n}", "dem": epoch_result("dense", "dsm.tif", n), "nodata": None,
+             "correlation": epoch_result("dense", "correlation.tif", n),
              "accuracy": {"checkpoints": epoch_result("inputs", "checkpoints.csv", n)}}
             for n in SURVEY_EPOCHS
         ]
@@ -49,6 +50,8 @@ if "change" in config:
             for k in ("error_raster", "checkpoints"):
                 if e["accuracy"].get(k):
                     files[f"{k}{i + 1}"] = e["accuracy"][k]
+            if e.get("correlation"):
+                files[f"correlation{i + 1}"] = e["correlation"]
         files.update({f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]})
         if CHANGE["heads_file"]:
             files["heads"] = CHANGE["heads_file"]
@@ -77,7 +80,7 @@ if "change" in config:
             epochs=CHANGE["epochs"],
             masks=CHANGE["masks"],
             heads_file=CHANGE["heads_file"],
-            methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts")},
+            methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "quality") if k in CHANGE},
             figure=CHANGE["figure"],
             seed=config["seed"],
             crs=config["site"]["crs"],

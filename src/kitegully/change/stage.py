@@ -16,7 +16,7 @@ from kitegully import InputError
 from kitegully.change import budget as bg
 from kitegully.change import plots, uncertainty as unc
 from kitegully.change.coregister import above_ground, coregister, nmad
-from kitegully.change.dod import dem_of_difference, load_epoch, on_common_grid
+from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
 from kitegully.change.headcuts import measure_headcut_retreat
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
 from kitegully.io.raster import Raster
@@ -72,7 +72,8 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     grid, z1, _ = on_common_grid(e1, e2)
     groups = bg.mask_groups(masks, grid)
     unstable = bg.unstable_union(masks, groups, z1.shape)
-    stable = np.isfinite(z1) & ~unstable
+    voids = matching_voids((e1, e2), grid, params.min_correlation)
+    stable = np.isfinite(z1) & ~unstable & ~voids
     if params.stable_max_object_height_m is not None:
         objects = above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m)
         log.info("above-ground objects (> %.2f m): %.1f %% of the grid, left out of stable ground",
@@ -81,6 +82,8 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     log.info("stable ground: %.1f %% of the common grid", 100.0 * stable.mean())
     z2, coreg = coregister(z1, e2.dem, grid, stable, params)
     dod = dem_of_difference(z1, z2)
+    n_void = int((voids & np.isfinite(dod)).sum())
+    dod[voids] = np.nan
     stable &= np.isfinite(dod)
     s1, i1 = unc.epoch_sigma(e1, grid)
     s2, i2 = unc.epoch_sigma(e2, grid)
@@ -119,7 +122,9 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
     write_table(budget, out["budget"])
     write_table(coreg.table(), out["coregistration"])
-    write_table(unc.sigma_table([i1, i2], sigma), out["sigma"])
+    sig_tab = unc.sigma_table([i1, i2], sigma)
+    sig_tab["void_area_m2"] = np.where(sig_tab["epoch"] == "DoD", n_void * grid.cell**2, np.nan)  # low-NCC cells left out
+    write_table(sig_tab, out["sigma"])
     write_table(unc.threshold_table(params, sigma), out["thresholds"])
     if heads_path:
         lowering = max(params.headcut_min_incision_m, unc.z_of_confidence(params.confidence) * float(np.nanmedian(sigma)))
@@ -138,6 +143,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     site = budget[(budget["mask"] == "site") & (budget["method"] == "raw")].iloc[0]
     summary = dict(dx_m=coreg.dx_m, dy_m=coreg.dy_m, dz_m=coreg.dz_m, stable_nmad_before_m=coreg.before["nmad_m"],
                    stable_nmad_after_m=coreg.after["nmad_m"], sigma_dod_m=float(np.nanmedian(sigma)),
-                   net_m3=float(site["net_m3"]), net_sd_m3=float(site["net_sd_m3"]), seconds=time.perf_counter() - t0)
+                   net_m3=float(site["net_m3"]), net_sd_m3=float(site["net_sd_m3"]), void_area_m2=n_void * grid.cell**2,
+                   seconds=time.perf_counter() - t0)
     log.info("change detected in %.1f s: whole-site net %.1f ± %.1f m³", summary["seconds"], summary["net_m3"], summary["net_sd_m3"])
     return summary
