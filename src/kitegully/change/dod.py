@@ -103,12 +103,15 @@ def load_epoch(spec: Mapping[str, Any], key: str, site_crs: str | None = None) -
     return Epoch(str(spec.get("name", key)), Raster(data, r.grid), acc, str(path), corr)
 
 
-def matching_voids(epochs: tuple[Epoch, ...], grid: GridSpec, min_correlation: float | None) -> np.ndarray:
+def matching_voids(epochs: tuple[Epoch, ...], grid: GridSpec, min_correlation: float | None,
+                   margin_m: float = 0.0, valid: np.ndarray | None = None) -> np.ndarray:
     """Cells of ``grid`` where an epoch's dense-matching correlation is below ``min_correlation``.
 
     Those are not measurements (see :class:`~kitegully.change.params.ChangeParams`); an epoch
     without a correlation raster, or ``min_correlation`` None, adds no void. Correlation is
-    sampled at the nearest cell (an NCC is not interpolated across a void edge). O(cells).
+    sampled at the nearest cell (an NCC is not interpolated across a void edge). The voids
+    and the edges of ``valid`` (cells where both DEMs hold an elevation) then grow by
+    ``margin_m`` (Euclidean distance between cell centres). O(cells).
     """
     out = np.zeros((grid.height, grid.width), bool)
     if min_correlation is None:
@@ -126,6 +129,10 @@ def matching_voids(epochs: tuple[Epoch, ...], grid: GridSpec, min_correlation: f
         low = inside & ~(c >= min_correlation)  # NaN correlation (unmatched) counts as low
         log.info("%s: %.2f %% of the common grid matched below NCC %.2f (voids)", e.name, 100.0 * low.mean(), min_correlation)
         out |= low
+    if margin_m > 0:
+        holes = out | (~valid if valid is not None else False)
+        if holes.any():
+            out |= ndimage.distance_transform_edt(~holes) * grid.cell <= margin_m + 1e-6
     return out
 
 

@@ -87,6 +87,12 @@ class ChangeParams:
         so 0.5 is SNR = 1, where the correlation peak is as much noise as terrain and a
         wrong peak (a gross error of metres) becomes likely. An epoch without a correlation
         raster has no voids; None = keep every cell.
+    void_margin_m : float
+        Voids (and the edges of each DEM's valid area) grow by this distance (m): a cell
+        whose matching window reaches a failed match shares its image pixels, and its own
+        correlation can pass while its elevation does not. [I] the dense matcher's window
+        half-width (``dense.matching.window_half_cells`` × cell: 2 × 0.2 = 0.4 m on the
+        twin); 0 = no margin.
     seed : int
         Master seed (variogram sampling).
     """
@@ -116,6 +122,7 @@ class ChangeParams:
     headcut_incision_sigma_m: float = 5.0
     headcut_min_incision_m: float = 0.25
     min_correlation: float | None = 0.5
+    void_margin_m: float = 0.0
     seed: int = 0
 
     @classmethod
@@ -134,7 +141,8 @@ class ChangeParams:
         coh = config_section(t["coherence"], "change.thresholds.coherence", ("window_cells", "n_low", "n_high", "p_low", "p_high"))
         b = config_section(sec["budget"], "change.budget", ("variogram_max_lag_m", "variogram_bins", "variogram_samples"))
         h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"))
-        q = config_section(sec.get("quality") or {"min_correlation": cls.min_correlation}, "change.quality", ("min_correlation",))
+        q = config_section(sec.get("quality") or {"min_correlation": cls.min_correlation, "void_margin_m": cls.void_margin_m},
+                           "change.quality", ("min_correlation", "void_margin_m"))
         return cls(
             coreg_enabled=bool(c["enabled"]), coreg_max_iterations=int(c["max_iterations"]),
             coreg_tolerance_m=float(c["tolerance_m"]), coreg_tilt=bool(c["tilt"]),
@@ -151,7 +159,8 @@ class ChangeParams:
             headcut_search_radius_m=float(h["search_radius_m"]),
             headcut_incision_sigma_m=float(h["incision_sigma_m"]),
             headcut_min_incision_m=float(h["min_incision_m"]),
-            min_correlation=None if q["min_correlation"] is None else float(q["min_correlation"]), seed=int(seed),
+            min_correlation=None if q["min_correlation"] is None else float(q["min_correlation"]),
+            void_margin_m=float(q["void_margin_m"]), seed=int(seed),
         )
 
     def __post_init__(self) -> None:
@@ -163,5 +172,7 @@ class ChangeParams:
             raise InputError("change.thresholds.coherence: need 0 <= n_low < n_high <= window_cells² - 1")
         if self.min_correlation is not None and not -1.0 <= self.min_correlation < 1.0:
             raise InputError(f"change.quality.min_correlation must be in [-1, 1) (an NCC) or null, got {self.min_correlation}")
+        if self.void_margin_m < 0:
+            raise InputError(f"change.quality.void_margin_m must be >= 0 m, got {self.void_margin_m}")
         if not 0.0 < self.coherence_p_low < self.coherence_p_high < 1.0:
             raise InputError("change.thresholds.coherence: need 0 < p_low < p_high < 1")

@@ -69,10 +69,12 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     if len(epochs) != 2:
         raise InputError(f"change.epochs: exactly two epochs are needed, got {len(epochs)}")
     e1, e2 = (load_epoch(s, f"change.epochs[{i}]", site_crs) for i, s in enumerate(epochs))
-    grid, z1, _ = on_common_grid(e1, e2)
+    grid, z1, z2_raw = on_common_grid(e1, e2)
     groups = bg.mask_groups(masks, grid)
     unstable = bg.unstable_union(masks, groups, z1.shape)
-    voids = matching_voids((e1, e2), grid, params.min_correlation)
+    voids = matching_voids((e1, e2), grid, params.min_correlation, params.void_margin_m,
+                           valid=np.isfinite(z1) & np.isfinite(z2_raw))
+    del z2_raw
     stable = np.isfinite(z1) & ~unstable & ~voids
     if params.stable_max_object_height_m is not None:
         objects = above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m)
