@@ -29,7 +29,7 @@ OUT = REPO / "benchmarks" / "out" / "change_controlled"
 
 FILES = dict(dod="dod.tif", sigma_dod="sigma_dod.tif", stable="stable_ground.tif", coregistration="coregistration.csv",
              sigma="sigma.csv", thresholds="thresholds.csv", variogram="variogram.csv", budget="budget.csv",
-             headcuts="headcut_retreat.csv", dod_map="dod_map.png", budget_bars="budget_bars.png",
+             headcuts="headcut_retreat.csv", widening="widening.csv", dod_map="dod_map.png", budget_bars="budget_bars.png",
              histogram="dod_histogram.png", variogram_png="variogram.png",
              **{f"thresholded_{m}": f"dod_thresholded_{m}.tif" for m in THRESHOLD_METHODS})
 EVAL = dict(detection="detection.csv", budget_vs_truth="budget_vs_truth.csv", headcuts_vs_truth="headcut_retreat_vs_truth.csv",
@@ -43,6 +43,10 @@ def main() -> None:
     ev = ch["evaluation"]
     e1 = export_epoch(REPO / ev["dem1_truth"], OUT / "inputs/epoch1_dsm_model.tif", CONTROLLED_EPOCH1)
     ch["epochs"][0]["dem"] = str(e1)
+    # epoch 2: the twin's epoch-2 truth through the same stated noise model (python -m kitegully.change.example),
+    # not the site's photogrammetric epoch 2, so that both epochs' errors follow the model
+    ch["epochs"][1].update(dem="results/kamech_dem_change/inputs/epoch2_dsm.tif", correlation=None)
+    ch["epochs"][0]["correlation"] = None
     out = {k: str(OUT / v) for k, v in FILES.items()}
     params = ChangeParams.from_config({k: ch[k] for k in ("coregistration", "thresholds", "budget", "headcuts")}, seed=cfg["seed"])
     detect_change(ch["epochs"], ch["masks"], ch["heads_file"], params, out, cfg["site"]["crs"], ch["figure"])

@@ -108,13 +108,14 @@ def matching_voids(epochs: tuple[Epoch, ...], grid: GridSpec, min_correlation: f
     """Cells of ``grid`` where an epoch's dense-matching correlation is below ``min_correlation``.
 
     Those are not measurements (see :class:`~kitegully.change.params.ChangeParams`); an epoch
-    without a correlation raster, or ``min_correlation`` None, adds no void. Correlation is
+    without a correlation raster, or ``min_correlation`` None, adds no void (and with no
+    correlation raster at all there is no margin either: DEMs not from image matching). Correlation is
     sampled at the nearest cell (an NCC is not interpolated across a void edge). The voids
     and the edges of ``valid`` (cells where both DEMs hold an elevation) then grow by
     ``margin_m`` (Euclidean distance between cell centres). O(cells).
     """
     out = np.zeros((grid.height, grid.width), bool)
-    if min_correlation is None:
+    if min_correlation is None or all(e.correlation is None for e in epochs):
         return out
     for e in epochs:
         if e.correlation is None:

@@ -79,6 +79,17 @@ class ChangeParams:
     headcut_min_incision_m : float
         Cells incised deeper than this (m) are channel ([I] 0.25 m, the gully stage's
         depth threshold).
+    widening_margin_m : float
+        Each epoch-1 cross-section is extended by this at both ends before the edges are
+        found on both DEMs ([I] 3 m: room for a season's bank retreat, about the largest
+        headcut retreat, plus an end level of ground).
+    widening_min_depth_m : float
+        A gully edge on a section is where the depth below the line between the profile's
+        end levels falls below this ([I] 0.25 m, the channel depth threshold of the
+        headcuts and the gully stage).
+    widening_end_m : float
+        Length at each end of a profile whose median elevation is the end level ([I] 1 m,
+        the dense-matching window).
     min_correlation : float or None
         A DoD cell is a measurement only where both epochs' dense matches (the epoch's
         ``correlation`` raster, NCC) reach this; others are voids, left out of the DoD, the
@@ -121,6 +132,9 @@ class ChangeParams:
     headcut_search_radius_m: float = 10.0
     headcut_incision_sigma_m: float = 5.0
     headcut_min_incision_m: float = 0.25
+    widening_margin_m: float = 3.0
+    widening_min_depth_m: float = 0.25
+    widening_end_m: float = 1.0
     min_correlation: float | None = 0.5
     void_margin_m: float = 0.0
     seed: int = 0
@@ -133,7 +147,7 @@ class ChangeParams:
         sub-sections (see ``config/schema/stages/change.schema.yaml``).
         """
         sec = config_section(cfg, "change", ("coregistration", "thresholds", "budget", "headcuts"),
-                             optional=("epochs", "masks", "heads_file", "figure", "evaluation", "quality"))
+                             optional=("epochs", "masks", "heads_file", "figure", "evaluation", "quality", "sections_file", "widening"))
         c = config_section(sec["coregistration"], "change.coregistration", (
             "enabled", "max_iterations", "tolerance_m", "tilt", "min_slope_deg", "max_slope_deg",
             "max_object_height_m", "object_window_m", "outlier_nmad", "max_samples"))
@@ -141,6 +155,8 @@ class ChangeParams:
         coh = config_section(t["coherence"], "change.thresholds.coherence", ("window_cells", "n_low", "n_high", "p_low", "p_high"))
         b = config_section(sec["budget"], "change.budget", ("variogram_max_lag_m", "variogram_bins", "variogram_samples"))
         h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"))
+        w = config_section(sec.get("widening") or {"margin_m": cls.widening_margin_m, "min_depth_m": cls.widening_min_depth_m,
+                                                    "end_m": cls.widening_end_m}, "change.widening", ("margin_m", "min_depth_m", "end_m"))
         q = config_section(sec.get("quality") or {"min_correlation": cls.min_correlation, "void_margin_m": cls.void_margin_m},
                            "change.quality", ("min_correlation", "void_margin_m"))
         return cls(
@@ -160,7 +176,8 @@ class ChangeParams:
             headcut_incision_sigma_m=float(h["incision_sigma_m"]),
             headcut_min_incision_m=float(h["min_incision_m"]),
             min_correlation=None if q["min_correlation"] is None else float(q["min_correlation"]),
-            void_margin_m=float(q["void_margin_m"]), seed=int(seed),
+            void_margin_m=float(q["void_margin_m"]), widening_margin_m=float(w["margin_m"]),
+            widening_min_depth_m=float(w["min_depth_m"]), widening_end_m=float(w["end_m"]), seed=int(seed),
         )
 
     def __post_init__(self) -> None:
@@ -172,6 +189,8 @@ class ChangeParams:
             raise InputError("change.thresholds.coherence: need 0 <= n_low < n_high <= window_cells² - 1")
         if self.min_correlation is not None and not -1.0 <= self.min_correlation < 1.0:
             raise InputError(f"change.quality.min_correlation must be in [-1, 1) (an NCC) or null, got {self.min_correlation}")
+        if not (self.widening_margin_m > 0 and self.widening_min_depth_m > 0 and self.widening_end_m > 0):
+            raise InputError("change.widening: margin_m, min_depth_m and end_m must be > 0 m")
         if self.void_margin_m < 0:
             raise InputError(f"change.quality.void_margin_m must be >= 0 m, got {self.void_margin_m}")
         if not 0.0 < self.coherence_p_low < self.coherence_p_high < 1.0:

@@ -19,6 +19,7 @@ from kitegully.change.coregister import above_ground, coregister, nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
 from kitegully.change.headcuts import measure_headcut_retreat
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
+from kitegully.change.widening import COLUMNS as WIDENING_COLUMNS, measure_widening
 from kitegully.io.raster import Raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
@@ -27,7 +28,7 @@ log = logging.getLogger(__name__)
 
 #: Keys of ``out`` that :func:`detect_change` writes (plus ``thresholded_<method>``).
 OUTPUTS = ("dod", "sigma_dod", "stable", "coregistration", "sigma", "thresholds", "variogram", "budget",
-           "headcuts", "dod_map", "budget_bars", "histogram", "variogram_png")
+           "headcuts", "widening", "dod_map", "budget_bars", "histogram", "variogram_png")
 
 
 def read_heads(path: str) -> pd.DataFrame:
@@ -41,7 +42,8 @@ def read_heads(path: str) -> pd.DataFrame:
 
 def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str, Any]], heads_path: str | None,
                   params: ChangeParams, out: Mapping[str, str], site_crs: str | None = None,
-                  figure: Mapping[str, Any] | None = None, attribution: str | None = None) -> dict[str, Any]:
+                  figure: Mapping[str, Any] | None = None, attribution: str | None = None,
+                  sections_path: str | None = None) -> dict[str, Any]:
     """Co-register, difference, threshold and budget two epochs; write every product.
 
     Parameters
@@ -59,6 +61,9 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         The DEMs must be in this CRS.
     figure
         ``limit_m`` (colour/histogram range) and ``max_px``.
+    sections_path
+        Epoch-1 cross-sections (the polygons stage's ``cross_sections.gpkg``) whose width is
+        measured on both DEMs (``widening.csv``), or None (an empty table).
 
     Returns
     -------
@@ -135,6 +140,12 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         heads = pd.DataFrame(columns=["head_id", "x_digitised", "y_digitised", "x1", "y1", "incision1_m", "x2", "y2",
                                       "incision2_m", "retreat_m", "retreat_heads_m", "retreat_heads_upslope_m"])
     write_table(heads, out["headcuts"])
+    if sections_path:
+        secs = read_vector(sections_path, crs=grid.crs)
+        wid = measure_widening(z1, z2, grid, secs, params.widening_margin_m, params.widening_min_depth_m, params.widening_end_m)
+    else:
+        wid = pd.DataFrame(columns=WIDENING_COLUMNS)
+    write_table(wid, out["widening"])
 
     fig = {"limit_m": 1.0, "max_px": 1500, **(figure or {})}
     plots.plot_dod_map(dod, grid, out["dod_map"], fig["limit_m"], fig["max_px"], attribution=attribution)
