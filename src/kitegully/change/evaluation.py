@@ -95,7 +95,7 @@ def headcut_table(measured: pd.DataFrame, true1: pd.DataFrame, true2: pd.DataFra
 def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, str], truth1: str, truth2: str,
                     masks: Sequence[Mapping[str, Any]], budget_csv: str, headcuts_csv: str,
                     true_heads1: str | None, true_heads2: str | None, cfg: Mapping[str, Any],
-                    out: Mapping[str, str]) -> dict[str, Any]:
+                    out: Mapping[str, str], widening: tuple | None = None) -> dict[str, Any]:
     """Write detection.csv, budget_vs_truth.csv, headcut_retreat_vs_truth.csv, moritani tables and a summary.
 
     ``cfg``: ``plot_m`` and ``min_lowering_m`` (Moritani plots), ``head_match_m``,
