@@ -16,8 +16,8 @@ and, per GCD threshold, the true change the threshold dropped (Σ true over cell
 against the error of the cells it kept. ``--voids`` also books the cells the change stage
 left out as voids (low matching correlation) by comparing with a DoD made without them.
 
-Usage: ``python benchmarks/change_error_budget.py --site kamech_twin [--before OTHER/dod.tif]``
-→ ``results/<site>/change/error_budget.csv`` (+ .md).
+Usage: ``python benchmarks/change_error_budget.py --site kamech_twin [--before OTHER/dod.tif] [--change-dir DIR]``
+→ ``error_budget.csv`` (+ .md) in the change folder judged.
 """
 
 from __future__ import annotations
@@ -42,9 +42,13 @@ VEGETATION = ("shrub", "tree")
 BUILT_WATER = ("building", "water")
 
 
-def error_budget(res: Path, before: Path | None = None) -> pd.DataFrame:
-    """Rows ``part, area_m2, error_m3, error_pct_of_true`` (see module docstring)."""
-    ch = res / "change"
+def error_budget(res: Path, before: Path | None = None, change_dir: Path | None = None) -> pd.DataFrame:
+    """Rows ``part, area_m2, error_m3, error_pct_of_true`` (see module docstring).
+
+    ``res``: the twin's results folder (truth); ``change_dir``: the change products to judge
+    (default ``res/change``).
+    """
+    ch = change_dir or res / "change"
     d = Raster.read(ch / "dod.tif")
     g, dod = d.grid, d.data.astype(np.float64)
     a = g.cell**2
@@ -96,10 +100,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--site", default="kamech_twin")
     ap.add_argument("--before", type=Path, default=None, help="a DoD of the same pair without voids (optional)")
+    ap.add_argument("--change-dir", type=Path, default=None, help="change products to judge (default results/<site>/change)")
     a = ap.parse_args()
     res = REPO / "results" / a.site
-    df = error_budget(res, a.before)
-    write_table(df, res / "change" / "error_budget.csv")
+    df = error_budget(res, a.before, a.change_dir)
+    write_table(df, (a.change_dir or res / "change") / "error_budget.csv")
     with pd.option_context("display.width", 200, "display.max_colwidth", 90):
         print(df.round(1).to_string(index=False))
 
