@@ -1,7 +1,7 @@
 """Our change stage against xDEM on the same DEM pair: co-registration shift, DoD volume, speed.
 
 xDEM cannot go into the project venv (it would downgrade pandas 3), so this script builds a
-throwaway venv ``.venv-xdem`` with pip (PyPI, pinned ``xdem==XDEM_VERSION``; network, a few
+throwaway venv ``.venv-xdem`` with pip (PyPI, pinned ``xdem==XDEM_VERSION`` and its optional ``scikit-gstat``; network, a few
 minutes the first time) and runs xDEM there on the same inputs as our ``change_detect`` rule:
 
 * the same two DEM files and our stable-ground mask (``results/<site>/change/stable_ground.tif``);
@@ -40,6 +40,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 XVENV = REPO / ".venv-xdem"
 XDEM_VERSION = "0.2.3"
+SKGSTAT_VERSION = "1.0.26"  # xDEM's optional variogram dependency (scikit-gstat)
 
 CHILD = r"""
 import json, sys, time, warnings
@@ -88,7 +89,10 @@ def ensure_venv() -> Path:
     if not py.exists():
         print(f"creating {XVENV} and installing xdem=={XDEM_VERSION} with pip (network, minutes)", flush=True)
         venv.create(XVENV, with_pip=True)
-        subprocess.run([str(py), "-m", "pip", "install", "-q", f"xdem=={XDEM_VERSION}"], check=True)
+    pins = [f"xdem=={XDEM_VERSION}", f"scikit-gstat=={SKGSTAT_VERSION}"]
+    have = subprocess.run([str(py), "-m", "pip", "freeze"], capture_output=True, text=True).stdout.lower()
+    if not all(p.lower() in have for p in pins):
+        subprocess.run([str(py), "-m", "pip", "install", "-q", *pins], check=True)
     return py
 
 
