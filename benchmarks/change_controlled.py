@@ -1,9 +1,8 @@
 """Controlled check of the change stage: both epochs' errors follow the stated noise model.
 
-The DEM-site example (``config/sites/kamech_dem_change.yaml``) pairs the twin's real dense
-DSM (epoch 1) with the epoch-2 truth plus a stated noise model: the two epochs' errors are
-unlike (epoch 1 carries the dense matcher's land-cover-dependent errors). This script runs
-the same change stage, same parameters, with epoch 1 replaced by the epoch-1 truth DSM seen
+Takes the DEM-site example's settings (``config/sites/kamech_dem_change.yaml``) but not its
+photogrammetric DSMs: epoch 2 is the twin's epoch-2 truth plus a stated noise model
+(``python -m kitegully.change.example`` writes it) and epoch 1 the epoch-1 truth DSM seen
 through the same noise model (another seed, no georeferencing error:
 ``kitegully.change.example.CONTROLLED_EPOCH1``), so what is left is the method's own error.
 
