@@ -32,7 +32,8 @@ FILES = dict(dod="dod.tif", sigma_dod="sigma_dod.tif", stable="stable_ground.tif
              histogram="dod_histogram.png", variogram_png="variogram.png",
              **{f"thresholded_{m}": f"dod_thresholded_{m}.tif" for m in THRESHOLD_METHODS})
 EVAL = dict(detection="detection.csv", budget_vs_truth="budget_vs_truth.csv", headcuts_vs_truth="headcut_retreat_vs_truth.csv",
-            moritani_plots="moritani_plots.csv", summary="evaluation_summary.csv")
+            moritani_plots="moritani_plots.csv", summary="evaluation_summary.csv",
+            widening_vs_truth="widening_vs_truth.csv")
 
 
 def main() -> None:
@@ -47,12 +48,16 @@ def main() -> None:
     ch["epochs"][1].update(dem="results/kamech_dem_change/inputs/epoch2_dsm.tif", correlation=None)
     ch["epochs"][0]["correlation"] = None
     out = {k: str(OUT / v) for k, v in FILES.items()}
-    params = ChangeParams.from_config({k: ch[k] for k in ("coregistration", "thresholds", "budget", "headcuts")}, seed=cfg["seed"])
-    detect_change(ch["epochs"], ch["masks"], ch["heads_file"], params, out, cfg["site"]["crs"], ch["figure"])
+    params = ChangeParams.from_config({k: ch[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "widening")},
+                                      seed=cfg["seed"])
+    detect_change(ch["epochs"], ch["masks"], ch["heads_file"], params, out, cfg["site"]["crs"], ch["figure"],
+                  sections_path=ch.get("sections_file"))
     evaluate_change(out["dod"], out["sigma_dod"], {m: out[f"thresholded_{m}"] for m in THRESHOLD_METHODS},
                     ev["dem1_truth"], ev["dem2_truth"], ch["masks"], out["budget"], out["headcuts"], ev["heads1_truth"],
                     ev["heads2_truth"], {k: ev[k] for k in ("plot_m", "min_lowering_m", "head_match_m", "net_tolerance")},
-                    {k: str(OUT / v) for k, v in EVAL.items()})
+                    {k: str(OUT / v) for k, v in EVAL.items()},
+                    widening=(out["widening"], ev.get("polygons1_truth"), ev.get("polygons2_truth"), params.widening_margin_m,
+                              ch.get("sections_file")))
 
 
 if __name__ == "__main__":
