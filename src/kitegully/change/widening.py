@@ -104,13 +104,14 @@ def measure_widening(z1: np.ndarray, z2: np.ndarray, grid: GridSpec, sections: g
     """
     rows = []
     step = 0.5 * grid.cell
+    surfaces = (np.asarray(z1, np.float64), np.asarray(z2, np.float64))  # once, not per section
     for i, (pid, st, wp, geom) in enumerate(zip(sections["polygon_id"], sections["station_m"], sections["width_m"],
                                                sections.geometry)):
         line = extend_line(geom, margin_m)
         inner = (margin_m, line.length - margin_m)
         out = []
-        for z in (z1, z2):
-            s, _, _, zz = drape(line, np.asarray(z, np.float64), grid, step)
+        for z in surfaces:
+            s, _, _, zz = drape(line, z, grid, step)
             out.append(edge_width(s, zz, inner, min_depth_m, end_m))
         (w1, d1), (w2, d2) = out
         rows.append(dict(section_id=i, polygon_id=pid, station_m=st, width_polygon1_m=wp, width1_m=w1, width2_m=w2,
