@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -50,6 +50,12 @@ ensemble: $(STAMP)
 
 clean-venv:
 	rm -rf $(VENV)
+
+# Our change stage against xDEM (pinned, in its own .venv-xdem built with pip: xDEM would downgrade
+# pandas in .venv) on the DEM-site example's pair: shift, volume, speed -> benchmarks/out/change_vs_xdem.md.
+# Needs the site's change stage run first (snakemake --configfile config/sites/kamech_dem_change.yaml).
+change-vs-xdem: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/change_vs_xdem.py --site kamech_dem_change
 
 # One-node SLURM cluster on this machine (needs root): tiny twin through workflow/profiles/slurm,
 # jobs checked in sacct, tables compared with a local run. Not part of `make test`.

@@ -33,3 +33,20 @@ def test_bad_keys_are_named():
     bad["thresholds"]["confidence"] = 1.5
     with pytest.raises(InputError, match=r"change.thresholds.confidence must be in \[0.5, 1\)"):
         ChangeParams.from_config(bad)
+
+
+def test_quality_and_widening_sections():
+    p = ChangeParams.from_config(CHANGE)
+    assert p.min_correlation == 0.5 and p.void_margin_m == 0.4
+    assert (p.widening_margin_m, p.widening_min_depth_m, p.widening_end_m) == (3.0, 0.25, 1.0)
+    bare = {k: v for k, v in CHANGE.items() if k not in ("quality", "widening")}
+    q = ChangeParams.from_config(bare)  # both optional: the dataclass defaults
+    assert q.min_correlation == 0.5 and q.void_margin_m == 0.0 and q.widening_margin_m == 3.0
+    bad = copy.deepcopy(CHANGE)
+    bad["quality"]["min_ncc"] = 0.3
+    with pytest.raises(InputError, match=r"change.quality: unknown key 'min_ncc'"):
+        ChangeParams.from_config(bad)
+    bad = copy.deepcopy(CHANGE)
+    bad["widening"]["margin_m"] = 0.0
+    with pytest.raises(InputError, match=r"change.widening: margin_m, min_depth_m and end_m must be > 0 m"):
+        ChangeParams.from_config(bad)

@@ -45,8 +45,10 @@ def _site(tmp_path):
                     dict(name="e2", dem=files["dem2"], nodata=None, accuracy=dict(sd_m=0.03))]
     ch["masks"] = [dict(name="gully", file=str(d / "gully.gpkg"), kind="vector", by="gully_id", unstable=True)]
     ch["heads_file"] = str(d / "heads.gpkg")
+    ch["sections_file"] = None
     ch["budget"]["variogram_max_lag_m"] = 40.0
-    ch["evaluation"].update(dem1_truth=files["truth1"], dem2_truth=files["truth2"], heads1_truth=None, heads2_truth=None)
+    ch["evaluation"].update(dem1_truth=files["truth1"], dem2_truth=files["truth2"], heads1_truth=None, heads2_truth=None,
+                           polygons1_truth=None, polygons2_truth=None)
     site = dict(site=dict(name="dem_site", kind="real", crs=CRS), seed=1, change=ch)
     path = tmp_path / "dem_site.yaml"
     path.write_text(yaml.safe_dump(site, sort_keys=False))

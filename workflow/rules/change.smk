@@ -15,6 +15,7 @@ if "change" in config:
                                 "with twin.epoch2 and the dense stage; other sites give their epochs as DEM files")
         CHANGE["epochs"] = [
             {"name": f"epoch{n}", "dem": epoch_result("dense", "dsm.tif", n), "nodata": None,
+             "correlation": epoch_result("dense", "correlation.tif", n),
              "accuracy": {"checkpoints": epoch_result("inputs", "checkpoints.csv", n)}}
             for n in SURVEY_EPOCHS
         ]
@@ -28,10 +29,15 @@ if "change" in config:
                                         "by": None, "unstable": True})
         if CHANGE["heads_file"] is None:
             CHANGE["heads_file"] = result("twin", "observed/gully_heads.gpkg")
+        if CHANGE.get("sections_file") is None and "polygons" in config:
+            CHANGE["sections_file"] = result("polygons", "cross_sections.gpkg")
         if CHANGE["evaluation"]:
             _twin_truth = {"dem1_truth": epoch_result("twin", "truth/dsm.tif", 1), "dem2_truth": epoch_result("twin", "truth/dsm.tif", 2),
                            "heads1_truth": epoch_result("twin", "truth/gully_heads.gpkg", 1),
-                           "heads2_truth": epoch_result("twin", "truth/gully_heads.gpkg", 2)}
+                           "heads2_truth": epoch_result("twin", "truth/gully_heads.gpkg", 2),
+                           "polygons1_truth": epoch_result("twin", "truth/gully_polygons.gpkg", 1),
+                           "polygons2_truth": epoch_result("twin", "truth/gully_polygons.gpkg", 2)}
+            CHANGE["evaluation"] = {"polygons1_truth": None, "polygons2_truth": None, **CHANGE["evaluation"]}
             CHANGE["evaluation"] = {k: (_twin_truth[k] if v is None and k in _twin_truth else v) for k, v in CHANGE["evaluation"].items()}
     else:
         if CHANGE["masks"] is None:
@@ -49,9 +55,13 @@ if "change" in config:
             for k in ("error_raster", "checkpoints"):
                 if e["accuracy"].get(k):
                     files[f"{k}{i + 1}"] = e["accuracy"][k]
+            if e.get("correlation"):
+                files[f"correlation{i + 1}"] = e["correlation"]
         files.update({f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]})
         if CHANGE["heads_file"]:
             files["heads"] = CHANGE["heads_file"]
+        if CHANGE.get("sections_file"):
+            files["sections"] = CHANGE["sections_file"]
         return files
 
     rule change_detect:
@@ -69,6 +79,7 @@ if "change" in config:
             variogram=result("change", "variogram.csv"),
             budget=report(result("change", "budget.csv"), caption=caption("change_budget"), category=CHANGE_CAT),
             headcuts=result("change", "headcut_retreat.csv"),
+            widening=result("change", "widening.csv"),
             dod_map=report(result("change", "dod_map.png"), caption=caption("change_dod_map"), category=CHANGE_CAT),
             budget_bars=report(result("change", "budget_bars.png"), caption=caption("change_budget_bars"), category=CHANGE_CAT),
             histogram=report(result("change", "dod_histogram.png"), caption=caption("change_histogram"), category=CHANGE_CAT),
@@ -77,7 +88,8 @@ if "change" in config:
             epochs=CHANGE["epochs"],
             masks=CHANGE["masks"],
             heads_file=CHANGE["heads_file"],
-            methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts")},
+            sections_file=CHANGE.get("sections_file"),
+            methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "quality", "widening") if k in CHANGE},
             figure=CHANGE["figure"],
             seed=config["seed"],
             crs=config["site"]["crs"],
@@ -103,20 +115,24 @@ if "change" in config:
                 sigma_dod=rules.change_detect.output.sigma_dod,
                 budget=rules.change_detect.output.budget,
                 headcuts=rules.change_detect.output.headcuts,
+                widening=rules.change_detect.output.widening,
+                **({"sections": CHANGE["sections_file"]} if CHANGE.get("sections_file") else {}),
                 **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
                 truth1=CHANGE_EVAL["dem1_truth"],
                 truth2=CHANGE_EVAL["dem2_truth"],
-                **{k: CHANGE_EVAL[k] for k in ("heads1_truth", "heads2_truth") if CHANGE_EVAL[k]},
+                **{k: CHANGE_EVAL[k] for k in ("heads1_truth", "heads2_truth", "polygons1_truth", "polygons2_truth") if CHANGE_EVAL.get(k)},
                 **{f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]},
             output:
                 detection=report(result("change", "detection.csv"), caption=caption("change_detection"), category=CHANGE_CAT),
                 budget_vs_truth=report(result("change", "budget_vs_truth.csv"), caption=caption("change_budget_vs_truth"), category=CHANGE_CAT),
                 headcuts_vs_truth=report(result("change", "headcut_retreat_vs_truth.csv"), caption=caption("change_headcuts"), category=CHANGE_CAT),
                 moritani_plots=result("change", "moritani_plots.csv"),
+                widening_vs_truth=result("change", "widening_vs_truth.csv"),
                 summary=report(result("change", "evaluation_summary.csv"), caption=caption("change_evaluation"), category=CHANGE_CAT),
             params:
                 masks=CHANGE["masks"],
                 evaluation={k: CHANGE_EVAL[k] for k in ("plot_m", "min_lowering_m", "head_match_m", "net_tolerance")},
+                widening_margin_m=(CHANGE.get("widening") or {}).get("margin_m", 3.0),
             log:
                 logfile("change", "evaluate"),
             script:

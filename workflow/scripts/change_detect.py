@@ -10,4 +10,5 @@ detect_change(
     sm.params.epochs, sm.params.masks, sm.params.heads_file,
     ChangeParams.from_config(sm.params.methods, seed=sm.params.seed), dict(sm.output),
     site_crs=sm.params.crs, figure=sm.params.figure, attribution=sm.params.attribution,
+    sections_path=sm.params.sections_file,
 )

@@ -10,4 +10,6 @@ evaluate_change(
     sm.input.dod, sm.input.sigma_dod, {m: sm.input[f"thresholded_{m}"] for m in THRESHOLD_METHODS},
     sm.input.truth1, sm.input.truth2, sm.params.masks, sm.input.budget, sm.input.headcuts,
     sm.input.get("heads1_truth"), sm.input.get("heads2_truth"), sm.params.evaluation, dict(sm.output),
+    widening=(sm.input.widening, sm.input.get("polygons1_truth"), sm.input.get("polygons2_truth"),
+              sm.params.widening_margin_m, sm.input.get("sections")),
 )

@@ -8,8 +8,10 @@ Modules: ``stage`` (the stage: files in and out), ``params`` (:class:`ChangePara
 ``dod`` (epoch inputs and their checks, common grid, DoD), ``coregister`` (Nuth & Kääb
 shift + plane on stable ground), ``uncertainty`` (σ per epoch, propagation, GCD
 thresholds), ``budget`` (volumes by mask; independent, spatially correlated and
-co-registration uncertainty), ``headcuts`` (retreat per digitised head), ``evaluation``
-(against known change), ``plots`` and ``example`` (inputs of the DEM-site example).
+co-registration uncertainty), ``headcuts`` (retreat per digitised head), ``widening`` (width
+of each epoch-1 cross-section on both DEMs), ``evaluation`` (against known change), ``plots``
+and ``example`` (the synthetic epoch 2 of the controlled check). Cells matched below a stated
+correlation are voids (``dod.matching_voids``).
 """
 
 from importlib import import_module

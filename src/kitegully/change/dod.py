@@ -35,6 +35,7 @@ class Epoch:
     dem: Raster
     accuracy: dict[str, Any]
     path: str
+    correlation: Raster | None = None
 
 
 def _check_nodata(path: Path, data: np.ndarray, declared: float | None, key: str) -> np.ndarray:
@@ -91,7 +92,49 @@ def load_epoch(spec: Mapping[str, Any], key: str, site_crs: str | None = None) -
         raise InputError(f"{path}: CRS {r.crs} differs from the site CRS {site_crs}; reproject the DEM first")
     if not np.isfinite(data).any():
         raise InputError(f"{path}: DEM holds no valid elevation")
-    return Epoch(str(spec.get("name", key)), Raster(data, r.grid), acc, str(path))
+    corr = None
+    if spec.get("correlation"):
+        cpath = Path(spec["correlation"])
+        if not cpath.exists():
+            raise InputError(f"{cpath}: correlation raster of {key} not found")
+        corr = Raster.read(cpath)
+        if not rasterio.crs.CRS.from_user_input(corr.crs) == rasterio.crs.CRS.from_user_input(r.crs):
+            raise InputError(f"{cpath}: CRS {corr.crs} of the correlation raster differs from its DEM's {r.crs}")
+    return Epoch(str(spec.get("name", key)), Raster(data, r.grid), acc, str(path), corr)
+
+
+def matching_voids(epochs: tuple[Epoch, ...], grid: GridSpec, min_correlation: float | None,
+                   margin_m: float = 0.0, valid: np.ndarray | None = None) -> np.ndarray:
+    """Cells of ``grid`` where an epoch's dense-matching correlation is below ``min_correlation``.
+
+    Those are not measurements (see :class:`~kitegully.change.params.ChangeParams`); an epoch
+    without a correlation raster, or ``min_correlation`` None, adds no void (and with no
+    correlation raster at all there is no margin either: DEMs not from image matching). Correlation is
+    sampled at the nearest cell (an NCC is not interpolated across a void edge). The voids
+    and the edges of ``valid`` (cells where both DEMs hold an elevation) then grow by
+    ``margin_m`` (Euclidean distance between cell centres). O(cells).
+    """
+    out = np.zeros((grid.height, grid.width), bool)
+    if min_correlation is None or all(e.correlation is None for e in epochs):
+        return out
+    for e in epochs:
+        if e.correlation is None:
+            continue
+        xs, ys = grid.cell_centres()
+        rows, _ = e.correlation.grid.rowcol(np.zeros(1), ys)
+        _, cols = e.correlation.grid.rowcol(xs, np.zeros(1))
+        ri, ci = np.rint(rows).astype(int), np.rint(cols).astype(int)
+        h, w = e.correlation.data.shape
+        inside = ((ri >= 0) & (ri < h))[:, None] & ((ci >= 0) & (ci < w))[None, :]
+        c = e.correlation.data[np.clip(ri, 0, h - 1)[:, None], np.clip(ci, 0, w - 1)[None, :]]
+        low = inside & ~(c >= min_correlation)  # NaN correlation (unmatched) counts as low
+        log.info("%s: %.2f %% of the common grid matched below NCC %.2f (voids)", e.name, 100.0 * low.mean(), min_correlation)
+        out |= low
+    if margin_m > 0:
+        holes = out | (~valid if valid is not None else False)
+        if holes.any():
+            out |= ndimage.distance_transform_edt(~holes) * grid.cell <= margin_m + 1e-6
+    return out
 
 
 def overlap_grid(a: GridSpec, b: GridSpec, a_path: str = "epoch 1", b_path: str = "epoch 2") -> GridSpec:

@@ -95,11 +95,13 @@ def headcut_table(measured: pd.DataFrame, true1: pd.DataFrame, true2: pd.DataFra
 def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, str], truth1: str, truth2: str,
                     masks: Sequence[Mapping[str, Any]], budget_csv: str, headcuts_csv: str,
                     true_heads1: str | None, true_heads2: str | None, cfg: Mapping[str, Any],
-                    out: Mapping[str, str]) -> dict[str, Any]:
+                    out: Mapping[str, str], widening: tuple | None = None) -> dict[str, Any]:
     """Write detection.csv, budget_vs_truth.csv, headcut_retreat_vs_truth.csv, moritani tables and a summary.
 
     ``cfg``: ``plot_m`` and ``min_lowering_m`` (Moritani plots), ``head_match_m``,
-    ``net_tolerance`` (target, fraction of the true net volume).
+    ``net_tolerance`` (target, fraction of the true net volume). ``widening``:
+    ``(widening_csv, true_polygons1, true_polygons2, margin_m, sections_gpkg)`` → ``out["widening_vs_truth"]``
+    (true width = the extended section line's length inside the true polygons of each epoch).
     """
     dod_r = Raster.read(dod_path)
     dod, grid = dod_r.data, dod_r.grid
@@ -131,6 +133,27 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
     plots_df, mor = moritani_plots(dod, true, grid.cell, cfg["plot_m"], cfg["min_lowering_m"])
     write_table(plots_df, out["moritani_plots"])
 
+    wrows = []
+    if widening is not None and "widening_vs_truth" in out:
+        wcsv, p1, p2, margin, secs = widening
+        wt = pd.read_csv(wcsv)
+        if p1 and p2 and secs and len(wt):
+            from kitegully.change.widening import true_widths
+            sec = read_vector(secs, crs=grid.crs)
+            wt["true_width1_m"] = true_widths(sec, read_vector(p1, crs=grid.crs), margin)[wt["section_id"]]
+            wt["true_width2_m"] = true_widths(sec, read_vector(p2, crs=grid.crs), margin)[wt["section_id"]]
+            wt["true_widening_m"] = wt["true_width2_m"] - wt["true_width1_m"]
+            wt["error_m"] = wt["widening_m"] - wt["true_widening_m"]
+            ok = wt["error_m"].notna()
+            mov = ok & (wt["true_widening_m"] > 0.1)
+            wrows = [("widening sections measured on both DEMs", int(ok.sum()), "count"),
+                     ("widening sections, all", len(wt), "count"),
+                     ("widening median |error|, all measured sections", float(wt.loc[ok, "error_m"].abs().median()), "m"),
+                     ("widening median error (bias), all measured sections", float(wt.loc[ok, "error_m"].median()), "m"),
+                     ("widening sections that truly widened > 0.1 m", int(mov.sum()), "count"),
+                     ("widening median |error|, sections that widened", float(wt.loc[mov, "error_m"].abs().median()) if mov.any() else np.nan, "m"),
+                     ("widening mean measured vs true, measured sections", float(wt.loc[ok, "widening_m"].mean()) - float(wt.loc[ok, "true_widening_m"].mean()), "m")]
+        write_table(wt, out["widening_vs_truth"])
     site = budget[(budget["mask"] == "site") & (budget["method"] == "raw")].iloc[0]
     hc = ht[np.isfinite(ht["error_m"])] if "error_m" in ht else ht.iloc[0:0]
     hc_moving = hc[hc["true_retreat_m"] > 0] if len(hc) else hc
@@ -155,6 +178,7 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
         ("detection rate of change > 2 sigma, 95 %", float(prob["detection_rate"]) * 100, "%"),
         ("moritani plots", mor["plots"], "count"), ("moritani MAE", mor.get("mae_m", np.nan), "m"),
         ("moritani MRE", mor.get("mre_pct", np.nan), "%"), ("moritani b", mor.get("b", np.nan), "-"),
+        *wrows,
     ]
     summary = pd.DataFrame(rows, columns=["quantity", "value", "unit"])
     write_table(summary, out["summary"])

@@ -1,8 +1,8 @@
-"""Inputs of the DEM-site example ``config/sites/kamech_dem_change.yaml``.
+"""Synthetic epoch-2 DEM of the controlled check (``benchmarks/change_controlled.py``).
 
-Epoch 1 is the default twin's own dense DSM (``results/kamech_twin/dense/dsm.tif``, real
-dense-matching errors). The twin's epoch-2 photographs are not rendered yet, so epoch 2 is
-the twin's epoch-2 **truth** DSM plus a stated photogrammetric noise model, written here:
+The DEM-site example ``config/sites/kamech_dem_change.yaml`` now pairs the default twin's two
+photogrammetric DSMs. This module keeps the earlier, labelled variant for the controlled
+check: the twin's epoch-2 **truth** DSM plus a stated photogrammetric noise model:
 
 ``z₂(x) = truth₂(x − Δ) + b + t·(x − x̄) + n_white + n_corr``
 

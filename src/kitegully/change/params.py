@@ -79,6 +79,31 @@ class ChangeParams:
     headcut_min_incision_m : float
         Cells incised deeper than this (m) are channel ([I] 0.25 m, the gully stage's
         depth threshold).
+    widening_margin_m : float
+        Each epoch-1 cross-section is extended by this at both ends before the edges are
+        found on both DEMs ([I] 3 m: room for a season's bank retreat, about the largest
+        headcut retreat, plus an end level of ground).
+    widening_min_depth_m : float
+        A gully edge on a section is where the depth below the line between the profile's
+        end levels falls below this ([I] 0.25 m, the channel depth threshold of the
+        headcuts and the gully stage).
+    widening_end_m : float
+        Length at each end of a profile whose median elevation is the end level ([I] 1 m,
+        the dense-matching window).
+    min_correlation : float or None
+        A DoD cell is a measurement only where both epochs' dense matches (the epoch's
+        ``correlation`` raster, NCC) reach this; others are voids, left out of the DoD, the
+        stable ground and the budgets (their area is reported). [I] 0.5: for a window of
+        terrain texture t plus image noise n, NCC ≈ var t / (var t + var n) = SNR²/(1 + SNR²),
+        so 0.5 is SNR = 1, where the correlation peak is as much noise as terrain and a
+        wrong peak (a gross error of metres) becomes likely. An epoch without a correlation
+        raster has no voids; None = keep every cell.
+    void_margin_m : float
+        Voids (and the edges of each DEM's valid area) grow by this distance (m): a cell
+        whose matching window reaches a failed match shares its image pixels, and its own
+        correlation can pass while its elevation does not. [I] the dense matcher's window
+        half-width (``dense.matching.window_half_cells`` × cell: 2 × 0.2 = 0.4 m on the
+        twin); 0 = no margin.
     seed : int
         Master seed (variogram sampling).
     """
@@ -107,6 +132,11 @@ class ChangeParams:
     headcut_search_radius_m: float = 10.0
     headcut_incision_sigma_m: float = 5.0
     headcut_min_incision_m: float = 0.25
+    widening_margin_m: float = 3.0
+    widening_min_depth_m: float = 0.25
+    widening_end_m: float = 1.0
+    min_correlation: float | None = 0.5
+    void_margin_m: float = 0.0
     seed: int = 0
 
     @classmethod
@@ -117,7 +147,7 @@ class ChangeParams:
         sub-sections (see ``config/schema/stages/change.schema.yaml``).
         """
         sec = config_section(cfg, "change", ("coregistration", "thresholds", "budget", "headcuts"),
-                             optional=("epochs", "masks", "heads_file", "figure", "evaluation"))
+                             optional=("epochs", "masks", "heads_file", "figure", "evaluation", "quality", "sections_file", "widening"))
         c = config_section(sec["coregistration"], "change.coregistration", (
             "enabled", "max_iterations", "tolerance_m", "tilt", "min_slope_deg", "max_slope_deg",
             "max_object_height_m", "object_window_m", "outlier_nmad", "max_samples"))
@@ -125,6 +155,10 @@ class ChangeParams:
         coh = config_section(t["coherence"], "change.thresholds.coherence", ("window_cells", "n_low", "n_high", "p_low", "p_high"))
         b = config_section(sec["budget"], "change.budget", ("variogram_max_lag_m", "variogram_bins", "variogram_samples"))
         h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"))
+        w = config_section(sec.get("widening") or {"margin_m": cls.widening_margin_m, "min_depth_m": cls.widening_min_depth_m,
+                                                    "end_m": cls.widening_end_m}, "change.widening", ("margin_m", "min_depth_m", "end_m"))
+        q = config_section(sec.get("quality") or {"min_correlation": cls.min_correlation, "void_margin_m": cls.void_margin_m},
+                           "change.quality", ("min_correlation", "void_margin_m"))
         return cls(
             coreg_enabled=bool(c["enabled"]), coreg_max_iterations=int(c["max_iterations"]),
             coreg_tolerance_m=float(c["tolerance_m"]), coreg_tilt=bool(c["tilt"]),
@@ -140,7 +174,10 @@ class ChangeParams:
             variogram_samples=int(b["variogram_samples"]),
             headcut_search_radius_m=float(h["search_radius_m"]),
             headcut_incision_sigma_m=float(h["incision_sigma_m"]),
-            headcut_min_incision_m=float(h["min_incision_m"]), seed=int(seed),
+            headcut_min_incision_m=float(h["min_incision_m"]),
+            min_correlation=None if q["min_correlation"] is None else float(q["min_correlation"]),
+            void_margin_m=float(q["void_margin_m"]), widening_margin_m=float(w["margin_m"]),
+            widening_min_depth_m=float(w["min_depth_m"]), widening_end_m=float(w["end_m"]), seed=int(seed),
         )
 
     def __post_init__(self) -> None:
@@ -150,5 +187,11 @@ class ChangeParams:
             raise InputError(f"change.thresholds.coherence.window_cells must be odd and >= 3, got {self.coherence_window}")
         if not 0 <= self.coherence_n_low < self.coherence_n_high <= self.coherence_window**2 - 1:
             raise InputError("change.thresholds.coherence: need 0 <= n_low < n_high <= window_cells² - 1")
+        if self.min_correlation is not None and not -1.0 <= self.min_correlation < 1.0:
+            raise InputError(f"change.quality.min_correlation must be in [-1, 1) (an NCC) or null, got {self.min_correlation}")
+        if not (self.widening_margin_m > 0 and self.widening_min_depth_m > 0 and self.widening_end_m > 0):
+            raise InputError("change.widening: margin_m, min_depth_m and end_m must be > 0 m")
+        if self.void_margin_m < 0:
+            raise InputError(f"change.quality.void_margin_m must be >= 0 m, got {self.void_margin_m}")
         if not 0.0 < self.coherence_p_low < self.coherence_p_high < 1.0:
             raise InputError("change.thresholds.coherence: need 0 < p_low < p_high < 1")

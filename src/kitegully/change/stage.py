@@ -16,9 +16,10 @@ from kitegully import InputError
 from kitegully.change import budget as bg
 from kitegully.change import plots, uncertainty as unc
 from kitegully.change.coregister import above_ground, coregister, nmad
-from kitegully.change.dod import dem_of_difference, load_epoch, on_common_grid
+from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
 from kitegully.change.headcuts import measure_headcut_retreat
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
+from kitegully.change.widening import COLUMNS as WIDENING_COLUMNS, measure_widening
 from kitegully.io.raster import Raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
@@ -27,7 +28,7 @@ log = logging.getLogger(__name__)
 
 #: Keys of ``out`` that :func:`detect_change` writes (plus ``thresholded_<method>``).
 OUTPUTS = ("dod", "sigma_dod", "stable", "coregistration", "sigma", "thresholds", "variogram", "budget",
-           "headcuts", "dod_map", "budget_bars", "histogram", "variogram_png")
+           "headcuts", "widening", "dod_map", "budget_bars", "histogram", "variogram_png")
 
 
 def read_heads(path: str) -> pd.DataFrame:
@@ -41,7 +42,8 @@ def read_heads(path: str) -> pd.DataFrame:
 
 def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str, Any]], heads_path: str | None,
                   params: ChangeParams, out: Mapping[str, str], site_crs: str | None = None,
-                  figure: Mapping[str, Any] | None = None, attribution: str | None = None) -> dict[str, Any]:
+                  figure: Mapping[str, Any] | None = None, attribution: str | None = None,
+                  sections_path: str | None = None) -> dict[str, Any]:
     """Co-register, difference, threshold and budget two epochs; write every product.
 
     Parameters
@@ -59,6 +61,9 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         The DEMs must be in this CRS.
     figure
         ``limit_m`` (colour/histogram range) and ``max_px``.
+    sections_path
+        Epoch-1 cross-sections (the polygons stage's ``cross_sections.gpkg``) whose width is
+        measured on both DEMs (``widening.csv``), or None (an empty table).
 
     Returns
     -------
@@ -69,10 +74,13 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     if len(epochs) != 2:
         raise InputError(f"change.epochs: exactly two epochs are needed, got {len(epochs)}")
     e1, e2 = (load_epoch(s, f"change.epochs[{i}]", site_crs) for i, s in enumerate(epochs))
-    grid, z1, _ = on_common_grid(e1, e2)
+    grid, z1, z2_raw = on_common_grid(e1, e2)
     groups = bg.mask_groups(masks, grid)
     unstable = bg.unstable_union(masks, groups, z1.shape)
-    stable = np.isfinite(z1) & ~unstable
+    voids = matching_voids((e1, e2), grid, params.min_correlation, params.void_margin_m,
+                           valid=np.isfinite(z1) & np.isfinite(z2_raw))
+    del z2_raw
+    stable = np.isfinite(z1) & ~unstable & ~voids
     if params.stable_max_object_height_m is not None:
         objects = above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m)
         log.info("above-ground objects (> %.2f m): %.1f %% of the grid, left out of stable ground",
@@ -81,6 +89,8 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     log.info("stable ground: %.1f %% of the common grid", 100.0 * stable.mean())
     z2, coreg = coregister(z1, e2.dem, grid, stable, params)
     dod = dem_of_difference(z1, z2)
+    n_void = int((voids & np.isfinite(dod)).sum())
+    dod[voids] = np.nan
     stable &= np.isfinite(dod)
     s1, i1 = unc.epoch_sigma(e1, grid)
     s2, i2 = unc.epoch_sigma(e2, grid)
@@ -119,7 +129,9 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
     write_table(budget, out["budget"])
     write_table(coreg.table(), out["coregistration"])
-    write_table(unc.sigma_table([i1, i2], sigma), out["sigma"])
+    sig_tab = unc.sigma_table([i1, i2], sigma)
+    sig_tab["void_area_m2"] = np.where(sig_tab["epoch"] == "DoD", n_void * grid.cell**2, np.nan)  # low-NCC cells left out
+    write_table(sig_tab, out["sigma"])
     write_table(unc.threshold_table(params, sigma), out["thresholds"])
     if heads_path:
         lowering = max(params.headcut_min_incision_m, unc.z_of_confidence(params.confidence) * float(np.nanmedian(sigma)))
@@ -128,6 +140,12 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         heads = pd.DataFrame(columns=["head_id", "x_digitised", "y_digitised", "x1", "y1", "incision1_m", "x2", "y2",
                                       "incision2_m", "retreat_m", "retreat_heads_m", "retreat_heads_upslope_m"])
     write_table(heads, out["headcuts"])
+    if sections_path:
+        secs = read_vector(sections_path, crs=grid.crs)
+        wid = measure_widening(z1, z2, grid, secs, params.widening_margin_m, params.widening_min_depth_m, params.widening_end_m)
+    else:
+        wid = pd.DataFrame(columns=WIDENING_COLUMNS)
+    write_table(wid, out["widening"])
 
     fig = {"limit_m": 1.0, "max_px": 1500, **(figure or {})}
     plots.plot_dod_map(dod, grid, out["dod_map"], fig["limit_m"], fig["max_px"], attribution=attribution)
@@ -138,6 +156,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     site = budget[(budget["mask"] == "site") & (budget["method"] == "raw")].iloc[0]
     summary = dict(dx_m=coreg.dx_m, dy_m=coreg.dy_m, dz_m=coreg.dz_m, stable_nmad_before_m=coreg.before["nmad_m"],
                    stable_nmad_after_m=coreg.after["nmad_m"], sigma_dod_m=float(np.nanmedian(sigma)),
-                   net_m3=float(site["net_m3"]), net_sd_m3=float(site["net_sd_m3"]), seconds=time.perf_counter() - t0)
+                   net_m3=float(site["net_m3"]), net_sd_m3=float(site["net_sd_m3"]), void_area_m2=n_void * grid.cell**2,
+                   seconds=time.perf_counter() - t0)
     log.info("change detected in %.1f s: whole-site net %.1f ± %.1f m³", summary["seconds"], summary["net_m3"], summary["net_sd_m3"])
     return summary
