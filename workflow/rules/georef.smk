@@ -13,12 +13,19 @@ if "georef" in config and "sfm" in config:
         tape = config["georef"]["tape_file"]
         return [tape] if tape else []
 
+    def georef_first_epoch_camera(wildcards):
+        """Later epochs (issue 17): the first epoch's adjusted camera, when georef.camera_from_first_epoch."""
+        if config["georef"].get("camera_from_first_epoch") and wildcards.epoch:
+            return result("georef", "camera_calibration.csv")
+        return []
+
     rule georef_adjust:
         input:
             model=eresult("sfm", "model"),
             image_info=eresult("sfm", "image_info.json"),
             gcp=INPUTS_GCP,  # the checked copy (heights in metres) of georef_gcp_file()
             extra=georef_extra_inputs(),
+            camera=georef_first_epoch_camera,
         output:
             model=directory(eresult("georef", "model")),
             transform=eresult("georef", "transform.json"),

@@ -18,4 +18,5 @@ georeference(
     out=out,
     attribution=snakemake.params.attribution,
     gcp_source=snakemake.params.gcp_source,
+    camera_calibration=snakemake.input.camera or None,  # later epochs: the first epoch's camera (issue 17)
 )

@@ -7,7 +7,8 @@ stays light.
 Modules: ``stage`` (the stage: parameters, files in and out), ``views`` (oriented images,
 pycolmap reader, image pyramids), ``kernels`` (compiled resampling, multi-image
 correlation, SGM, occlusion, openness), ``matching`` (one tile, coarse to fine),
-``surface`` (tiled site DSM), ``ortho`` (true orthophoto), ``shading`` (hillshade, openness).
+``surface`` (tiled site DSM), ``datum`` (vertical datum check at the GCP targets), ``ortho`` (true
+orthophoto), ``shading`` (hillshade, openness).
 """
 
 from importlib import import_module

@@ -23,6 +23,7 @@ import pandas as pd
 from kitegully import InputError
 from kitegully.config import config_section
 from kitegully.dense.cell import choose_cell
+from kitegully.dense.datum import DatumParams, check_datum
 from kitegully.dense.matching import MatchParams
 from kitegully.dense.ortho import orthophoto
 from kitegully.dense.shading import hillshade, openness
@@ -136,6 +137,9 @@ class DenseParams:
         Figures show the rasters decimated to at most this many pixels per side.
     threads : int
         Threads of the rule (Snakemake ``threads:``; the script passes the granted count).
+    datum : DatumParams
+        Vertical datum check of the DSM at the GCP targets (``dense.datum``, optional;
+        absent = disabled; see :mod:`kitegully.dense.datum`).
     """
 
     cell_m: float | str
@@ -149,11 +153,12 @@ class DenseParams:
     shading: ShadingParams
     figure_max_px: int
     threads: int
+    datum: DatumParams = DatumParams.from_config(None)
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "DenseParams":
         """Build from the ``dense`` config section; raises InputError naming a bad key."""
-        config_section(cfg, "dense", cls.__dataclass_fields__)
+        config_section(cfg, "dense", [k for k in cls.__dataclass_fields__ if k != "datum"], optional=("datum",))
         if cfg["cell_m"] != "auto":
             if isinstance(cfg["cell_m"], (str, bool)) or cfg["cell_m"] is None:
                 raise InputError(f"dense.cell_m: must be a number of metres or 'auto', got {cfg['cell_m']!r}")
@@ -175,6 +180,7 @@ class DenseParams:
             overlap_cells=cfg["overlap_cells"], max_cached_images=cfg["max_cached_images"],
             matching=MatchParams.from_config(cfg["matching"]), orthophoto=OrthoParams.from_config(cfg["orthophoto"]),
             shading=ShadingParams.from_config(cfg["shading"]), figure_max_px=cfg["figure_max_px"], threads=cfg["threads"],
+            datum=DatumParams.from_config(cfg.get("datum")),
         )
 
 
@@ -262,7 +268,7 @@ def shading_figures(dsm: np.ndarray, grid: GridSpec, sh: ShadingParams, figure_m
 
 def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path, crs: str,
                         params: DenseParams, threads: int, out: Mapping[str, str | Path],
-                        site_json: str | Path | None = None) -> dict:
+                        site_json: str | Path | None = None, gcps: pd.DataFrame | None = None) -> dict:
     """Dense matching, orthophoto and shading of the georeferenced model; writes the products.
 
     Parameters
@@ -283,6 +289,9 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
         Product name → path; keys dsm, correlation, orthophoto, hillshade, openness, summary.
     site_json : path, optional
         The twin's ``site.json`` (needed by ``extent: site``).
+    gcps : DataFrame, optional
+        ``gcp_id, x, y, z`` of the targets the GCP adjustment used, for the datum check
+        (``params.datum``); with ``out["datum"]`` the per-target table is written there.
 
     Returns
     -------
@@ -319,6 +328,16 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
     t_match = time.perf_counter() - t0
     if not np.isfinite(res.dsm).any():
         raise InputError(f"{model_dir}: dense matching found no valid cell (check the images and the model's orientation)")
+    datum = None
+    if params.datum.enabled:
+        if gcps is None:
+            raise InputError("dense.datum.enabled: the datum check needs the GCP file (the rule's gcp input)")
+        datum = check_datum(res.dsm, grid, gcps, params.datum)
+        log.info("dense: %s", datum.reason)
+        if datum.applied:
+            res.dsm -= np.float32(datum.offset_m)  # before the orthophoto, so it is rendered on the shifted surface
+        if "datum" in out:
+            write_table(datum.table, out["datum"])
     write_raster(out["dsm"], res.dsm, grid, tags={"units": "m", "nodata": "NaN"})
     write_raster(out["correlation"], res.ncc, grid, tags={"units": "NCC (-1..1)"})
     oc = params.orthophoto
@@ -341,6 +360,8 @@ def match_dense_surface(model_dir: str | Path, transform_json: str | Path | None
         "matching_s": t_match, "orthophoto_s": t_ortho, "cells_per_s": cells / t_match,
         "peak_memory_mb": peak_memory_mb(), "threads": int(threads),
     }
+    if datum is not None:
+        summary.update(datum.summary())
     area_ext = 3.18e6 / 0.2 ** 2
     summary["extrapolated_3_18_km2_at_0_2_m_h"] = area_ext / summary["cells_per_s"] / 3600.0
     write_table(pd.DataFrame({"quantity": list(summary), "value": [summary[k] for k in summary]}), out["summary"])

@@ -9,16 +9,18 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+import pandas as pd
 import pycolmap
 
 from kitegully import InputError
 from kitegully.config import config_section
 from kitegully.georef import export
-from kitegully.georef.bundle import BundleSettings
+from kitegully.georef.bundle import Block, BundleSettings
 from kitegully.georef.control import georeference_block
 from kitegully.georef.gcp_io import read_gcps, read_tape_distances
 from kitegully.georef.model import block_from_reconstruction
@@ -161,6 +163,13 @@ class GeorefParams:
         File format of the sparse cloud: ``laz`` (LAS 1.4 compressed with LASzip, laspy's
         ``lazrs`` backend; opens in QGIS, CloudCompare, PDAL) or ``las`` (the same points
         uncompressed). The rule names the output ``sparse_cloud.<cloud_format>``.
+    camera_from_first_epoch : bool
+        Later survey epochs of a site (issue 17) take the camera's intrinsics as the first
+        epoch's GCP adjustment found them and keep them fixed (optional key; default
+        false). [I] Same camera body and lens, focused at infinity: a weaker later block
+        (fewer photos, strips and clicks) cannot separate focal length from flying height
+        (dz = H·Δf/f) and bends into a dome with a wrong f and k1 (James & Robson 2014);
+        the first epoch's stronger block calibrates it better. No effect on the first epoch.
     """
 
     gcp_format: str
@@ -178,13 +187,15 @@ class GeorefParams:
     bundle: BundleSettings
     arrow_scale: float | None
     cloud_format: str
+    camera_from_first_epoch: bool = False
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "GeorefParams":
         """Build from the ``georef`` config section; raises InputError naming a bad key."""
         config_section(cfg, "georef", ("gcp_format", "csv_crs", "gcp_pixel_frame", "gcp_pixel_scale",
                                        "gcp_pixel_offset_px", "method", "tape_file", "sigma_gcp_xy_m", "sigma_gcp_z_m",
-                                       "max_tie_points", "tie_grid", "qa", "bundle", "figure", "cloud_format"))
+                                       "max_tie_points", "tie_grid", "qa", "bundle", "figure", "cloud_format"),
+                       optional=("camera_from_first_epoch",))
         method = _choice(cfg["method"], METHODS, "georef.method")
         if method == "tape_horn" and not cfg["tape_file"]:
             raise InputError("georef.tape_file: the tape_horn method needs a file of taped distances")
@@ -212,12 +223,14 @@ class GeorefParams:
             bundle=bundle_settings_from_config(cfg["bundle"], sxy, sz),
             arrow_scale=None if fig["arrow_scale"] is None else float(fig["arrow_scale"]),
             cloud_format=_choice(cfg["cloud_format"], ("laz", "las"), "georef.cloud_format"),
+            camera_from_first_epoch=bool(cfg.get("camera_from_first_epoch", False)),
         )
 
 
 def georeference(
     model_dir: str | Path, image_info_json: str | Path, gcp_file: str | Path, sfm_frame: str, params: GeorefParams,
     crs: str, seed: int, out: Mapping[str, str | Path], attribution: str | None = None, gcp_source: str | None = None,
+    camera_calibration: str | Path | None = None,
 ) -> dict:
     """Georeference the SfM model with the GCPs and write the stage's products.
 
@@ -245,6 +258,9 @@ def georeference(
     gcp_source : str, optional
         The GCP file as the user gave it (``gcp_file`` may be its checked copy), named in
         error messages.
+    camera_calibration : path, optional
+        Another epoch's ``camera_calibration.csv``: its adjusted intrinsics replace the
+        SfM ones and stay fixed in the adjustment (``params.camera_from_first_epoch``).
 
     Returns
     -------
@@ -271,12 +287,16 @@ def georeference(
         rec, params.max_tie_points, seed, params.tie_grid,
     )
     rows = {name.split("/")[-1]: k for k, name in enumerate(index.image_names)}
+    sfm_block = block
+    if camera_calibration is not None:
+        block = with_calibration(block, camera_calibration)
+        params = replace(params, bundle=replace(params.bundle, refine=()))
     res = georeference_block(block, gcps, infos, rows, params, sfm_frame, tape, str(gcp_source or gcp_file))
 
     rec = export.write_model(rec, res.block, index, res.offset, out["model"])
     export.write_transform(out["transform"], crs, res.offset, res.transform.as_dict(), res.report)
     export.write_residual_tables(res.residuals, res.loo, out["residuals"], out["loo"])
-    write_table(export.calibration_table(block, res.block, index, rec), out["calibration"])
+    write_table(export.calibration_table(sfm_block, res.block, index, rec), out["calibration"])
     cams = export.camera_positions(res.block, index, res.offset, crs, {i.sfm_name: i.name for i in infos})
     write_vector(cams, out["cameras"])
     n_pts = export.write_las(rec, res.offset, crs, out["cloud"])
@@ -289,3 +309,23 @@ def georeference(
     log.info("georeferencing %s be trusted: %s", verdict, "; ".join(summary["trust_reasons"]) or "all checks passed")
     log.info("diagnosis: %s (%s)", summary["diagnosis"], summary["diagnosis_text"])
     return summary
+
+
+def with_calibration(block: Block, calibration_csv: str | Path) -> Block:
+    """``block`` with the adjusted intrinsics of another epoch's ``camera_calibration.csv``.
+
+    One row per camera, in the same order and of the same image size; raises InputError
+    naming the file otherwise.
+    """
+    try:
+        cal = pd.read_csv(calibration_csv)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{calibration_csv}: cannot read the camera calibration ({exc})") from None
+    cols = ["f_px_adjusted", "cx_px_adjusted", "cy_px_adjusted", "k1_adjusted", "k2_adjusted"]
+    if not set(cols) <= set(cal.columns) or len(cal) != len(block.intr):
+        raise InputError(f"{calibration_csv}: needs one row per camera ({len(block.intr)}) with the columns {', '.join(cols)}")
+    out = block.copy()
+    out.intr = cal[cols].to_numpy(float)
+    log.info("camera intrinsics fixed at %s: %s (SfM had %s)", calibration_csv, np.round(out.intr, 5).tolist(),
+             np.round(block.intr, 5).tolist())
+    return out
