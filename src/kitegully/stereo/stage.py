@@ -227,8 +227,9 @@ def _render_pair(rig: StereoRig, height: Callable, texture, noise_dn: float, rng
     """Twin step: the two photographs of ``height`` (only the window that sees ``extent_pts`` is rendered)."""
     wl = _window(rig.left, rig.pose_left, extent_pts)
     wr = _window(rig.right, rig.pose_right, extent_pts)
-    L = render_heightfield(rig.left, rig.pose_left, height, texture, noise_dn=noise_dn, rng=rng, window=wl)
-    R = render_heightfield(rig.right, rig.pose_right, height, texture, noise_dn=noise_dn, rng=rng, window=wr)
+    # [I] 5 fixed-point iterations: the ray-surface error shrinks by ~slope·tan(view angle) < 0.1 per iteration
+    L = render_heightfield(rig.left, rig.pose_left, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wl)
+    R = render_heightfield(rig.right, rig.pose_right, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wr)
     return L, R
 
 
@@ -258,21 +259,32 @@ class PairProcessor:
         a, b = self.rect.rectify_points(uv_l, "left"), self.rect.rectify_points(uv_r, "right")
         return self.to_world.apply(triangulate_points(self.rect, a, b, self.model_pose))
 
-    def dem(self, img_l, img_r, grid: GridSpec):
-        """Surface measurement: match the rectified pair over the box, triangulate, grid (mean per cell)."""
+    def dem(self, img_l, img_r, grid: GridSpec, z_range: tuple[float, float] = (-0.05, 0.05)):
+        """Surface measurement: match the rectified pair where it sees ``grid``, triangulate, grid (mean per cell).
+
+        Only the part of the left rectified image that sees the grid (between ``z_range``, world m)
+        is matched: the frame and the walls are not part of the DEM.
+        """
         Lr, Rr = self.rect.remap(img_l, "left"), self.rect.remap(img_r, "right")
-        x0, y0, x1, y1 = self._roi(Lr)
+        x0, y0, x1, y1 = self._roi(grid, z_range, Lr.shape)
         levels = int(np.clip(np.ceil(np.log2(max(self.d_range[1] - self.d_range[0], 8) / 8)), 2, 5))
         disp = match_epipolar(Lr, Rr, self.d_range, MatchParams(levels=levels, **{k: v for k, v in self.match.__dict__.items() if k != "levels"}),
                               roi=(x0, y0, x1, y1))
         P = self.to_world.apply(disparity_to_points(disp, self.rect, self.model_pose))
         return grid_dem(P, grid, min_count=3), int(disp.valid.sum())
 
-    @staticmethod
-    def _roi(Lr: np.ndarray) -> tuple[int, int, int, int]:
-        ok = np.isfinite(Lr)
-        rows, cols = np.nonzero(ok.any(axis=1))[0], np.nonzero(ok.any(axis=0))[0]
-        return int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1
+    def _roi(self, grid: GridSpec, z_range, shape, margin_px: int = 24) -> tuple[int, int, int, int]:
+        """Bounding box (px) in the left rectified image of the grid's corners at both ends of ``z_range``."""
+        x0, y0, x1, y1 = grid.bounds
+        W = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in z_range], float)
+        s = self.to_world
+        Xm = ((W - s.t) @ s.R) / s.scale  # world -> model (= left camera) frame
+        Xr = Xm @ self.rect.R1.T
+        uv = (Xr @ self.rect.P1[:, :3].T + self.rect.P1[:, 3])
+        uv = uv[:, :2] / uv[:, 2:3]
+        h, w = shape
+        return (max(0, int(uv[:, 0].min()) - margin_px), max(0, int(uv[:, 1].min()) - margin_px),
+                min(w, int(uv[:, 0].max()) + margin_px), min(h, int(uv[:, 1].max()) + margin_px))
 
 
 def _measure_tie_and_marks(rig: StereoRig, rng, proc: Mapping[str, Any], box=BOX, z_range=(0.0, 0.1)):
@@ -451,7 +463,7 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     texture = soil_texture(rng_for(seed, "stereo", "texture"), TEXTURE_EXTENT)
     grid = _box_grid(proc["cell_mm"] * 1e-3)
     ref = _cell_truth(_relief, grid)
-    extent = np.vstack([_frame_marks(), [[BOX[0], BOX[1], 0], [BOX[2], BOX[3], 0]]])
+    extent = np.array([[x, y, z] for x in (BOX[0], BOX[2]) for y in (BOX[1], BOX[3]) for z in (-0.01, 0.01)])  # the soil, not the frame
     rows = []
     for H, B in (tuple(float(v) for v in s) for s in db["setups"]):
         rng = rng_for(seed, "stereo", "dry_box", f"{H}-{B}")
@@ -580,8 +592,7 @@ def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     texture = soil_texture(rng_for(seed, "stereo", "texture_rain"), TEXTURE_EXTENT)
     tan = np.tan(np.radians(rn["slope_deg"]))
     grid = _box_grid(proc["cell_mm"] * 1e-3)
-    extent = np.vstack([_frame_marks() * [1, 1, 0] + np.c_[0 * _frame_marks()[:, :2], -tan * _frame_marks()[:, 1] + 0.01],
-                        [[BOX[0], BOX[1], tan * 0.25], [BOX[2], BOX[3], -tan * 0.25]]])
+    extent = np.array([[x, y, -tan * y + dz] for x in (BOX[0], BOX[2]) for y in (BOX[1], BOX[3]) for dz in (-0.01, 0.01)])
     S_cm2 = (BOX[2] - BOX[0]) * (BOX[3] - BOX[1]) * 1e4
     rate = interrill_rate_kg_m2_h(rn["interrill_erodibility"], rn["intensity_mm_h"], rn["slope_deg"])
     times = np.arange(0, rn["duration_min"] + 1e-9, rn["interval_min"])
@@ -655,8 +666,10 @@ def measure_wind(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     H, B = float(wd["H_m"]), float(wd["B_m"])
     # the part of the 2.0 × 0.45 m tray both cameras see at H = 0.6 m: a 0.12 × 0.12 m patch of sand
     box = (-0.06, -0.06, 0.06, 0.06)
-    texture = soil_texture(rng_for(seed, "stereo", "texture_sand"), (-0.12, -0.12, 0.12, 0.12), cell_m=8e-5,
-                           scales_m=(1.6e-4, 4e-4, 1.2e-3, 4e-3))
+    # [I] sand texture at ~0.7 ground pixel (0.08 mm at H = 0.6 m), grains 2-50 cells
+    cell = float(np.clip(H * D2H_PIXEL_MM / 51.4 / 1.4, 8e-5, 2.5e-4))
+    sand = dict(cell_m=cell, scales_m=(2 * cell, 5 * cell, 15 * cell, 50 * cell))
+    texture = soil_texture(rng_for(seed, "stereo", "texture_sand"), (-0.12, -0.12, 0.12, 0.12), **sand)
     lam, amp = wd["ripple_wavelength_mm"] * 1e-3, wd["ripple_mm"] * 1e-3
     defl = wd["deflation_mm"] * 1e-3
 
@@ -667,10 +680,9 @@ def measure_wind(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     rng = rng_for(seed, "stereo", "wind")
     truth, pp = _setup(H, B, cams, params, rng, box=box, z_range=(-0.003, 0.01))
     grid = _box_grid(wd["cell_mm"] * 1e-3, box)
-    extent = np.vstack([_frame_marks(box), [[box[0], box[1], 0], [box[2], box[3], 0]]])
+    extent = np.array([[x, y, z] for x in (box[0], box[2]) for y in (box[1], box[3]) for z in (-0.003, 0.003)])
     d0, _ = pp.dem(*_render_pair(truth, surface(False), texture, proc["image_noise_dn"], rng, extent), grid)
-    texture1 = soil_texture(rng_for(seed, "stereo", "texture_sand_after"), (-0.12, -0.12, 0.12, 0.12), cell_m=8e-5,
-                            scales_m=(1.6e-4, 4e-4, 1.2e-3, 4e-3))  # [I] the blown sand is new grains
+    texture1 = soil_texture(rng_for(seed, "stereo", "texture_sand_after"), (-0.12, -0.12, 0.12, 0.12), **sand)  # [I] new grains
     d1, _ = pp.dem(*_render_pair(truth, surface(True), texture1, proc["image_noise_dn"], rng, extent), grid)
     nails = _nails(rng, box)
     gauge_before = _cell_truth(surface(False), grid)
