@@ -76,5 +76,5 @@ def test_weighted_control_bundle_absorbs_field_error():
     assert df_w < 0.06 and df_w < 0.3 * df_fixed
     # the adjusted targets moved towards the truth
     assert np.sqrt(np.mean((xyz - field.xyz) ** 2)) < np.sqrt(np.mean((known.xyz - field.xyz) ** 2))
-    with pytest.raises(InputError, match="sigma_px = 0 and sigma_field_m = 0.0002 must both be positive"):
+    with pytest.raises(InputError, match="camera: sigma_px = 0.0 and sigma_field_m = 0.0002 must both be positive"):
         calibrate_camera_weighted(known, obs, cam.width, cam.height, D2H_PIXEL_MM, 0.0, 2e-4)

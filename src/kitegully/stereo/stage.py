@@ -217,7 +217,7 @@ def _nails(rng: np.random.Generator, box=BOX, n: int = 20) -> np.ndarray:
     return np.column_stack([X.ravel(), Y.ravel()])[:n] + rng.normal(0, 0.005, (n, 2))
 
 
-def _window(cam: Camera, pose: Pose, pts: np.ndarray, margin_px: int = 48) -> tuple[int, int, int, int]:
+def _window(cam: Camera, pose: Pose, pts: np.ndarray, margin_px: int = 160) -> tuple[int, int, int, int]:
     uv = cam.project(pts, pose)
     return (int(np.nanmin(uv[:, 0])) - margin_px, int(np.nanmin(uv[:, 1])) - margin_px,
             int(np.nanmax(uv[:, 0])) + margin_px, int(np.nanmax(uv[:, 1])) + margin_px)
@@ -273,8 +273,12 @@ class PairProcessor:
         P = self.to_world.apply(disparity_to_points(disp, self.rect, self.model_pose))
         return grid_dem(P, grid, min_count=3), int(disp.valid.sum())
 
-    def _roi(self, grid: GridSpec, z_range, shape, margin_px: int = 24) -> tuple[int, int, int, int]:
-        """Bounding box (px) in the left rectified image of the grid's corners at both ends of ``z_range``."""
+    def _roi(self, grid: GridSpec, z_range, shape, margin_px: int = 96) -> tuple[int, int, int, int]:
+        """Bounding box (px) in the left rectified image of the grid's corners at both ends of ``z_range``.
+
+        [I] The margin (96 px) is a coarse-level matching window (11 px at level 3 = 88 px): near the
+        edge of the matched region the coarse levels see no data and the fine levels inherit blunders.
+        """
         x0, y0, x1, y1 = grid.bounds
         W = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in z_range], float)
         s = self.to_world

@@ -34,13 +34,19 @@ def soil_texture(rng: np.random.Generator, extent_m: tuple[float, float, float, 
 
     Cost: O(cells · len(scales_m)) Gaussian filtering.
     """
-    from scipy.ndimage import gaussian_filter
+    import cv2
 
     xmin, ymin, xmax, ymax = extent_m
     w, h = int(np.ceil((xmax - xmin) / cell_m)), int(np.ceil((ymax - ymin) / cell_m))
     acc = np.zeros((h, w), np.float32)
     for s in scales_m:
-        n = gaussian_filter(rng.standard_normal((h, w)).astype(np.float32), s / cell_m)
+        # OpenCV's separable Gaussian (kernel ±4σ, reflected border): same field as scipy's, several times faster
+        # large scales are drawn on a coarser grid (≥ 4 cells per σ) and resized: same spectrum, far cheaper
+        k = max(1, int(s / cell_m / 4))
+        hc, wc = -(-h // k), -(-w // k)
+        n = cv2.GaussianBlur(rng.standard_normal((hc, wc)).astype(np.float32), (0, 0), s / cell_m / k, borderType=cv2.BORDER_REFLECT)
+        if k > 1:
+            n = cv2.resize(n, (wc * k, hc * k), interpolation=cv2.INTER_CUBIC)[:h, :w]
         acc += n / (n.std() + 1e-12)
     acc /= acc.std()
     return Texture(np.clip(0.3 + 0.09 * acc, 0.05, 0.6).astype(np.float32), xmin, ymax, cell_m)
