@@ -28,7 +28,7 @@ def tiny(cfg):
     c["calibration_test"]["H_m"] = [2.0, 4.0]
     c["dry_box"].update(setups=[[4.7, 0.8], [4.7, 0.63]], removals=2, removal_H_m=4.7, removal_B_m=0.8)
     c["rain"].update(bulk_densities=[0.91], duration_min=10.0, interval_min=10.0, H_m=4.7, B_m=0.8)
-    c["wind"].update(H_m=1.5, B_m=0.5)
+    c["wind"].update(H_m=3.0, B_m=1.0)
     return c
 
 
@@ -73,7 +73,7 @@ def test_entry_points_on_a_tiny_configuration(cfg, tmp_path):
     d = {k: str(tmp_path / f"{k}.{'png' if k.endswith('png') else 'csv'}") for k in ("mae_vs_L", "mae_vs_L_png", "removals", "removals_png", "dod_png")}
     measure_dry_box({k: c[k] for k in ("processing", "dry_box")}, o["cameras"], 7, d)
     mv = pd.read_csv(d["mae_vs_L"])
-    assert len(mv) == 2 and (mv["surface_mae_mm"] < 1.0).all()
+    assert len(mv) == 2 and (mv["surface_mae_mm"] < 0.5 * mv["dz_1px_mm"]).all()  # well under the 1-px δz (6.4 mm)
     rem = pd.read_csv(d["removals"])
     assert len(rem) == 2 and rem["M_s_mm"].iloc[0] == pytest.approx(50 / 1500 * 10, rel=0.01)  # 50 mL over 1500 cm²
     assert abs(rem["b_fit"].iloc[0] - 1) < 0.2
