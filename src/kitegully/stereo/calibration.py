@@ -334,7 +334,6 @@ def calibrate_camera_weighted(field: ControlField, observations: list[Observatio
     rv0 = np.array([cv2_rvec(p.R) for p in start.poses])
     t0 = np.array([p.t for p in start.poses])
     x0 = np.concatenate([[c.f, c.cx, c.cy, c.k1, c.k2], np.hstack([rv0, t0]).ravel(), field.xyz.ravel()])
-    scale = np.concatenate([[c.f * 1e-3, 1.0, 1.0, 1e-3, 1e-3], np.tile([1e-3] * 3 + [1e-3] * 3, n_img), np.full(3 * n_pt, 1e-4)])
 
     def resid(p):
         f, cx, cy, k1, k2 = p[:5]
@@ -360,7 +359,7 @@ def calibrate_camera_weighted(field: ControlField, observations: list[Observatio
     r_i.append(2 * len(uv) + np.arange(3 * n_pt))
     c_i.append(5 + 6 * n_img + np.arange(3 * n_pt))
     S = coo_matrix((np.ones(sum(len(v) for v in r_i), np.int8), (np.concatenate(r_i), np.concatenate(c_i))), shape=(m, len(x0)))
-    sol = least_squares(resid, x0, jac_sparsity=S, x_scale=scale, method="trf", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
+    sol = least_squares(resid, x0, jac_sparsity=S, x_scale="jac", method="trf", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=1000)
     log.debug("%s: weighted bundle %d evaluations, status %d", name, sol.nfev, sol.status)
     p = sol.x
     cam = Camera(**{**c.__dict__, "f": float(p[0]), "cx": float(p[1]), "cy": float(p[2]), "k1": float(p[3]), "k2": float(p[4])})
