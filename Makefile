@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem stereo
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -47,6 +47,12 @@ test: $(STAMP)
 # results/ensemble/summary.csv and summary.md (about 6 x 10 min on 2 idle cores).
 ensemble: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) $(ENSEMBLE_ARGS)
+
+# Plot-scale stereo lab (issue 19, Moritani et al. 2010): its own site, not part of `make run`;
+# results/stereo_lab/stereo/ (README "Plot-scale stereo (Moritani et al. 2010)").
+stereo: $(STAMP)
+	@$(BIN)/python -m kitegully.config config/sites/stereo_lab.yaml
+	$(BIN)/snakemake --cores $(CORES) --configfile config/sites/stereo_lab.yaml $(SNAKE_ARGS)
 
 clean-venv:
 	rm -rf $(VENV)

@@ -16,6 +16,7 @@ STAGES = [
     "polygons",
     "obia",
     "change",
+    "stereo",
     "report",
 ]
 

@@ -92,6 +92,27 @@ def calibration_poses(H_m: float = 3.0, shift_m: tuple[float, float] = (0.22, 0.
     return poses
 
 
+def convergent_poses(H_m: float = 3.0, offset_m: float = 1.5, n: int = 8, aim_z_m: float = 0.1) -> list[Pose]:
+    """``n`` convergent stations on a circle of radius ``offset_m`` at ``H_m``, all aimed at the field, rolled 0/90/180/270°.
+
+    [I] Beyond the paper's six parallel shifted images: a station 1.5 m off-centre at 3 m
+    views the field 27° off-nadir, so f and the camera distance change the image
+    differently (the f–distance correlation of near-nadir images is what lets the 0.2 mm
+    field error into f), and the rolls decorrelate the principal point from the poses.
+    Targets stay away from the frame corners in these images, so the paper's shifted
+    images are still needed for K1, K2.
+    """
+    from kitegully.stereo.rig import look_at_pose
+
+    rolls = (0.0, 90.0, 180.0, 270.0)
+    out = []
+    for k in range(n):
+        a = 2 * np.pi * k / n
+        C = np.array([offset_m * np.cos(a), offset_m * np.sin(a), H_m])
+        out.append(look_at_pose(C, np.array([0.0, 0.0, aim_z_m]), 0.0, 0.0, rolls[k % 4]))
+    return out
+
+
 @dataclass(frozen=True)
 class Observation:
     """Target measurements in one image: ids and pixel positions (N × 2)."""
@@ -232,3 +253,128 @@ def calibration_table(results: dict[str, CalibrationResult], truth: dict[str, Ca
                          "truth": tru[key], "paper": paper.get(key, np.nan), "error": err,
                          "rel_error_pct": 100.0 * err / tru[key] if tru[key] != 0 else np.nan})
     return pd.DataFrame(rows)
+
+
+def _rodrigues_batch(rv: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N × 3 × 3) of rotation vectors (N × 3)."""
+    th = np.linalg.norm(rv, axis=1)[:, None, None]
+    safe = np.where(th > 1e-12, th, 1.0)
+    k = rv[:, :, None] / safe[:, :, 0][:, :, None]
+    K = np.zeros((len(rv), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2, 0], k[:, 1, 0], -k[:, 0, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2, 0], -k[:, 1, 0], k[:, 0, 0]
+    eye = np.broadcast_to(np.eye(3), K.shape)
+    R = eye + np.sin(safe) * K + (1 - np.cos(safe)) * (K @ K)
+    return np.where(th > 1e-12, R, eye + _skew(rv))
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    S = np.zeros((len(v), 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return S
+
+
+def calibrate_camera_weighted(field: ControlField, observations: list[Observation], width: int, height: int, pixel_mm: float,
+                              sigma_px: float, sigma_field_m: float, nominal_f_mm: float = D2H_NOMINAL_F_MM,
+                              name: str = "camera", template: Camera | None = None) -> tuple[CalibrationResult, np.ndarray]:
+    """Self-calibrating bundle with the control field as weighted observations (free network with weighted control).
+
+    Unknowns: f, cx, cy, k1, k2, the pose of every image and the 3-D position of every
+    target. Observations: the image measurements (σ = ``sigma_px``) and the field
+    coordinates (σ = ``sigma_field_m`` per coordinate). The targets may move within their
+    stated accuracy when the images say so, so the 0.2 mm field error is no longer forced
+    into f; the control still fixes the datum (position, orientation, scale) through its
+    weights, so there is no datum defect. Started from :func:`calibrate_camera` (control
+    held fixed).
+
+    [I] Why: with near-nadir stations f and the camera distance are nearly
+    interchangeable; only the 0.3 m of pole relief separates them, so a horizontal target
+    error of 0.2 mm moves f by ~0.1 mm when the field is held fixed. Letting the targets
+    move only helps where the images determine them better than 0.2 mm, i.e. with
+    convergent stations (good intersection angles); see :func:`calibration_poses`.
+
+    Parameters
+    ----------
+    field : ControlField
+        Stated target coordinates (m) with their error.
+    observations : list[Observation]
+        Target measurements per image (checked as in :func:`calibrate_camera`).
+    width, height : int
+        Image size (px).
+    pixel_mm : float
+        Pixel pitch (mm).
+    sigma_px, sigma_field_m : float
+        Standard deviations of the image measurements (px) and of each field coordinate (m), > 0.
+    nominal_f_mm, name, template
+        As in :func:`calibrate_camera`.
+
+    Returns
+    -------
+    (CalibrationResult, ndarray)
+        The calibration (``rms_px`` of the image residuals) and the adjusted target coordinates (32 × 3, m).
+
+    Notes
+    -----
+    Cost: sparse Levenberg–Marquardt-like trust-region solve over 5 + 6·images + 3·targets
+    unknowns with finite-difference Jacobians; ≈ 400 evaluations, about 4 s of one core for 32 targets and 14 images.
+    """
+    from scipy.optimize import least_squares
+    from scipy.sparse import coo_matrix
+
+    if not (sigma_px > 0 and sigma_field_m > 0):
+        raise InputError(f"{name}: sigma_px = {sigma_px} and sigma_field_m = {sigma_field_m} must both be positive")
+    start = calibrate_camera(field, observations, width, height, pixel_mm, nominal_f_mm, name, template)
+    index = {i: k for k, i in enumerate(field.ids.tolist())}
+    n_img, n_pt = len(observations), len(field.ids)
+    img_of = np.concatenate([np.full(len(o.ids), k) for k, o in enumerate(observations)])
+    pt_of = np.concatenate([[index[i] for i in o.ids.tolist()] for o in observations]).astype(int)
+    uv = np.vstack([o.uv for o in observations])
+    c = start.camera
+    rv0 = np.array([cv2_rvec(p.R) for p in start.poses])
+    t0 = np.array([p.t for p in start.poses])
+    x0 = np.concatenate([[c.f, c.cx, c.cy, c.k1, c.k2], np.hstack([rv0, t0]).ravel(), field.xyz.ravel()])
+
+    def resid(p):
+        f, cx, cy, k1, k2 = p[:5]
+        ext = p[5:5 + 6 * n_img].reshape(n_img, 6)
+        X = p[5 + 6 * n_img:].reshape(n_pt, 3)
+        R = _rodrigues_batch(ext[:, :3])
+        Xc = np.einsum("nij,nj->ni", R[img_of], X[pt_of]) + ext[img_of, 3:]
+        xn, yn = Xc[:, 0] / Xc[:, 2], Xc[:, 1] / Xc[:, 2]
+        r2 = xn * xn + yn * yn
+        s = 1 + k1 * r2 + k2 * r2 * r2
+        r_img = (np.column_stack([f * xn * s + cx, f * yn * s + cy]) - uv) / sigma_px
+        r_fld = (X - field.xyz) / sigma_field_m
+        return np.concatenate([r_img.ravel(), r_fld.ravel()])
+
+    m = 2 * len(uv) + 3 * n_pt
+    r_i, c_i = [], []
+    for a in (0, 1):
+        r = 2 * np.arange(len(uv)) + a
+        cols = np.column_stack([np.tile(np.arange(5), (len(uv), 1)), 5 + 6 * img_of[:, None] + np.arange(6),
+                                5 + 6 * n_img + 3 * pt_of[:, None] + np.arange(3)])
+        r_i.append(np.repeat(r, cols.shape[1]))
+        c_i.append(cols.ravel())
+    r_i.append(2 * len(uv) + np.arange(3 * n_pt))
+    c_i.append(5 + 6 * n_img + np.arange(3 * n_pt))
+    S = coo_matrix((np.ones(sum(len(v) for v in r_i), np.int8), (np.concatenate(r_i), np.concatenate(c_i))), shape=(m, len(x0)))
+    sol = least_squares(resid, x0, jac_sparsity=S, x_scale="jac", method="trf", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=1000)
+    log.debug("%s: weighted bundle %d evaluations, status %d", name, sol.nfev, sol.status)
+    p = sol.x
+    cam = Camera(**{**c.__dict__, "f": float(p[0]), "cx": float(p[1]), "cy": float(p[2]), "k1": float(p[3]), "k2": float(p[4])})
+    ext = p[5:5 + 6 * n_img].reshape(n_img, 6)
+    R = _rodrigues_batch(ext[:, :3])
+    poses = [Pose(R=R[k], C=-R[k].T @ ext[k, 3:]) for k in range(n_img)]
+    r = resid(p)[:2 * len(uv)] * sigma_px
+    rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2) * 2))
+    log.info("%s: weighted-control bundle on %d images: RMS %.3f px, targets moved %.3f mm RMS", name, n_img, rms,
+             1e3 * float(np.sqrt(np.mean((p[5 + 6 * n_img:].reshape(n_pt, 3) - field.xyz) ** 2))))
+    return CalibrationResult(cam, rms, poses, len(uv)), p[5 + 6 * n_img:].reshape(n_pt, 3)
+
+
+def cv2_rvec(R: np.ndarray) -> np.ndarray:
+    """Rotation vector of a rotation matrix (OpenCV's Rodrigues)."""
+    import cv2
+
+    return cv2.Rodrigues(np.asarray(R, float))[0].ravel()

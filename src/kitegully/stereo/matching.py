@@ -273,7 +273,8 @@ def match_epipolar(left: np.ndarray, right: np.ndarray, d_range: tuple[float, fl
 
 def rectified_to_world(X_rect: np.ndarray, rect: Rectification, pose_left: Pose) -> np.ndarray:
     """Points in the left rectified frame (N × 3) to world: ``X_w = R_lᵀ R1ᵀ X_rect + C_l``."""
-    return (np.asarray(X_rect, float) @ rect.R1) @ pose_left.R + pose_left.C
+    X = np.ascontiguousarray(X_rect, dtype=float)  # a strided slice would make matmul fall off BLAS (seconds per Mpt)
+    return (X @ rect.R1) @ pose_left.R + pose_left.C
 
 
 def disparity_to_points(disp: Disparity, rect: Rectification, pose_left: Pose, step: int = 1) -> np.ndarray:

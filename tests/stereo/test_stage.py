@@ -1,0 +1,94 @@
+"""The stereo stage: parameters, the rain model's maths and the entry points on a tiny configuration."""
+
+import copy
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from kitegully import InputError
+from kitegully.stereo.stage import (StereoParams, calibrate_rig, interrill_rate_kg_m2_h, measure_dry_box, measure_rain,
+                                    measure_wind, settlement_mm)
+
+SITE = "config/sites/stereo_lab.yaml"
+
+
+@pytest.fixture(scope="module")
+def cfg(request):
+    root = request.config.rootpath
+    return yaml.safe_load((root / SITE).read_text())["stereo"]
+
+
+def tiny(cfg):
+    """A tiny configuration: paper stations, fixed control, rigs high enough that the box is a few hundred pixels."""
+    c = copy.deepcopy(cfg)
+    c["calibration"].update(stations="paper", weighted_control=False)
+    c["calibration_test"]["H_m"] = [2.0, 4.0]
+    c["dry_box"].update(setups=[[4.7, 0.8], [4.7, 0.63]], removals=2, removal_H_m=4.7, removal_B_m=0.8)
+    c["rain"].update(bulk_densities=[0.91], duration_min=10.0, interval_min=10.0, H_m=4.7, B_m=0.8)
+    c["wind"].update(H_m=3.0, B_m=1.0)
+    return c
+
+
+def test_params_from_site_file_and_bad_keys(cfg):
+    p = StereoParams.from_config(cfg)
+    assert p.calibration["field_sigma_mm"] == 0.2 and len(p.dry_box["setups"]) == 11
+    bad = copy.deepcopy(cfg)
+    bad["rain"]["drop_size"] = 2
+    with pytest.raises(InputError, match="stereo.rain: unknown key 'drop_size'"):
+        StereoParams.from_config(bad)
+    bad = copy.deepcopy(cfg)
+    bad["rain"]["bulk_densities"] = [0.91, 1.3]
+    with pytest.raises(InputError, match=r"stereo.rain.bulk_densities: 1.3 g/cm³ must lie between 0 and seal_density \(1.2\)"):
+        StereoParams.from_config(bad)
+    bad = copy.deepcopy(cfg)
+    bad["calibration"]["stations"] = "many"
+    with pytest.raises(InputError, match="stereo.calibration.stations: must be 'paper' or 'paper\\+convergent'"):
+        StereoParams.from_config(bad)
+
+
+def test_settlement_and_interrill_maths():
+    assert settlement_mm(0.91, 10.0, 1.20) == pytest.approx(10 * (1 - 0.91 / 1.2))
+    assert settlement_mm(1.25, 10.0, 1.20) == 0.0
+    # WEPP: D_i = K_i I^2 S_f, I = 60 mm/h, 10 deg: S_f = 1.05 - 0.85 exp(-4 sin 10°) = 0.6256
+    Sf = 1.05 - 0.85 * np.exp(-4 * np.sin(np.radians(10)))
+    assert interrill_rate_kg_m2_h(1e6, 60.0, 10.0) == pytest.approx(1e6 * (60e-3 / 3600) ** 2 * Sf * 3600)
+    assert interrill_rate_kg_m2_h(1e6, 60.0, 10.0) == pytest.approx(0.626, abs=0.001)
+
+
+def test_entry_points_on_a_tiny_configuration(cfg, tmp_path):
+    c = tiny(cfg)
+    o = {k: str(tmp_path / v) for k, v in {"calibration": "calibration.csv", "cameras": "cameras.json", "test": "test.csv",
+                                             "test_png": "test.png"}.items()}
+    calibrate_rig({k: c[k] for k in ("calibration", "calibration_test")}, 7, o)
+    tab = pd.read_csv(o["calibration"])
+    assert len(tab) == 10 and {"recovered", "recovered_paper_protocol", "truth", "paper"} <= set(tab.columns)
+    assert json.loads(open(o["cameras"]).read())["left"]["width"] == 2464
+    test = pd.read_csv(o["test"])
+    with_io = test[test.processing == "with inner orientation"]["mae_z_mm"].to_numpy()
+    without = test[test.processing == "without inner orientation"]["mae_z_mm"].to_numpy()
+    assert (with_io < without).all()  # the inner orientation matters
+    d = {k: str(tmp_path / f"{k}.{'png' if k.endswith('png') else 'csv'}") for k in ("mae_vs_L", "mae_vs_L_png", "removals", "removals_png", "dod_png")}
+    measure_dry_box({k: c[k] for k in ("processing", "dry_box")}, o["cameras"], 7, d)
+    mv = pd.read_csv(d["mae_vs_L"])
+    assert len(mv) == 2 and (mv["surface_mae_mm"] < 0.5 * mv["dz_1px_mm"]).all()  # well under the 1-px δz (6.4 mm)
+    rem = pd.read_csv(d["removals"])
+    assert len(rem) == 2 and rem["M_s_mm"].iloc[0] == pytest.approx(50 / 1500 * 10, rel=0.01)  # 50 mL over 1500 cm²
+    assert abs(rem["b_fit"].iloc[0] - 1) < 0.2
+    r = {k: str(tmp_path / f"{k}.{'png' if 'png' in k else 'csv'}") for k in ("rain_runs", "rain_series", "dod_png_0")}
+    measure_rain({k: c[k] for k in ("processing", "rain")}, o["cameras"], 7, r)
+    rr = pd.read_csv(r["rain_runs"])
+    # the DEM lowering includes the settlement, the gravimetric depth does not
+    assert rr["A_s_final_mm"].iloc[0] > rr["M_s_final_mm"].iloc[0]
+    w = {"wind_run": str(tmp_path / "wind.csv"), "dod_png": str(tmp_path / "wind.png")}
+    measure_wind({k: c[k] for k in ("processing", "wind")}, o["cameras"], 7, w)
+    assert pd.read_csv(w["wind_run"])["MAE_nails_mm"].iloc[0] < 0.5
+
+
+def test_bad_camera_file_gives_one_sentence(cfg, tmp_path):
+    bad = tmp_path / "cams.json"
+    bad.write_text(json.dumps({"left": {}}))
+    with pytest.raises(InputError, match="not a calibrated stereo camera file"):
+        measure_wind({k: tiny(cfg)[k] for k in ("processing", "wind")}, str(bad), 7, {})
