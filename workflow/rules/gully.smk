@@ -56,9 +56,16 @@ if "gully" in config:
             script:
                 "../scripts/gully_standin_dem.py"
 
+    # Large sites (config section tiling, issue 21): the depression fill of the tracing surface
+    # runs as tile jobs (tiled Priority-Flood, Barnes 2016; equal to the untiled fill bit for
+    # bit) and gully_map reads the merged fill. Other sites fill inside gully_map, unchanged.
+    GULLY_TILED = "tiling" in config
+    GULLY_FILLED_INPUT = {"filled": result("gully", "tiles/filled_trace_surface.tif")} if GULLY_TILED else {}
+
     rule gully_map:
         input:
             unpack(lambda wc: GULLY_HEADS_INPUT),
+            unpack(lambda wc: GULLY_FILLED_INPUT),
             dem=mapping_dem(),
         output:
             depth=result("gully", "depth.tif"),
@@ -182,3 +189,74 @@ if "gully" in config:
 
     GULLY_TARGETS.append(rules.gully_sensitivity.output.table)
     add_targets(*GULLY_TARGETS)
+
+    if GULLY_TILED:
+        from kitegully.terrain.tiling import TilingParams as _TilingParams
+
+        _GULLY_TILING = _TilingParams.from_config(config)
+        # the tile names follow from the config alone (site extent, tiling.tile_m): no checkpoint
+        GULLY_TILE_NAMES = _GULLY_TILING.names()
+        GULLY_TILING_PARAMS = {"tile_m": _GULLY_TILING.tile_m, "width_m": _GULLY_TILING.width_m,
+                               "height_m": _GULLY_TILING.height_m}
+
+        wildcard_constraints:
+            tile=r"r\d{3}_c\d{3}",
+
+        rule gully_trace_surface:
+            input:
+                dem=mapping_dem(),
+            output:
+                surface=result("gully", "tiles/trace_surface.tif"),
+            params:
+                mapping=GULLY_MAPPING,
+                crs=config["site"]["crs"],
+            threads: GULLY["threads"]
+            log:
+                logfile("gully", "trace_surface"),
+            benchmark:
+                benchfile("gully", "trace_surface")
+            script:
+                "../scripts/gully_trace_surface.py"
+
+        rule gully_fill_tile:
+            input:
+                surface=rules.gully_trace_surface.output.surface,
+            output:
+                fill=temp(result("gully", "tiles/fill/{tile}.fill.npz")),
+                summary=result("gully", "tiles/fill/{tile}.summary.npz"),
+            params:
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "fill_tile_{tile}"),
+            benchmark:
+                benchfile("gully", "fill_tile_{tile}")
+            script:
+                "../scripts/gully_fill_tile.py"
+
+        rule gully_fill_merge:
+            input:
+                summaries=expand(result("gully", "tiles/fill/{tile}.summary.npz"), tile=GULLY_TILE_NAMES),
+            output:
+                spill=result("gully", "tiles/fill/spill.npz"),
+            log:
+                logfile("gully", "fill_merge"),
+            benchmark:
+                benchfile("gully", "fill_merge")
+            script:
+                "../scripts/gully_fill_merge.py"
+
+        rule gully_fill_mosaic:
+            input:
+                surface=rules.gully_trace_surface.output.surface,
+                spill=rules.gully_fill_merge.output.spill,
+                fills=expand(result("gully", "tiles/fill/{tile}.fill.npz"), tile=GULLY_TILE_NAMES),
+            output:
+                filled=result("gully", "tiles/filled_trace_surface.tif"),
+            params:
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "fill_mosaic"),
+            benchmark:
+                benchfile("gully", "fill_mosaic")
+            script:
+                "../scripts/gully_fill_mosaic.py"
