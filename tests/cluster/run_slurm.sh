@@ -54,7 +54,8 @@ cleanup() {
     for d in slurmd slurmctld slurmdbd; do stop_pidfile "$WORK/run/$d.pid"; done
     stop_pidfile "$WORK/mysqlrun/mysql.pid"
     [ -n "${MUNGE_STARTED:-}" ] && stop_pidfile /run/munge/munged.pid
-    left=$(pgrep -x -d, 'slurmd|slurmctld|slurmdbd|mariadbd' || true)
+    left=""
+    for d in slurmd slurmctld slurmdbd mariadbd; do pgrep -x "$d" >/dev/null && left="$left $d"; done
     if [ -n "$left" ]; then log "daemons still running: $left"; [ $rc = 0 ] && rc=1; else log "daemons stopped"; fi
   fi
   log "total $((SECONDS / 60)) min $((SECONDS % 60)) s, exit $rc"
