@@ -22,6 +22,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 
 from kitegully import InputError
+from kitegully.config import config_section
 from kitegully.terrain.tiled_fill import Tile
 
 
@@ -52,6 +53,7 @@ class TilingParams:
         t = cfg.get("tiling")
         if not t:
             raise InputError("tiling: the site has no tiling section")
+        config_section(t, "tiling", ("tile_m", "extent"))
         ext = t.get("extent") or (cfg.get("twin") or {}).get("extent")
         if not ext:
             raise InputError("tiling.extent: a site that is not a twin must give the extent (width_m, height_m) to tile")
