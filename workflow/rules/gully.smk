@@ -56,11 +56,16 @@ if "gully" in config:
             script:
                 "../scripts/gully_standin_dem.py"
 
-    # Large sites (config section tiling, issue 21): the depression fill of the tracing surface
-    # runs as tile jobs (tiled Priority-Flood, Barnes 2016; equal to the untiled fill bit for
-    # bit) and gully_map reads the merged fill. Other sites fill inside gully_map, unchanged.
+    # Large sites (config section tiling, issue 21): the depth map and the depression fill of
+    # the tracing surface run as tile jobs (the tiled Priority-Flood, Barnes 2016, equals the
+    # untiled fill bit for bit; depth tiles read the kernel radius around them) and gully_map
+    # reads the merged products. Other sites do both inside gully_map, unchanged.
     GULLY_TILED = "tiling" in config
-    GULLY_FILLED_INPUT = {"filled": result("gully", "tiles/filled_trace_surface.tif")} if GULLY_TILED else {}
+    GULLY_FILLED_INPUT = {
+        "filled": result("gully", "tiles/filled_trace_surface.tif"),
+        "smoothed": result("gully", "tiles/smoothed_dem.tif"),
+        "depth": result("gully", "tiles/depth.tif"),
+    } if GULLY_TILED else {}
 
     rule gully_map:
         input:
@@ -201,6 +206,38 @@ if "gully" in config:
 
         wildcard_constraints:
             tile=r"r\d{3}_c\d{3}",
+
+        rule gully_depth_tile:
+            input:
+                dem=mapping_dem(),
+            output:
+                tile=temp(result("gully", "tiles/depth/{tile}.npz")),
+            params:
+                sigma_m=GULLY["sigma_m"],
+                truncate_sigmas=GULLY["truncate_sigmas"],
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "depth_tile_{tile}"),
+            benchmark:
+                benchfile("gully", "depth_tile_{tile}")
+            script:
+                "../scripts/gully_depth_tile.py"
+
+        rule gully_depth_mosaic:
+            input:
+                dem=mapping_dem(),
+                tiles=expand(result("gully", "tiles/depth/{tile}.npz"), tile=GULLY_TILE_NAMES),
+            output:
+                smoothed=result("gully", "tiles/smoothed_dem.tif"),
+                depth=result("gully", "tiles/depth.tif"),
+            params:
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "depth_mosaic"),
+            benchmark:
+                benchfile("gully", "depth_mosaic")
+            script:
+                "../scripts/gully_depth_mosaic.py"
 
         rule gully_trace_surface:
             input:

@@ -127,6 +127,8 @@ def map_gullies(
     workers: int = 1,
     auto_heads: HeadDetectionParams | None = None,
     filled: np.ndarray | None = None,
+    smoothed: np.ndarray | None = None,
+    depth: np.ndarray | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -149,6 +151,9 @@ def map_gullies(
         The ε = 0 priority-flood fill of :func:`tracing_surface`, made elsewhere (the
         tiled fill of a large site, :mod:`kitegully.terrain.tiled_fill`, equal bit for
         bit to the fill done here); only with ``flat_routing: resolve``.
+    smoothed, depth : ndarray (H, W) float32, optional
+        The depth map (steps a-d) made elsewhere, both or neither: the merged depth
+        tiles of a large site (:func:`kitegully.gully.depth.depth_map_tile`).
 
     Returns
     -------
@@ -162,7 +167,12 @@ def map_gullies(
     """
     t: dict[str, float] = {}
     t0 = time.perf_counter()
-    smoothed, depth = depth_map(dem, grid.cell, params.sigma_m, params.truncate_sigmas, workers)
+    if (smoothed is None) != (depth is None):
+        raise ValueError("give both the smoothed DEM and the depth map, or neither")
+    if smoothed is None:
+        smoothed, depth = depth_map(dem, grid.cell, params.sigma_m, params.truncate_sigmas, workers)
+    elif smoothed.shape != dem.shape or depth.shape != dem.shape:
+        raise ValueError(f"depth map has shape {depth.shape}, the DEM {dem.shape}")
     t["smoothing_s"] = time.perf_counter() - t0
     log.info("depth map: σ = %.3g m, %d x %d cells, %.1f s", params.sigma_m, grid.height, grid.width, t["smoothing_s"])
 

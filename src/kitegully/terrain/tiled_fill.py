@@ -135,8 +135,8 @@ def tile_with_halo(z: np.ndarray, tile: Tile) -> np.ndarray:
     return out
 
 
-def read_tile_with_halo(path: str | Path, tile: Tile) -> np.ndarray:
-    """Read one tile plus a one-cell halo from a raster file (NaN outside / at nodata).
+def read_tile_with_halo(path: str | Path, tile: Tile, halo: int = 1) -> np.ndarray:
+    """Read one tile plus a halo of ``halo`` cells from a raster file (NaN outside / at nodata).
 
     Only the window is read, so a per-tile job never holds the whole DEM.
     """
@@ -144,7 +144,7 @@ def read_tile_with_halo(path: str | Path, tile: Tile) -> np.ndarray:
     from rasterio.windows import Window
 
     with rasterio.open(path) as src:
-        win = Window(tile.c0 - 1, tile.r0 - 1, tile.w + 2, tile.h + 2)
+        win = Window(tile.c0 - halo, tile.r0 - halo, tile.w + 2 * halo, tile.h + 2 * halo)
         a = src.read(1, window=win, boundless=True, masked=True)
     data = np.asarray(a.filled(np.nan) if a.dtype.kind == "f" else a.astype(np.float64).filled(np.nan), dtype=np.float64)
     return data
