@@ -45,15 +45,13 @@ flats matter (``gully.flat_routing: resolve`` and the polygon conditioning route
 with :mod:`kitegully.terrain.flats`); only ``polygons.thalweg.mfd_catchment_area`` uses
 ε = 1e-4.
 
-As Snakemake jobs (not wired yet): the tile names come from :func:`tile_grid` on the DEM
-shape and ``tile`` from the config (deterministic, no checkpoint needed); a rule
-``fill_tile`` with a ``{tile}`` wildcard reads its window with :func:`read_tile_with_halo`
-and writes ``tiles/{tile}.fill.npz`` (:meth:`TileFill.save`) and the small
-``tiles/{tile}.summary.npz``; one rule ``fill_merge`` reads every summary
-(``expand`` over the grid) and writes ``spill.npz``; a rule ``fill_finalise`` with the
-``{tile}`` wildcard reads its ``.fill.npz`` and ``spill.npz`` and writes its part of the
-filled DEM (a VRT or a last gather rule makes the mosaic, or the next tiled stage reads the
-tiles directly).
+As Snakemake jobs (``workflow/rules/gully.smk``, sites with a ``tiling:`` section): the
+tile names come from :class:`kitegully.terrain.tiling.TilingParams` (a function of the config
+alone, no checkpoint) and the windows from :func:`kitegully.terrain.tiling.split_grid`; rule
+``gully_fill_tile`` (wildcard ``{tile}``) reads its window with :func:`read_tile_with_halo`
+and writes ``{tile}.fill.npz`` (:meth:`TileFill.save`) and the small ``{tile}.summary.npz``;
+``gully_fill_merge`` reads every summary and writes ``spill.npz``; ``gully_fill_mosaic``
+finalises each tile while it writes the filled raster window by window.
 
 Complexity: per tile O(t log t) time, O(t) memory (t cells; the float64 fill, int32
 labels, a byte per cell, the queues and the label-pair list); merge O(E log V) time and
