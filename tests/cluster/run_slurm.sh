@@ -40,14 +40,26 @@ if [ ${#need[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need[@]}" >/dev/null
 fi
 
+stop_pidfile() {  # stop the daemon whose pid file this script's config names, wait for it
+  local f=$1 pid
+  [ -f "$f" ] || return 0
+  pid=$(cat "$f"); kill "$pid" 2>/dev/null || true
+  for _ in $(seq 30); do kill -0 "$pid" 2>/dev/null || return 0; sleep 1; done
+  echo "[run_slurm] WARNING: process $pid ($f) still running" >&2
+}
 cleanup() {
+  local rc=$?
   if [ -z "${KEEP_CLUSTER:-}" ]; then
     log "stopping the cluster"
-    for p in slurmd slurmctld slurmdbd; do pkill -x "$p" 2>/dev/null || true; done
-    sleep 1
-    [ -f "$WORK/mysqlrun/mysql.pid" ] && kill "$(cat "$WORK/mysqlrun/mysql.pid")" 2>/dev/null || true
-    pkill -x munged 2>/dev/null || true
+    for d in slurmd slurmctld slurmdbd; do stop_pidfile "$WORK/run/$d.pid"; done
+    stop_pidfile "$WORK/mysqlrun/mysql.pid"
+    [ -n "${MUNGE_STARTED:-}" ] && stop_pidfile /run/munge/munged.pid
+    left=""
+    for d in slurmd slurmctld slurmdbd mariadbd; do pgrep -x "$d" >/dev/null && left="$left $d"; done
+    if [ -n "$left" ]; then log "daemons still running: $left"; [ $rc = 0 ] && rc=1; else log "daemons stopped"; fi
   fi
+  log "total $((SECONDS / 60)) min $((SECONDS % 60)) s, exit $rc"
+  exit $rc
 }
 trap cleanup EXIT
 
@@ -61,6 +73,7 @@ if ! pgrep -x munged >/dev/null; then
   chown -R munge:munge /etc/munge /run/munge /var/log/munge /var/lib/munge
   chmod 400 /etc/munge/munge.key
   runuser -u munge -- /usr/sbin/munged
+  MUNGE_STARTED=1
 fi
 munge -n | unmunge >/dev/null || die "munge does not authenticate"
 
@@ -149,11 +162,17 @@ SLURM_RESULTS=$WORK/results_slurm
 LOCAL_RESULTS=$WORK/results_local
 rm -rf "$SLURM_RESULTS" "$LOCAL_RESULTS"
 log "running $SITE_CONFIG through workflow/profiles/slurm"
+t0=$SECONDS
 "$SNAKEMAKE" --profile workflow/profiles/slurm --configfile "$SITE_CONFIG" \
   --config results_dir="$SLURM_RESULTS" > "$WORK/log/snakemake_slurm.log" 2>&1 || { tail -30 "$WORK/log/snakemake_slurm.log"; die "the SLURM run failed"; }
+t_slurm=$((SECONDS - t0))
+log "SLURM run: $t_slurm s"
 log "running $SITE_CONFIG locally"
+t0=$SECONDS
 "$SNAKEMAKE" --cores "$CPUS" --configfile "$SITE_CONFIG" --config results_dir="$LOCAL_RESULTS" \
   > "$WORK/log/snakemake_local.log" 2>&1 || { tail -30 "$WORK/log/snakemake_local.log"; die "the local run failed"; }
+t_local=$((SECONDS - t0))
+log "local run: $t_local s"
 
 # 6. Jobs went through sbatch: sacct lists one completed job per Snakemake job.
 n_jobs=$(grep -cE "^(localrule|rule) " "$WORK/log/snakemake_slurm.log" || true)

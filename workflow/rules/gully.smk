@@ -56,9 +56,21 @@ if "gully" in config:
             script:
                 "../scripts/gully_standin_dem.py"
 
+    # Large sites (config section tiling, issue 21): the depth map and the depression fill of
+    # the tracing surface run as tile jobs (the tiled Priority-Flood, Barnes 2016, equals the
+    # untiled fill bit for bit; depth tiles read the kernel radius around them) and gully_map
+    # reads the merged products. Other sites do both inside gully_map, unchanged.
+    GULLY_TILED = "tiling" in config
+    GULLY_FILLED_INPUT = {
+        "filled": result("gully", "tiles/filled_trace_surface.tif"),
+        "smoothed": result("gully", "tiles/smoothed_dem.tif"),
+        "depth": result("gully", "tiles/depth.tif"),
+    } if GULLY_TILED else {}
+
     rule gully_map:
         input:
             unpack(lambda wc: GULLY_HEADS_INPUT),
+            unpack(lambda wc: GULLY_FILLED_INPUT),
             dem=mapping_dem(),
         output:
             depth=result("gully", "depth.tif"),
@@ -182,3 +194,106 @@ if "gully" in config:
 
     GULLY_TARGETS.append(rules.gully_sensitivity.output.table)
     add_targets(*GULLY_TARGETS)
+
+    if GULLY_TILED:
+        from kitegully.terrain.tiling import TilingParams as _TilingParams
+
+        _GULLY_TILING = _TilingParams.from_config(config)
+        # the tile names follow from the config alone (site extent, tiling.tile_m): no checkpoint
+        GULLY_TILE_NAMES = _GULLY_TILING.names()
+        GULLY_TILING_PARAMS = {"tile_m": _GULLY_TILING.tile_m, "width_m": _GULLY_TILING.width_m,
+                               "height_m": _GULLY_TILING.height_m}
+
+        wildcard_constraints:
+            tile=r"r\d{3}_c\d{3}",
+
+        rule gully_depth_tile:
+            input:
+                dem=mapping_dem(),
+            output:
+                tile=temp(result("gully", "tiles/depth/{tile}.npz")),
+            params:
+                sigma_m=GULLY["sigma_m"],
+                truncate_sigmas=GULLY["truncate_sigmas"],
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "depth_tile_{tile}"),
+            benchmark:
+                benchfile("gully", "depth_tile_{tile}")
+            script:
+                "../scripts/gully_depth_tile.py"
+
+        rule gully_depth_mosaic:
+            input:
+                dem=mapping_dem(),
+                tiles=expand(result("gully", "tiles/depth/{tile}.npz"), tile=GULLY_TILE_NAMES),
+            output:
+                smoothed=result("gully", "tiles/smoothed_dem.tif"),
+                depth=result("gully", "tiles/depth.tif"),
+            params:
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "depth_mosaic"),
+            benchmark:
+                benchfile("gully", "depth_mosaic")
+            script:
+                "../scripts/gully_depth_mosaic.py"
+
+        rule gully_trace_surface:
+            input:
+                dem=mapping_dem(),
+            output:
+                surface=result("gully", "tiles/trace_surface.tif"),
+            params:
+                mapping=GULLY_MAPPING,
+                crs=config["site"]["crs"],
+            threads: GULLY["threads"]
+            log:
+                logfile("gully", "trace_surface"),
+            benchmark:
+                benchfile("gully", "trace_surface")
+            script:
+                "../scripts/gully_trace_surface.py"
+
+        rule gully_fill_tile:
+            input:
+                surface=rules.gully_trace_surface.output.surface,
+            output:
+                fill=temp(result("gully", "tiles/fill/{tile}.fill.npz")),
+                summary=result("gully", "tiles/fill/{tile}.summary.npz"),
+            params:
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "fill_tile_{tile}"),
+            benchmark:
+                benchfile("gully", "fill_tile_{tile}")
+            script:
+                "../scripts/gully_fill_tile.py"
+
+        rule gully_fill_merge:
+            input:
+                summaries=expand(result("gully", "tiles/fill/{tile}.summary.npz"), tile=GULLY_TILE_NAMES),
+            output:
+                spill=result("gully", "tiles/fill/spill.npz"),
+            log:
+                logfile("gully", "fill_merge"),
+            benchmark:
+                benchfile("gully", "fill_merge")
+            script:
+                "../scripts/gully_fill_merge.py"
+
+        rule gully_fill_mosaic:
+            input:
+                surface=rules.gully_trace_surface.output.surface,
+                spill=rules.gully_fill_merge.output.spill,
+                fills=expand(result("gully", "tiles/fill/{tile}.fill.npz"), tile=GULLY_TILE_NAMES),
+            output:
+                filled=result("gully", "tiles/filled_trace_surface.tif"),
+            params:
+                tiling=GULLY_TILING_PARAMS,
+            log:
+                logfile("gully", "fill_mosaic"),
+            benchmark:
+                benchfile("gully", "fill_mosaic")
+            script:
+                "../scripts/gully_fill_mosaic.py"

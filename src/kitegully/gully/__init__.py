@@ -15,6 +15,7 @@ and :func:`score_gully_areas` (``validation``), :func:`gully_sensitivity` (``sen
 from importlib import import_module
 
 _EXPORTS = {"GullyParams": "pipeline", "map_gullies": "pipeline", "gully_summary": "pipeline", "map_raster": "pipeline",
+            "tracing_surface": "pipeline",
             "ValidationParams": "validation", "score_network": "validation", "score_gully_areas": "validation",
             "check_reference": "validation", "catchment_outline": "validation",
             "gully_sensitivity": "sensitivity"}

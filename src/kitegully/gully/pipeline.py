@@ -126,6 +126,9 @@ def map_gullies(
     params: GullyParams,
     workers: int = 1,
     auto_heads: HeadDetectionParams | None = None,
+    filled: np.ndarray | None = None,
+    smoothed: np.ndarray | None = None,
+    depth: np.ndarray | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -144,6 +147,13 @@ def map_gullies(
     auto_heads : HeadDetectionParams, optional
         Also detect heads from the DEM (:func:`kitegully.gully.heads.detect_heads`) and
         trace from them after the given heads (``gully.heads: automatic | both``).
+    filled : ndarray (H, W), optional
+        The ε = 0 priority-flood fill of :func:`tracing_surface`, made elsewhere (the
+        tiled fill of a large site, :mod:`kitegully.terrain.tiled_fill`, equal bit for
+        bit to the fill done here); only with ``flat_routing: resolve``.
+    smoothed, depth : ndarray (H, W) float32, optional
+        The depth map (steps a-d) made elsewhere, both or neither: the merged depth
+        tiles of a large site (:func:`kitegully.gully.depth.depth_map_tile`).
 
     Returns
     -------
@@ -157,7 +167,12 @@ def map_gullies(
     """
     t: dict[str, float] = {}
     t0 = time.perf_counter()
-    smoothed, depth = depth_map(dem, grid.cell, params.sigma_m, params.truncate_sigmas, workers)
+    if (smoothed is None) != (depth is None):
+        raise ValueError("give both the smoothed DEM and the depth map, or neither")
+    if smoothed is None:
+        smoothed, depth = depth_map(dem, grid.cell, params.sigma_m, params.truncate_sigmas, workers)
+    elif smoothed.shape != dem.shape or depth.shape != dem.shape:
+        raise ValueError(f"depth map has shape {depth.shape}, the DEM {dem.shape}")
     t["smoothing_s"] = time.perf_counter() - t0
     log.info("depth map: σ = %.3g m, %d x %d cells, %.1f s", params.sigma_m, grid.height, grid.width, t["smoothing_s"])
 
@@ -167,18 +182,21 @@ def map_gullies(
     log.info("patches: %d of %d kept (volume >= %.3g m3)", int(table["kept"].sum()), len(table), params.min_patch_volume_m3)
 
     t0 = time.perf_counter()
-    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
-    zi, n_holes = interpolate_holes(dem, water_cells)
+    z_heads, zi, n_holes = tracing_surface(dem, grid, params, workers)
     inside_idx, inside = snap_heads(
-        zi, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels
+        z_heads, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels
     )
-    z_heads = zi
-    if params.trace_smoothing_m > 0:
-        holes = ~np.isfinite(zi)
-        zi = gaussian_smooth_fft(zi, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas, workers=workers)
-        zi[holes] = np.nan
     resolve = params.flat_routing == "resolve"
-    filled, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
+    if filled is None:
+        filled, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
+    else:
+        if not resolve:
+            raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: resolve")
+        if filled.shape != zi.shape:
+            raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {zi.shape}")
+        filled = np.asarray(filled, dtype=np.float64)  # as priority_flood_fill returns it (same values)
+        n_raised = int(np.count_nonzero(filled > zi))
+        log.info("filled DEM: given (tiled priority flood), not filled here")
     del zi
     dirs, n_flat, n_left = (None, 0, 0)
     if resolve:
@@ -227,6 +245,48 @@ def map_gullies(
         smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised,
         n_flat, t, auto_idx,
     )
+
+
+def tracing_surface(
+    dem: np.ndarray, grid: GridSpec, params: GullyParams, workers: int = 1
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The surface the network is traced on (steps f-g before the fill).
+
+    Holes smaller than ``water_min_area_m2`` are interpolated (larger ones stay NaN: open
+    water), then the surface is smoothed with ``trace_smoothing_m`` when that is > 0.
+
+    Parameters
+    ----------
+    dem : ndarray (H, W) float32
+        The DEM (m), NaN nodata.
+    grid : GridSpec
+    params : GullyParams
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    z_heads : ndarray (H, W)
+        The hole-filled DEM (heads are snapped and detected on it).
+    z_trace : ndarray (H, W)
+        The tracing surface (the input of the depression fill).
+    n_holes : int
+        Hole cells interpolated.
+
+    Notes
+    -----
+    O(n log n) (the FFT smoothing); the interpolation of holes is global (a hole may
+    cross any tile border), so a tiled site makes this surface in one job.
+    """
+    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
+    zi, n_holes = interpolate_holes(dem, water_cells)
+    z_trace = zi
+    if params.trace_smoothing_m > 0:
+        holes = ~np.isfinite(zi)
+        z_trace = gaussian_smooth_fft(zi, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas,
+                                      workers=workers)
+        z_trace[holes] = np.nan
+    return zi, z_trace, n_holes
 
 
 def map_raster(mask: np.ndarray, valid: np.ndarray) -> np.ndarray:

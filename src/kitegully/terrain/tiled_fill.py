@@ -45,15 +45,13 @@ flats matter (``gully.flat_routing: resolve`` and the polygon conditioning route
 with :mod:`kitegully.terrain.flats`); only ``polygons.thalweg.mfd_catchment_area`` uses
 ε = 1e-4.
 
-As Snakemake jobs (not wired yet): the tile names come from :func:`tile_grid` on the DEM
-shape and ``tile`` from the config (deterministic, no checkpoint needed); a rule
-``fill_tile`` with a ``{tile}`` wildcard reads its window with :func:`read_tile_with_halo`
-and writes ``tiles/{tile}.fill.npz`` (:meth:`TileFill.save`) and the small
-``tiles/{tile}.summary.npz``; one rule ``fill_merge`` reads every summary
-(``expand`` over the grid) and writes ``spill.npz``; a rule ``fill_finalise`` with the
-``{tile}`` wildcard reads its ``.fill.npz`` and ``spill.npz`` and writes its part of the
-filled DEM (a VRT or a last gather rule makes the mosaic, or the next tiled stage reads the
-tiles directly).
+As Snakemake jobs (``workflow/rules/gully.smk``, sites with a ``tiling:`` section): the
+tile names come from :class:`kitegully.terrain.tiling.TilingParams` (a function of the config
+alone, no checkpoint) and the windows from :func:`kitegully.terrain.tiling.split_grid`; rule
+``gully_fill_tile`` (wildcard ``{tile}``) reads its window with :func:`read_tile_with_halo`
+and writes ``{tile}.fill.npz`` (:meth:`TileFill.save`) and the small ``{tile}.summary.npz``;
+``gully_fill_merge`` reads every summary and writes ``spill.npz``; ``gully_fill_mosaic``
+finalises each tile while it writes the filled raster window by window.
 
 Complexity: per tile O(t log t) time, O(t) memory (t cells; the float64 fill, int32
 labels, a byte per cell, the queues and the label-pair list); merge O(E log V) time and
@@ -135,8 +133,8 @@ def tile_with_halo(z: np.ndarray, tile: Tile) -> np.ndarray:
     return out
 
 
-def read_tile_with_halo(path: str | Path, tile: Tile) -> np.ndarray:
-    """Read one tile plus a one-cell halo from a raster file (NaN outside / at nodata).
+def read_tile_with_halo(path: str | Path, tile: Tile, halo: int = 1) -> np.ndarray:
+    """Read one tile plus a halo of ``halo`` cells from a raster file (NaN outside / at nodata).
 
     Only the window is read, so a per-tile job never holds the whole DEM.
     """
@@ -144,7 +142,7 @@ def read_tile_with_halo(path: str | Path, tile: Tile) -> np.ndarray:
     from rasterio.windows import Window
 
     with rasterio.open(path) as src:
-        win = Window(tile.c0 - 1, tile.r0 - 1, tile.w + 2, tile.h + 2)
+        win = Window(tile.c0 - halo, tile.r0 - halo, tile.w + 2 * halo, tile.h + 2 * halo)
         a = src.read(1, window=win, boundless=True, masked=True)
     data = np.asarray(a.filled(np.nan) if a.dtype.kind == "f" else a.astype(np.float64).filled(np.nan), dtype=np.float64)
     return data

@@ -1,0 +1,202 @@
+"""The whole Kamech survey at full size (issue 21): run it, then tabulate cost and accuracy.
+
+Runs Snakemake on ``config/sites/kamech_full.yaml`` (3.18 km², ~770 photos per epoch, both
+epochs, every stage) and writes ``results/<site>/benchmark.csv`` (+ ``.md``):
+
+- ``rule`` rows: per Snakemake job, wall time, CPU time and peak memory (max RSS) from the
+  rules' benchmark files (``results/<site>/benchmarks/**.tsv``);
+- ``run`` rows: total wall time of the Snakemake run, the largest peak memory of any job,
+  the number of jobs;
+- ``accuracy`` rows: camera RMSE, checkpoint mean / SD / n, DSM coverage, gully good fit /
+  FP / FN at 5 m, polygon IoU, change net error, bare-soil OA, each next to the paper's
+  Tables 3-4 value (Feurer et al. 2018) where the paper gives one, and the issue's target;
+- ``scaling`` rows: the tiled stages (gully depth tiles + mosaic, fill tiles + merge +
+  mosaic) rerun with ``--cores 1`` and ``--cores 2`` in the same session, and the speed-up
+  (each wall time includes Snakemake's start, a few seconds).
+
+    .venv/bin/python benchmarks/kamech_full.py [--cores 2]             # the full site (hours)
+    .venv/bin/python benchmarks/kamech_full.py --cut 600x400 --tile-m 200  # a cut-down extent
+    .venv/bin/python benchmarks/kamech_full.py --collect-only          # tabulate an existing run
+    .venv/bin/python benchmarks/kamech_full.py --dry-run               # snakemake -n
+
+``--cut WxH`` runs the same site on a W × H m corner (site name ``kamech_full_cut<W>x<H>``,
+its own results folder); every row of its table says ``NOT the full site``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "src"))
+
+from kitegully.io.tables import write_table  # noqa: E402
+
+SITE_FILE = REPO / "config/sites/kamech_full.yaml"
+SNAKEMAKE = REPO / ".venv/bin/snakemake"
+#: Tile jobs rerun for the 1- vs 2-core speed-up, and the merge rules they run until.
+TILE_RULES = ("gully_depth_tile", "gully_fill_tile")
+MERGE_RULES = ("gully_depth_mosaic", "gully_fill_mosaic")
+
+#: (item, unit, paper value, issue target): Feurer et al. 2018 Tables 3-4 (METHODS.md 1.8).
+PAPER = {
+    "camera RMSE": ("m", None, "<= 2 GSD"),
+    "checkpoint mean": ("m", 0.06, None),
+    "checkpoint SD": ("m", 0.22, "<= 1.5 GSD"),
+    "checkpoint n": ("", 469, None),
+    "DSM valid": ("%", None, None),
+    "gully good fit 5 m": ("%", 74.0, ">= 85"),
+    "gully FP 5 m": ("%", 8.0, None),
+    "gully FN 5 m": ("%", 26.0, None),
+    "polygon IoU (median over gullies)": ("", None, None),
+    "change net error": ("%", None, "|.| <= 10"),
+    "kite bare-soil OA": ("%", None, None),
+    "GSD": ("m", 0.13, None),
+    "images epoch 1": ("", 752, None),
+}
+
+
+def snakemake(args: list[str], log_path: Path, env: dict) -> float:
+    """Run Snakemake from the repository root; return its wall time (s)."""
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    with open(log_path, "w") as fh:
+        rc = subprocess.call([str(SNAKEMAKE), *args], cwd=REPO, stdout=fh, stderr=subprocess.STDOUT, env=env)
+    wall = time.perf_counter() - t0
+    if rc:
+        raise SystemExit(f"snakemake failed (exit {rc}): see {log_path}")
+    return wall
+
+
+def rule_costs(site_dir: Path) -> pd.DataFrame:
+    """One row per benchmark file: job, wall s, CPU s, peak RSS MB."""
+    rows = []
+    for p in sorted((site_dir / "benchmarks").rglob("*.tsv")):
+        b = pd.read_csv(p, sep="\t")
+        if b.empty:
+            continue
+        rows.append({"job": str(p.relative_to(site_dir / "benchmarks").with_suffix("")),
+                     "wall_s": float(b["s"].iloc[-1]), "cpu_s": float(b["cpu_time"].iloc[-1]),
+                     "max_rss_mb": float(b["max_rss"].iloc[-1])})
+    return pd.DataFrame(rows, columns=["job", "wall_s", "cpu_s", "max_rss_mb"])
+
+
+def _kv(path: Path, key_col: str, val_col: str) -> dict:
+    if not path.exists():
+        return {}
+    d = pd.read_csv(path)
+    return dict(zip(d[key_col].astype(str), d[val_col]))
+
+
+def accuracies(site_dir: Path) -> dict[str, float]:
+    """The products' accuracies (whatever of them the run made)."""
+    out: dict[str, float] = {}
+    ev = site_dir / "georef/twin_evaluation.json"
+    if ev.exists():
+        j = json.loads(ev.read_text())
+        out["camera RMSE"] = j.get("camera_rmse_m")
+        out["GSD"] = j.get("gsd_m")
+        out["images epoch 1"] = j.get("n_images")
+    cp = _kv(site_dir / "validate/checkpoint_summary.csv", "statistic", "value_m")
+    for k, name in (("mean", "checkpoint mean"), ("sd", "checkpoint SD"), ("n", "checkpoint n")):
+        if k in cp:
+            out[name] = cp[k]
+    ds = _kv(site_dir / "dense/dense_summary.csv", "quantity", "value")
+    if "valid_pct" in ds:
+        out["DSM valid"] = ds["valid_pct"]
+    nv = _kv(site_dir / "gully/network_validation.csv", "category", "percent")
+    for k, name in (("good_fit", "gully good fit 5 m"), ("false_positive", "gully FP 5 m"), ("false_negative", "gully FN 5 m")):
+        if k in nv:
+            out[name] = nv[k]
+    ps = site_dir / "polygons/polygon_scores.csv"
+    if ps.exists():
+        out["polygon IoU (median over gullies)"] = float(pd.read_csv(ps)["iou"].median())
+    ch = _kv(site_dir / "change/evaluation_summary.csv", "quantity", "value")
+    if "site_net_error_pct" in ch:
+        out["change net error"] = ch["site_net_error_pct"]
+    ob = site_dir / "obia/kite/accuracy.csv"
+    if ob.exists():
+        out["kite bare-soil OA"] = float(pd.read_csv(ob)["overall_accuracy"].iloc[0])
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--cut", help="run a W x H m corner instead of the full site, e.g. 600x400 (NOT the full site)")
+    ap.add_argument("--tile-m", type=float, help="tiling.tile_m override (with --cut: keep several tiles)")
+    ap.add_argument("--results-dir", default="results")
+    ap.add_argument("--collect-only", action="store_true")
+    ap.add_argument("--dry-run", action="store_true")
+    ap.add_argument("--no-scaling", action="store_true", help="skip the 1- vs 2-core rerun of the tiled stages")
+    args = ap.parse_args()
+
+    site_cfg = yaml.safe_load(SITE_FILE.read_text())
+    site = site_cfg["site"]["name"]
+    configfiles = [str(SITE_FILE)]
+    label = "full site (3.18 km2)"
+    override: dict = {}
+    if args.cut:
+        w, h = (float(v) for v in args.cut.lower().split("x"))
+        site = f"kamech_full_cut{int(w)}x{int(h)}"
+        ext = dict(site_cfg["twin"]["extent"], width_m=w, height_m=h)
+        override = {"site": dict(site_cfg["site"], name=site), "twin": {"extent": ext}}
+        label = f"NOT the full site: {w:.0f} x {h:.0f} m = {w * h / 1e6:.3f} km2 corner"
+    if args.tile_m:
+        override.setdefault("tiling", {})["tile_m"] = args.tile_m
+    results = Path(args.results_dir).resolve()
+    site_dir = results / site
+    if override:
+        ov = results / f"{site}.override.yaml"
+        ov.parent.mkdir(parents=True, exist_ok=True)
+        ov.write_text(yaml.safe_dump(override, sort_keys=False))
+        configfiles.append(str(ov))
+    env = dict(os.environ, PYTHONPATH=f"{REPO / 'src'}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+    base = ["--configfile", *configfiles, "--config", f"results_dir={results}"]
+
+    rows = []
+    if args.dry_run:
+        snakemake(["-n", "--cores", str(args.cores), *base], site_dir / "benchmark_dryrun.log", env)
+        print((site_dir / "benchmark_dryrun.log").read_text()[-3000:])
+        return 0
+    if not args.collect_only:
+        wall = snakemake(["--cores", str(args.cores), *base], site_dir / "benchmark_run.log", env)
+        rows.append(("run", "total wall (Snakemake, --cores %d)" % args.cores, wall, "s", None, "<= 10800 (3 h)"))
+        if not args.no_scaling:
+            walls = {}
+            for k in (1, 2):
+                walls[k] = snakemake(["--cores", str(k), "--forcerun", *TILE_RULES, "--until", *MERGE_RULES, *base],
+                                     site_dir / f"benchmark_tiled_{k}core.log", env)
+                rows.append(("scaling", f"tiled gully stages (depth + fill tile jobs, merges), --cores {k}", walls[k], "s",
+                             None, None))
+            rows.append(("scaling", "tiled gully stages speed-up 1 -> 2 cores", walls[1] / walls[2], "x", None, None))
+    costs = rule_costs(site_dir)
+    for r in costs.itertuples(index=False):
+        rows.append(("rule", f"{r.job} wall", r.wall_s, "s", None, None))
+        rows.append(("rule", f"{r.job} CPU", r.cpu_s, "s", None, None))
+        rows.append(("rule", f"{r.job} peak memory", r.max_rss_mb, "MB", None, "<= 8000"))
+    if len(costs):
+        rows.append(("run", "largest peak memory of any job", costs["max_rss_mb"].max(), "MB", None, "<= 8000"))
+        rows.append(("run", "sum of job wall times", costs["wall_s"].sum(), "s", None, None))
+        rows.append(("run", "jobs with a benchmark file", len(costs), "", None, None))
+    for name, value in accuracies(site_dir).items():
+        unit, paper, target = PAPER.get(name, ("", None, None))
+        rows.append(("accuracy", name, value, unit, paper, target))
+    df = pd.DataFrame(rows, columns=["kind", "item", "value", "unit", "paper", "target"])
+    df.insert(0, "extent", label)
+    write_table(df, site_dir / "benchmark.csv")
+    print(f"{label}: {len(df)} rows -> {site_dir / 'benchmark.csv'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

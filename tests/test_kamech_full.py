@@ -1,0 +1,25 @@
+"""The full-size Kamech site (issue 21) holds the paper's extent and acquisition (Table 2)."""
+
+from pathlib import Path
+
+from kitegully.config import load_yaml, validate_config
+from kitegully.terrain.tiling import TilingParams
+
+REPO = Path(__file__).resolve().parents[1]
+SITE = REPO / "config/sites/kamech_full.yaml"
+
+
+def test_kamech_full_is_the_paper_survey():
+    cfg = validate_config({**load_yaml(REPO / "config/config.yaml"), **load_yaml(SITE)},
+                          [REPO / "config/config.yaml", SITE])
+    ext = cfg["twin"]["extent"]
+    assert abs(ext["width_m"] * ext["height_m"] / 1e6 - 3.18) < 0.005
+    assert cfg["flight"]["line_lengths_m"] == [150, 360, 600]
+    assert cfg["twin"]["targets"]["count"] == 8
+    assert cfg["twin"]["survey"]["checkpoints"]["count"] == 469
+    assert cfg["dense"]["cell_m"] == 0.2
+    # every stage of the default twin, epoch 2 and the change stage included
+    default = load_yaml(REPO / "config/sites/kamech_twin.yaml")
+    assert set(default) <= set(cfg)
+    assert "epoch2" in cfg["twin"] and "change" in cfg and "polygons" in cfg and cfg["obia"]["kite_scale"]["enabled"]
+    assert TilingParams.from_config(cfg).counts == (3, 5)
