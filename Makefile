@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem stereo
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem stereo lowcost
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -53,6 +53,12 @@ ensemble: $(STAMP)
 stereo: $(STAMP)
 	@$(BIN)/python -m kitegully.config config/sites/stereo_lab.yaml
 	$(BIN)/snakemake --cores $(CORES) --configfile config/sites/stereo_lab.yaml $(SNAKE_ARGS)
+
+# The low-cost RGB + NIR kite survey of paper 004 (issue 18) on its own twin; not part of
+# the default run (about 10 min on 2 idle cores).
+lowcost: $(STAMP)
+	@$(BIN)/python -m kitegully.config config/sites/lowcost_twin.yaml
+	$(BIN)/snakemake --cores $(CORES) --configfile config/sites/lowcost_twin.yaml $(SNAKE_ARGS)
 
 clean-venv:
 	rm -rf $(VENV)
