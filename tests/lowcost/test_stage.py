@@ -56,7 +56,8 @@ def test_tin_dsm_reproduces_a_plane():
     xy = rng.uniform(0, 10, (400, 2)) + [290000.0, 6115000.0]
     z = 0.1 * (xy[:, 0] - 290000.0) - 0.05 * (xy[:, 1] - 6115000.0) + 2.0
     dsm, grid = tin_dsm(np.column_stack([xy, z]), 0.5, "EPSG:32756")
-    xs, ys = grid.cell_centres()
+    assert dsm.shape == grid.shape
+    xs, ys = np.meshgrid(*grid.cell_centres())
     ok = np.isfinite(dsm)
     assert ok.mean() > 0.8
     np.testing.assert_allclose(dsm[ok], (0.1 * (xs - 290000.0) - 0.05 * (ys - 6115000.0) + 2.0)[ok], atol=1e-4)

@@ -191,7 +191,7 @@ def tin_dsm(points: np.ndarray, cell: float, crs: str) -> tuple[np.ndarray, Grid
     lo = np.percentile(points[:, :2], 0.5, axis=0)
     hi = np.percentile(points[:, :2], 99.5, axis=0)
     grid = GridSpec.covering((lo[0], lo[1], hi[0], hi[1]), cell, crs)
-    xs, ys = grid.cell_centres()
+    xs, ys = np.meshgrid(*grid.cell_centres())
     o = points[:, :2].mean(axis=0)
     f = LinearNDInterpolator(points[:, :2] - o, points[:, 2])
     return f(xs - o[0], ys - o[1]).astype(np.float32), grid
@@ -248,7 +248,7 @@ def survey_lowcost(observed_dir: str | Path, sfm_cfg: Mapping[str, Any], survey_
     mt = matches_by_pair_type(work / "work" / "database.db", sfm_to_name, sfm.min_num_matches)
     write_table(mt, out / "matches_by_pair_type.csv")
     rec = pycolmap.Reconstruction(str(work / "model"))
-    n_cams = rec.num_cameras()
+    n_cams = len(rec.cameras)
     views = views_from_reconstruction(rec, work / "work" / "images", local_offset=np.zeros(3), where=str(work / "model"))
     by_name = {sfm_to_name[im.name]: im for im in views.images}
     clicks = pd.read_csv(obs / "image_clicks.csv")
@@ -312,9 +312,8 @@ def survey_lowcost(observed_dir: str | Path, sfm_cfg: Mapping[str, Any], survey_
 
 def _sample_truth(truth: Raster, grid: GridSpec) -> np.ndarray:
     """Truth class (nearest) at the cell centres of ``grid``; 0 outside."""
-    xs, ys = grid.cell_centres()
-    r, c = truth.grid.rowcol(xs, ys)
-    r, c = np.asarray(r), np.asarray(c)
+    xs, ys = np.meshgrid(*grid.cell_centres())
+    r, c = truth.grid.index(xs, ys)
     ok = (r >= 0) & (c >= 0) & (r < truth.grid.height) & (c < truth.grid.width)
     out = np.zeros(xs.shape, np.uint8)
     out[ok] = truth.data[r[ok], c[ok]]
@@ -407,9 +406,8 @@ def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping
                      "mean_vertical_error_m": float(d[:, 2].mean())})
     dsm = Raster.read(sv / "dsm.tif")
     tdsm = Raster.read(tr / "dsm.tif")
-    xs, ys = dsm.grid.cell_centres()
-    r, c = tdsm.grid.rowcol(xs, ys)
-    r, c = np.asarray(r), np.asarray(c)
+    xs, ys = np.meshgrid(*dsm.grid.cell_centres())
+    r, c = tdsm.grid.index(xs, ys)
     ok = (r >= 0) & (c >= 0) & (r < tdsm.grid.height) & (c < tdsm.grid.width) & np.isfinite(dsm.data)
     diff = dsm.data[ok] - tdsm.data[r[ok], c[ok]]
     med = float(np.median(diff))
