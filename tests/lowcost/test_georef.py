@@ -100,3 +100,20 @@ def test_no_waterline_point_is_one_sentence():
     edges = [("T0", "T1", 1.0), ("T1", "T2", 2**0.5), ("T2", "T0", 1.0)]
     with pytest.raises(InputError, match="no waterline point was triangulated"):
         georeference_tape_horn(model, model, edges, np.zeros((0, 3)), 0.16)
+
+
+def test_levelling_on_the_waterline_removes_a_tilt():
+    from kitegully.lowcost.georef import level_to_water
+    rng = np.random.default_rng(5)
+    u = rng.uniform(0, 40, 30)
+    water = np.column_stack([u, 3.0 + rng.uniform(-2, 2, 30), np.full(30, 0.16)])   # level, ~1.2 m SD across
+    tilt = rotvec_to_matrix(np.array([[0.03, -0.05, 0.0]]))[0]                       # a few degrees
+    est = Similarity(1.0, tilt, np.array([0.0, 0.0, 2.0]))                           # the GPS-tilted block
+    lev = level_to_water(est, water, min_spread_m=1.0)
+    z = lev.apply(water)[:, 2]
+    assert np.ptp(z) < 1e-9                                                         # the waterline is level again
+    np.testing.assert_allclose(lev.R @ np.array([0, 0, 1.0]), [0, 0, 1.0], atol=1e-9)
+    # points spread too little across: only the along-line tilt is fixed
+    thin = np.column_stack([u, np.full(30, 3.0), np.full(30, 0.16)])
+    lev2 = level_to_water(est, thin, min_spread_m=1.0)
+    assert np.ptp(lev2.apply(thin)[:, 2]) < 1e-9

@@ -106,10 +106,11 @@ def triangulate(clicks: pd.DataFrame, images: Mapping[str, OrientedImage], min_v
 
 
 def georeference_tape_horn(model_t: Mapping[str, np.ndarray], gps: Mapping[str, np.ndarray],
-                           edges: list[tuple[str, str, float]], model_water: np.ndarray, water_level_m: float
-                           ) -> tuple[Similarity, float, pd.DataFrame]:
-    """Tape scale, Horn on GPS, tide shift. Returns the similarity (shift included in its
-    translation), the shift (m) and the residual table (global, local, per target/edge)."""
+                           edges: list[tuple[str, str, float]], model_water: np.ndarray, water_level_m: float,
+                           level: bool = False, min_spread_m: float = 1.0) -> tuple[Similarity, float, pd.DataFrame]:
+    """Tape scale, Horn on GPS, tide shift (and with ``level`` the waterline levelled first,
+    :func:`level_to_water`). Returns the similarity (shift included in its translation),
+    the shift (m) and the residual table of Horn's fit (global, local, per target/edge)."""
     s, ratios = tape_scale(dict(model_t), edges)
     ids = [k for k in model_t if k in gps]
     if len(ids) < 3:
@@ -121,9 +122,50 @@ def georeference_tape_horn(model_t: Mapping[str, np.ndarray], gps: Mapping[str, 
     res = np.linalg.norm(sim.apply(np.array([model_t[k] for k in ids])) - b, axis=1)
     if len(model_water) == 0:
         raise InputError("no waterline point was triangulated; the vertical datum cannot be set")
+    if level:
+        sim = level_to_water(sim, model_water, min_spread_m)
     dz = water_level_m - float(np.mean(sim.apply(model_water)[:, 2]))
-    final = Similarity(s, rigid.R, rigid.t + np.array([0.0, 0.0, dz]))
-    return final, dz, residual_rows("tape_horn_gps", sim, model_t, gps, ids, edges, res)
+    final = Similarity(s, sim.R, sim.t + np.array([0.0, 0.0, dz]))
+    return final, dz, residual_rows("tape_horn_gps", Similarity(s, rigid.R, rigid.t), model_t, gps, ids, edges, res)
+
+
+def level_to_water(sim: Similarity, model_water: np.ndarray, min_spread_m: float) -> Similarity:
+    """Turn the georeferenced model so that the waterline is level ([I] the water surface is
+    a level surface of known height: besides the paper's shift it fixes the tilt that GPS
+    heights (±2 m over a few tens of metres) leave in Horn's rotation).
+
+    A plane ``z = a·u + b·v + c`` is fitted to the waterline points on their principal
+    horizontal axes ``u`` (along) and ``v`` (across); the across slope ``b`` is kept only
+    when the points spread at least ``min_spread_m`` (SD) across, else it is unobserved
+    and left as Horn gave it. The model is then rotated about the points' centroid so the
+    fitted plane becomes horizontal. O(points).
+    """
+    W = sim.apply(model_water)
+    if len(W) < 3:
+        return sim
+    c = W.mean(axis=0)
+    d = W - c
+    _, sv, vt = np.linalg.svd(d[:, :2], full_matrices=False)
+    e_u, e_v = vt[0], vt[1]
+    u, v = d[:, :2] @ e_u, d[:, :2] @ e_v
+    spread_v = float(sv[1] / np.sqrt(len(W)))
+    if spread_v >= min_spread_m:
+        (a, b, _), *_ = np.linalg.lstsq(np.column_stack([u, v, np.ones_like(u)]), d[:, 2], rcond=None)
+    else:
+        (a, _), *_ = np.linalg.lstsq(np.column_stack([u, np.ones_like(u)]), d[:, 2], rcond=None)
+        b = 0.0
+    g = a * e_u + b * e_v                                   # gradient dz/dx, dz/dy
+    n = np.array([-g[0], -g[1], 1.0])
+    n /= np.linalg.norm(n)
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(n, z)
+    sin, cos = np.linalg.norm(axis), float(n @ z)
+    if sin < 1e-12:
+        return sim
+    k = axis / sin
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    Rt = np.eye(3) + sin * K + (1 - cos) * K @ K             # Rodrigues: n -> z
+    return Similarity(sim.scale, Rt @ sim.R, Rt @ (sim.t - c) + c)
 
 
 def georeference_rtk(model_t: Mapping[str, np.ndarray], rtk: Mapping[str, np.ndarray],
