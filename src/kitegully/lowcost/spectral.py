@@ -29,9 +29,10 @@ level (expected misfit instead of 95 %: +13 / +13 nm) or the wavelength grid (2.
 +12 / +16 nm); it shrinks with the noise (0.02 %: +7 / +5 nm) and the NIR part with a
 chart of more, NIR-varied panels (24 + 200 smooth spectra: NIR +7 nm, red +11 nm). So
 the NIR bias is the chart (its pigments barely differ beyond 730 nm), and the red bias
-is what 24 smooth broad-band reflectances at realistic noise can resolve of the D5100's
-steep long-wave red edge: any regulariser fills it smoothly and moves the peak towards
-the shoulder. Not a defect of this solver that a different penalty or grid would fix;
+is what 24 smooth broad-band reflectances at realistic noise can resolve of the D5100
+red curve, which rises steeply on its short-wave side and falls slowly on its long-wave
+shoulder: the smoothing any regulariser needs at this noise moves the maximum towards
+the shoulder (the NIR curve has the same asymmetry at its 720 nm cut-on). Not a defect of this solver that a different penalty or grid would fix;
 the cure is data (more noise-free shots averaged, a chart with narrower spectral
 features, or a monochromator).
 """
