@@ -59,6 +59,23 @@ if "lowcost" in config:
         script:
             "../scripts/lowcost_survey.py"
 
+    rule lowcost_rtk_bundle:
+        input:
+            observed=rules.lowcost_twin.output.observed,
+            sfm=rules.lowcost_survey.output.sfm,
+        output:
+            folder=directory(result("lowcost", "rtk_bundle")),
+        params:
+            georef=LOWCOST["rtk_bundle"],
+            seed=config["seed"],
+            crs=config["site"]["crs"],
+        log:
+            logfile("lowcost", "lowcost_rtk_bundle"),
+        benchmark:
+            benchfile("lowcost", "lowcost_rtk_bundle")
+        script:
+            "../scripts/lowcost_rtk_bundle.py"
+
     rule lowcost_evaluate:
         input:
             survey=[result("lowcost", n) for n in LOWCOST_SURVEY],
@@ -77,4 +94,5 @@ if "lowcost" in config:
         script:
             "../scripts/lowcost_evaluate.py"
 
-    add_targets(rules.lowcost_spectral.output, rules.lowcost_survey.output, rules.lowcost_evaluate.output)
+    add_targets(rules.lowcost_spectral.output, rules.lowcost_survey.output, rules.lowcost_rtk_bundle.output,
+                rules.lowcost_evaluate.output)
