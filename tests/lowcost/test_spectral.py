@@ -36,7 +36,8 @@ def test_response_is_non_negative_and_normalised(chart):
 
 def test_green_and_blue_peaks_within_10_nm_over_noise_draws(chart):
     """Green and blue peaks are recovered within 10 nm; the red and NIR peaks are biased
-    (a property of the chart, see the module docstring), which this test records."""
+    (chart and noise, not the solver: see the module docstring and
+    benchmarks/lowcost_spectral_bias.py), which this test records."""
     p, w, A = chart
     true = np.column_stack([sp.rgb_response(w), sp.nir_converted_response(w)])
     tp = sp.peak_wavelength(w, true)

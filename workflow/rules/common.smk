@@ -17,6 +17,7 @@ STAGES = [
     "obia",
     "change",
     "stereo",
+    "lowcost",
     "report",
 ]
 

@@ -1,9 +1,11 @@
 """The low-cost kite survey of Bryson et al. (2013): spectral response of consumer RGB and
 NIR-converted cameras, taped scale + Horn's absolute orientation, NDVI, slope and aspect.
 
-Implemented so far: :mod:`~kitegully.lowcost.spectral` (camera spectral response from a
-simulated Macbeth-chart shot) and :mod:`~kitegully.lowcost.surface` (NDVI, slope and
-aspect rasters). The tape scale and Horn's method live in
-:mod:`kitegully.georef.similarity`. The twin at the paper's scale, the two rendered
-flights, joint SfM and the orthomosaics are not implemented yet.
+Modules: :mod:`~kitegully.lowcost.spectral` (camera spectral response from a simulated
+Macbeth-chart shot), :mod:`~kitegully.lowcost.surface` (NDVI, slope and aspect rasters),
+:mod:`~kitegully.lowcost.twin_site` (the twin: shore strip, RGB and NIR flights, targets,
+GPS, tape, tide), :mod:`~kitegully.lowcost.georef` (click triangulation, tape + Horn +
+tide, waterline levelling) and :mod:`~kitegully.lowcost.stage` (the stage's entry points
+``measure_spectral_response``, ``survey_lowcost``, ``evaluate_lowcost``). The tape scale
+and Horn's method live in :mod:`kitegully.georef.similarity`.
 """

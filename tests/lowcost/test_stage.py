@@ -1,0 +1,63 @@
+"""Low-cost survey helpers: NIR photo check, white balance, match counts by pair type, TIN DSM."""
+
+from __future__ import annotations
+
+import sqlite3
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from kitegully import InputError
+from kitegully.lowcost.stage import MAX_IMAGE_ID, check_nir_images, matches_by_pair_type, tin_dsm, white_balance
+
+
+def test_nir_photo_without_a_red_channel_is_one_sentence(tmp_path):
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "rgb_000.jpg")
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "nir_000.jpg")
+    check_nir_images(tmp_path)
+    Image.fromarray(np.zeros((8, 8), np.uint8)).save(tmp_path / "nir_001.jpg")
+    with pytest.raises(InputError, match=r"nir_001\.jpg: NIR photo has no red channel \(mode L, 1 band\)"):
+        check_nir_images(tmp_path)
+
+
+def test_white_balance_returns_the_panel_reflectance_on_the_panel():
+    gamma = 2.2
+    panel_dn = np.array([240.0, 200.0, 180.0])
+    img = np.stack([np.full((2, 2), v, np.uint8) for v in np.rint(panel_dn)])
+    img[:, 0, 0] = 0
+    out = white_balance(img, panel_dn, 0.99, gamma)
+    assert np.isnan(out[:, 0, 0]).all()
+    np.testing.assert_allclose(out[:, 1, 1], 0.99, rtol=1e-6)
+    half = white_balance(np.rint(panel_dn * 0.5 ** (1 / gamma)).astype(np.uint8)[:, None, None], panel_dn, 1.0, gamma)
+    np.testing.assert_allclose(half.ravel(), 0.5, rtol=0.02)                 # linear after the tone curve
+
+
+def test_matches_are_counted_by_sensor_pair(tmp_path):
+    db = tmp_path / "database.db"
+    con = sqlite3.connect(db)
+    con.execute("CREATE TABLE images (image_id INTEGER, name TEXT)")
+    con.execute("CREATE TABLE two_view_geometries (pair_id INTEGER, rows INTEGER)")
+    con.executemany("INSERT INTO images VALUES (?, ?)", [(1, "0000_rgb_000.jpg"), (2, "0001_rgb_001.jpg"), (3, "0002_nir_000.jpg")])
+    pairs = [(1, 2, 800), (1, 3, 150), (2, 3, 10)]                        # the last one is below the minimum
+    con.executemany("INSERT INTO two_view_geometries VALUES (?, ?)", [(a * MAX_IMAGE_ID + b, n) for a, b, n in pairs])
+    con.commit()
+    con.close()
+    names = {"0000_rgb_000.jpg": "rgb_000.jpg", "0001_rgb_001.jpg": "rgb_001.jpg", "0002_nir_000.jpg": "nir_000.jpg"}
+    t = matches_by_pair_type(db, names, 15).set_index("pair_type")
+    assert t.loc["RGB-RGB", "pairs_matched"] == 1 and t.loc["RGB-RGB", "mean_matches_per_matched_pair"] == 800
+    assert t.loc["RGB-NIR", "pairs_tested"] == 2 and t.loc["RGB-NIR", "pairs_matched"] == 1
+    assert t.loc["NIR-NIR", "pairs_matched"] == 0
+    assert t.loc["RGB-NIR", "paper_mean_matches"] == 188.2
+
+
+def test_tin_dsm_reproduces_a_plane():
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 10, (400, 2)) + [290000.0, 6115000.0]
+    z = 0.1 * (xy[:, 0] - 290000.0) - 0.05 * (xy[:, 1] - 6115000.0) + 2.0
+    dsm, grid = tin_dsm(np.column_stack([xy, z]), 0.5, "EPSG:32756")
+    assert dsm.shape == grid.shape
+    xs, ys = np.meshgrid(*grid.cell_centres())
+    ok = np.isfinite(dsm)
+    assert ok.mean() > 0.8
+    np.testing.assert_allclose(dsm[ok], (0.1 * (xs - 290000.0) - 0.05 * (ys - 6115000.0) + 2.0)[ok], atol=1e-4)
