@@ -42,6 +42,8 @@ def _bilinear(img, u, v):
 
 @njit(cache=True)
 def _sgm_direction(cost, dr, dc, p1, p2, total):
+    """Reference (serial) aggregation along one direction; kept for the tests and the
+    speed benchmark. :func:`sgm_aggregate` gives bit-identical results in parallel."""
     H, W, K = cost.shape
     L = np.empty((H, W, K), dtype=np.float32)
     r_start, r_end, r_step = (0, H, 1) if dr >= 0 else (H - 1, -1, -1)
@@ -74,17 +76,135 @@ def _sgm_direction(cost, dr, dc, p1, p2, total):
 _DIRS = np.array([[0, 1], [0, -1], [1, 0], [-1, 0], [1, 1], [-1, -1], [1, -1], [-1, 1]], dtype=np.int64)
 
 
-def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np.ndarray:
-    """Semi-global aggregation of a cost volume (H, W, K) along 4 or 8 directions.
-
-    Labels are neighbouring steps of the elevation search; a change of one step costs
-    ``p1``, a larger jump ``p2``. O(directions · H·W·K) time, O(H·W·K) extra memory.
-    """
+def sgm_aggregate_reference(cost: np.ndarray, p1: float, p2: float, directions: int) -> np.ndarray:
+    """Serial reference of :func:`sgm_aggregate` (one thread, full (H, W, K) path buffer)."""
     cost = np.ascontiguousarray(cost, dtype=np.float32)
     total = np.zeros_like(cost)
     for dr, dc in _DIRS[: int(directions)]:
         _sgm_direction(cost, int(dr), int(dc), np.float32(p1), np.float32(p2), total)
     return total
+
+
+@njit(cache=True)
+def _sgm_path(cost, r, c, dr, dc, p1, p2, total):
+    """Aggregate one path from its entry cell (r, c) in steps (dr, dc), adding to ``total``;
+    only the previous cell's costs are kept (2·K floats)."""
+    H, W, K = cost.shape
+    prev = np.empty(K, dtype=np.float32)
+    cur = np.empty(K, dtype=np.float32)
+    for d in range(K):
+        prev[d] = cost[r, c, d]
+        total[r, c, d] += prev[d]
+    r += dr
+    c += dc
+    while r >= 0 and r < H and c >= 0 and c < W:
+        mprev = prev[0]
+        for d in range(1, K):
+            if prev[d] < mprev:
+                mprev = prev[d]
+        for d in range(K):
+            best = prev[d]
+            if d > 0 and prev[d - 1] + p1 < best:
+                best = prev[d - 1] + p1
+            if d < K - 1 and prev[d + 1] + p1 < best:
+                best = prev[d + 1] + p1
+            if mprev + p2 < best:
+                best = mprev + p2
+            cur[d] = cost[r, c, d] + best - mprev
+            total[r, c, d] += cur[d]
+        tmp = prev
+        prev = cur
+        cur = tmp
+        r += dr
+        c += dc
+
+
+@njit(cache=True, parallel=True)
+def _sgm_direction_parallel(cost, dr, dc, p1, p2, total):
+    """Aggregation along direction (dr, dc): every path (a row, a column or a diagonal)
+    is independent, so the paths run in parallel. Each cell of ``total`` is written by
+    one path per direction, and the arithmetic is the reference's, so the result does not
+    depend on the thread count and equals :func:`_sgm_direction` bit for bit."""
+    H, W, K = cost.shape
+    # paths start on the cells whose predecessor (r - dr, c - dc) is outside the grid:
+    # the entry row (when dr != 0), then the entry column (when dc != 0) minus the corner
+    nrow = W if dr != 0 else 0
+    r0 = 0 if dr >= 0 else H - 1
+    c0 = 0 if dc >= 0 else W - 1
+    ncol = 0
+    if dc != 0:
+        ncol = H - 1 if dr != 0 else H
+    shift = 1 if dr > 0 else 0
+    for s in prange(nrow + ncol):
+        si = np.int64(s)
+        if si < nrow:
+            _sgm_path(cost, np.int64(r0), si, dr, dc, p1, p2, total)
+        else:
+            _sgm_path(cost, si - nrow + shift, np.int64(c0), dr, dc, p1, p2, total)
+
+
+def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np.ndarray:
+    """Semi-global aggregation of a cost volume (H, W, K) along 4 or 8 directions.
+
+    Labels are neighbouring steps of the elevation search; a change of one step costs
+    ``p1``, a larger jump ``p2``. The directions are summed in a fixed order and the
+    paths of one direction run in parallel, so the result is deterministic and equal to
+    :func:`sgm_aggregate_reference`. O(directions · H·W·K) time, O(H·W·K) extra memory
+    (the output).
+    """
+    cost = np.ascontiguousarray(cost, dtype=np.float32)
+    total = np.zeros_like(cost)
+    for dr, dc in _DIRS[: int(directions)]:
+        _sgm_direction_parallel(cost, int(dr), int(dc), np.float32(p1), np.float32(p2), total)
+    return total
+
+
+@njit(cache=True, parallel=True)
+def ncc_cost(score, nan_cost, out):
+    """SGM cost ``(1 − NCC)/2`` (float32, ``nan_cost`` where NaN) of ``score`` (K, H, W),
+    written transposed into ``out`` (H, W, K). O(K·H·W)."""
+    K, H, W = score.shape
+    one = np.float32(1.0)
+    half = np.float32(0.5)
+    nc = np.float32(nan_cost)
+    for i in prange(H):
+        for k in range(K):
+            for j in range(W):
+                s = score[k, i, j]
+                out[i, j, k] = (one - s) * half if np.isfinite(s) else nc
+
+
+@njit(cache=True, parallel=True)
+def sgm_winner(agg, d_out, off_out):
+    """Label of least aggregated cost per cell (first on ties, as ``np.argmin``) and its
+    sub-step offset in [−0.5, 0.5] from a parabola through the costs around it (0 at the
+    first and last label), in float32 arithmetic. ``agg`` (H, W, K). O(H·W·K)."""
+    H, W, K = agg.shape
+    two = np.float32(2.0)
+    half = np.float32(0.5)
+    eps = np.float32(1e-12)
+    for i in prange(H):
+        for j in range(W):
+            best = agg[i, j, 0]
+            d = 0
+            for k in range(1, K):
+                if agg[i, j, k] < best:
+                    best = agg[i, j, k]
+                    d = k
+            d_out[i, j] = d
+            off = np.float32(0.0)
+            if K >= 3 and d >= 1 and d <= K - 2:
+                cm = agg[i, j, d - 1]
+                c0 = agg[i, j, d]
+                cp = agg[i, j, d + 1]
+                den = cm - two * c0 + cp
+                if den > eps:
+                    off = half * (cm - cp) / den
+                    if off < -half:
+                        off = -half
+                    elif off > half:
+                        off = half
+            off_out[i, j] = off
 
 
 @njit(cache=True)
