@@ -85,77 +85,44 @@ def sgm_aggregate_reference(cost: np.ndarray, p1: float, p2: float, directions: 
     return total
 
 
-@njit(cache=True)
-def _sgm_path(cost, r, c, dr, dc, p1, p2, total):
-    """Aggregate one path from its entry cell (r, c) in steps (dr, dc), adding to ``total``;
-    only the previous cell's costs are kept (2·K floats)."""
-    H, W, K = cost.shape
-    prev = np.empty(K, dtype=np.float32)
-    cur = np.empty(K, dtype=np.float32)
-    for d in range(K):
-        prev[d] = cost[r, c, d]
-        total[r, c, d] += prev[d]
-    r += dr
-    c += dc
-    while r >= 0 and r < H and c >= 0 and c < W:
-        mprev = prev[0]
-        for d in range(1, K):
-            if prev[d] < mprev:
-                mprev = prev[d]
-        for d in range(K):
-            best = prev[d]
-            if d > 0 and prev[d - 1] + p1 < best:
-                best = prev[d - 1] + p1
-            if d < K - 1 and prev[d + 1] + p1 < best:
-                best = prev[d + 1] + p1
-            if mprev + p2 < best:
-                best = mprev + p2
-            cur[d] = cost[r, c, d] + best - mprev
-            total[r, c, d] += cur[d]
-        tmp = prev
-        prev = cur
-        cur = tmp
-        r += dr
-        c += dc
+@njit(cache=True, parallel=True)
+def sgm_paths(cost, p1, p2, Ls):
+    """Path costs ``Ls[n]`` (H, W, K) of direction ``_DIRS[n]`` for n < len(Ls), the
+    directions in parallel (one parallel region; each direction is the reference's serial
+    recursion). O(directions · H·W·K) time and memory."""
+    for n in prange(Ls.shape[0]):
+        Ls[n, :, :, :] = 0.0
+        _sgm_direction(cost, _DIRS[n, 0], _DIRS[n, 1], p1, p2, Ls[n])
 
 
 @njit(cache=True, parallel=True)
-def _sgm_direction_parallel(cost, dr, dc, p1, p2, total):
-    """Aggregation along direction (dr, dc): every path (a row, a column or a diagonal)
-    is independent, so the paths run in parallel. Each cell of ``total`` is written by
-    one path per direction, and the arithmetic is the reference's, so the result does not
-    depend on the thread count and equals :func:`_sgm_direction` bit for bit."""
-    H, W, K = cost.shape
-    # paths start on the cells whose predecessor (r - dr, c - dc) is outside the grid:
-    # the entry row (when dr != 0), then the entry column (when dc != 0) minus the corner
-    nrow = W if dr != 0 else 0
-    r0 = 0 if dr >= 0 else H - 1
-    c0 = 0 if dc >= 0 else W - 1
-    ncol = 0
-    if dc != 0:
-        ncol = H - 1 if dr != 0 else H
-    shift = 1 if dr > 0 else 0
-    for s in prange(nrow + ncol):
-        si = np.int64(s)
-        if si < nrow:
-            _sgm_path(cost, np.int64(r0), si, dr, dc, p1, p2, total)
-        else:
-            _sgm_path(cost, si - nrow + shift, np.int64(c0), dr, dc, p1, p2, total)
+def sgm_sum(Ls, total):
+    """``total`` = Σ_n ``Ls[n]`` added in the reference's order (n = 0, 1, …), so equal bit
+    for bit to the serial accumulation. O(directions · H·W·K)."""
+    N, H, W, K = Ls.shape
+    for i in prange(H):
+        for j in range(W):
+            for d in range(K):
+                t = np.float32(0.0)
+                for n in range(N):
+                    t += Ls[n, i, j, d]
+                total[i, j, d] = t
 
 
 def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np.ndarray:
     """Semi-global aggregation of a cost volume (H, W, K) along 4 or 8 directions.
 
     Labels are neighbouring steps of the elevation search; a change of one step costs
-    ``p1``, a larger jump ``p2``. The directions are summed in a fixed order and the
-    paths of one direction run in parallel, so the result is deterministic and equal to
-    :func:`sgm_aggregate_reference`. O(directions · H·W·K) time, O(H·W·K) extra memory
-    (the output).
+    ``p1``, a larger jump ``p2``. The directions run in parallel into separate buffers that
+    are summed in a fixed order, so the result does not depend on the thread count and
+    equals :func:`sgm_aggregate_reference` bit for bit. O(directions · H·W·K) time and
+    memory.
     """
     cost = np.ascontiguousarray(cost, dtype=np.float32)
-    total = np.zeros_like(cost)
-    for dr, dc in _DIRS[: int(directions)]:
-        _sgm_direction_parallel(cost, int(dr), int(dc), np.float32(p1), np.float32(p2), total)
+    Ls = np.empty((int(directions),) + cost.shape, np.float32)
+    sgm_paths(cost, np.float32(p1), np.float32(p2), Ls)
+    total = np.empty_like(cost)
+    sgm_sum(Ls, total)
     return total
 
 
@@ -175,28 +142,35 @@ def ncc_cost(score, nan_cost, out):
 
 
 @njit(cache=True, parallel=True)
-def sgm_winner(agg, d_out, off_out):
-    """Label of least aggregated cost per cell (first on ties, as ``np.argmin``) and its
-    sub-step offset in [−0.5, 0.5] from a parabola through the costs around it (0 at the
-    first and last label), in float32 arithmetic. ``agg`` (H, W, K). O(H·W·K)."""
-    H, W, K = agg.shape
+def sgm_winner(Ls, d_out, off_out):
+    """Sum of the path costs ``Ls`` (N, H, W, K) in the reference's order, its label of least
+    cost per cell (first on ties, as ``np.argmin``) and the sub-step offset in [−0.5, 0.5]
+    of a parabola through the costs around it (0 at the first and last label), in float32
+    arithmetic as the former numpy code. O(N·H·W·K)."""
+    N, H, W, K = Ls.shape
     two = np.float32(2.0)
     half = np.float32(0.5)
     eps = np.float32(1e-12)
     for i in prange(H):
+        agg = np.empty(K, dtype=np.float32)
         for j in range(W):
-            best = agg[i, j, 0]
+            for k in range(K):
+                t = np.float32(0.0)
+                for n in range(N):
+                    t += Ls[n, i, j, k]
+                agg[k] = t
+            best = agg[0]
             d = 0
             for k in range(1, K):
-                if agg[i, j, k] < best:
-                    best = agg[i, j, k]
+                if agg[k] < best:
+                    best = agg[k]
                     d = k
             d_out[i, j] = d
             off = np.float32(0.0)
             if K >= 3 and d >= 1 and d <= K - 2:
-                cm = agg[i, j, d - 1]
-                c0 = agg[i, j, d]
-                cp = agg[i, j, d + 1]
+                cm = agg[d - 1]
+                c0 = agg[d]
+                cp = agg[d + 1]
                 den = cm - two * c0 + cp
                 if den > eps:
                     off = half * (cm - cp) / den
@@ -305,8 +279,9 @@ def sample_stack(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
             R = Rs[v]
             C = Cs[v]
             p = Ps[v]
-            for j in range(W):
-                for k in range(K):
+            # k outside j: the writes run along contiguous rows of ``out`` (same values)
+            for k in range(K):
+                for j in range(W):
                     z = base[i, j] + k * dz
                     u, w, d = _project(R, C, p, xs[j], ys[i], z)
                     if d <= 0.0 or not np.isfinite(z):

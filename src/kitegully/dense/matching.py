@@ -23,8 +23,8 @@ from scipy import ndimage
 from kitegully import InputError
 from numba.typed import List
 
-from kitegully.dense.kernels import (multiview_ncc_stack, ncc_cost, sample_stack, sgm_aggregate,
-                                     sgm_aggregate_reference, sgm_winner)
+from kitegully.dense.kernels import (multiview_ncc_stack, ncc_cost, sample_stack, sgm_aggregate_reference,
+                                     sgm_paths, sgm_winner)
 from kitegully.dense.views import PyramidCache, ViewSet
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.holes import fill_nearest
@@ -193,16 +193,18 @@ def _sgm_winner(score: np.ndarray, K: int, params: MatchParams) -> tuple[np.ndar
     """Winning label per cell after semi-global aggregation of ``(1 − NCC)/2`` and its
     sub-step offset in [−0.5, 0.5] (parabola through the aggregated costs around it).
 
-    Compiled and parallel throughout (cost transposed to (H, W, K) once, SGM paths in
-    parallel, fused argmin + parabola); equal bit for bit to :func:`_sgm_winner_reference`.
+    Compiled and parallel in three regions (cost transposed to (H, W, K); the SGM
+    directions in parallel; their sum fused with argmin + parabola); equal bit for bit to
+    :func:`_sgm_winner_reference`.
     """
     k, h, w = score.shape
     cost = np.empty((h, w, k), np.float32)
     ncc_cost(score, float(params.nan_cost), cost)
-    agg = sgm_aggregate(cost, params.p1, params.p2, params.sgm_directions)
+    Ls = np.empty((params.sgm_directions, h, w, k), np.float32)
+    sgm_paths(cost, np.float32(params.p1), np.float32(params.p2), Ls)
     d = np.empty((h, w), np.int64)
     off = np.empty((h, w), np.float32)
-    sgm_winner(agg, d, off)
+    sgm_winner(Ls, d, off)
     return d, off
 
 
