@@ -42,8 +42,6 @@ def _bilinear(img, u, v):
 
 @njit(cache=True)
 def _sgm_direction(cost, dr, dc, p1, p2, total):
-    """Reference (serial) aggregation along one direction; kept for the tests and the
-    speed benchmark. :func:`sgm_aggregate` gives bit-identical results in parallel."""
     H, W, K = cost.shape
     L = np.empty((H, W, K), dtype=np.float32)
     r_start, r_end, r_step = (0, H, 1) if dr >= 0 else (H - 1, -1, -1)
@@ -76,53 +74,20 @@ def _sgm_direction(cost, dr, dc, p1, p2, total):
 _DIRS = np.array([[0, 1], [0, -1], [1, 0], [-1, 0], [1, 1], [-1, -1], [1, -1], [-1, 1]], dtype=np.int64)
 
 
-def sgm_aggregate_reference(cost: np.ndarray, p1: float, p2: float, directions: int) -> np.ndarray:
-    """Serial reference of :func:`sgm_aggregate` (one thread, full (H, W, K) path buffer)."""
-    cost = np.ascontiguousarray(cost, dtype=np.float32)
-    total = np.zeros_like(cost)
-    for dr, dc in _DIRS[: int(directions)]:
-        _sgm_direction(cost, int(dr), int(dc), np.float32(p1), np.float32(p2), total)
-    return total
-
-
-@njit(cache=True, parallel=True)
-def sgm_paths(cost, p1, p2, Ls):
-    """Path costs ``Ls[n]`` (H, W, K) of direction ``_DIRS[n]`` for n < len(Ls), the
-    directions in parallel (one parallel region; each direction is the reference's serial
-    recursion). O(directions · H·W·K) time and memory."""
-    for n in prange(Ls.shape[0]):
-        Ls[n, :, :, :] = 0.0
-        _sgm_direction(cost, _DIRS[n, 0], _DIRS[n, 1], p1, p2, Ls[n])
-
-
-@njit(cache=True, parallel=True)
-def sgm_sum(Ls, total):
-    """``total`` = Σ_n ``Ls[n]`` added in the reference's order (n = 0, 1, …), so equal bit
-    for bit to the serial accumulation. O(directions · H·W·K)."""
-    N, H, W, K = Ls.shape
-    for i in prange(H):
-        for j in range(W):
-            for d in range(K):
-                t = np.float32(0.0)
-                for n in range(N):
-                    t += Ls[n, i, j, d]
-                total[i, j, d] = t
-
-
 def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np.ndarray:
     """Semi-global aggregation of a cost volume (H, W, K) along 4 or 8 directions.
 
     Labels are neighbouring steps of the elevation search; a change of one step costs
-    ``p1``, a larger jump ``p2``. The directions run in parallel into separate buffers that
-    are summed in a fixed order, so the result does not depend on the thread count and
-    equals :func:`sgm_aggregate_reference` bit for bit. O(directions · H·W·K) time and
-    memory.
+    ``p1``, a larger jump ``p2``. O(directions · H·W·K) time, O(H·W·K) extra memory.
+
+    Serial on purpose: it is ~2 % of a tile's time, and running the directions (or the
+    paths of one direction) in parallel was measured slower on the shared 2-core machine
+    (extra buffers and thread barriers; see README, dense matching speed).
     """
     cost = np.ascontiguousarray(cost, dtype=np.float32)
-    Ls = np.empty((int(directions),) + cost.shape, np.float32)
-    sgm_paths(cost, np.float32(p1), np.float32(p2), Ls)
-    total = np.empty_like(cost)
-    sgm_sum(Ls, total)
+    total = np.zeros_like(cost)
+    for dr, dc in _DIRS[: int(directions)]:
+        _sgm_direction(cost, int(dr), int(dc), np.float32(p1), np.float32(p2), total)
     return total
 
 
@@ -142,35 +107,30 @@ def ncc_cost(score, nan_cost, out):
 
 
 @njit(cache=True, parallel=True)
-def sgm_winner(Ls, d_out, off_out):
-    """Sum of the path costs ``Ls`` (N, H, W, K) in the reference's order, its label of least
-    cost per cell (first on ties, as ``np.argmin``) and the sub-step offset in [−0.5, 0.5]
-    of a parabola through the costs around it (0 at the first and last label), in float32
-    arithmetic as the former numpy code. O(N·H·W·K)."""
-    N, H, W, K = Ls.shape
+def sgm_winner(agg, d_out, off_out):
+    """Label of least aggregated cost ``agg`` (H, W, K) per cell (first on ties, as
+    ``np.argmin``) into ``d_out`` and the sub-step offset in [−0.5, 0.5] of a parabola
+    through the costs around it (0 at the first and last label) into ``off_out``, in the
+    float32 arithmetic of the former numpy code. O(H·W·K)."""
+    H, W, K = agg.shape
     two = np.float32(2.0)
     half = np.float32(0.5)
     eps = np.float32(1e-12)
     for i in prange(H):
-        agg = np.empty(K, dtype=np.float32)
         for j in range(W):
-            for k in range(K):
-                t = np.float32(0.0)
-                for n in range(N):
-                    t += Ls[n, i, j, k]
-                agg[k] = t
-            best = agg[0]
+            a = agg[i, j]
+            best = a[0]
             d = 0
             for k in range(1, K):
-                if agg[k] < best:
-                    best = agg[k]
+                if a[k] < best:
+                    best = a[k]
                     d = k
             d_out[i, j] = d
             off = np.float32(0.0)
             if K >= 3 and d >= 1 and d <= K - 2:
-                cm = agg[d - 1]
-                c0 = agg[d]
-                cp = agg[d + 1]
+                cm = a[d - 1]
+                c0 = a[d]
+                cp = a[d + 1]
                 den = cm - two * c0 + cp
                 if den > eps:
                     off = half * (cm - cp) / den

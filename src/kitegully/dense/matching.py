@@ -23,8 +23,8 @@ from scipy import ndimage
 from kitegully import InputError
 from numba.typed import List
 
-from kitegully.dense.kernels import (multiview_ncc_stack, ncc_cost, sample_stack, sgm_aggregate_reference,
-                                     sgm_paths, sgm_winner)
+from kitegully.dense.kernels import (multiview_ncc_stack, ncc_cost, sample_stack, sgm_aggregate,
+                                     sgm_winner)
 from kitegully.dense.views import PyramidCache, ViewSet
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.holes import fill_nearest
@@ -193,25 +193,24 @@ def _sgm_winner(score: np.ndarray, K: int, params: MatchParams) -> tuple[np.ndar
     """Winning label per cell after semi-global aggregation of ``(1 − NCC)/2`` and its
     sub-step offset in [−0.5, 0.5] (parabola through the aggregated costs around it).
 
-    Compiled and parallel in three regions (cost transposed to (H, W, K); the SGM
-    directions in parallel; their sum fused with argmin + parabola); equal bit for bit to
+    The cost is transposed to (H, W, K) by one compiled pass and the winner and parabola
+    are fused in one compiled pass (no numpy temporaries); equal bit for bit to
     :func:`_sgm_winner_reference`.
     """
     k, h, w = score.shape
     cost = np.empty((h, w, k), np.float32)
     ncc_cost(score, float(params.nan_cost), cost)
-    Ls = np.empty((params.sgm_directions, h, w, k), np.float32)
-    sgm_paths(cost, np.float32(params.p1), np.float32(params.p2), Ls)
+    agg = sgm_aggregate(cost, params.p1, params.p2, params.sgm_directions)
     d = np.empty((h, w), np.int64)
     off = np.empty((h, w), np.float32)
-    sgm_winner(Ls, d, off)
+    sgm_winner(agg, d, off)
     return d, off
 
 
 def _sgm_winner_reference(score: np.ndarray, K: int, params: MatchParams) -> tuple[np.ndarray, np.ndarray]:
-    """The former numpy + serial-SGM implementation of :func:`_sgm_winner` (tests, benchmark)."""
+    """The former numpy implementation of :func:`_sgm_winner` (tests, benchmark)."""
     cost = np.where(np.isfinite(score), (1.0 - score) * 0.5, params.nan_cost).astype(np.float32)
-    agg = sgm_aggregate_reference(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
+    agg = sgm_aggregate(np.moveaxis(cost, 0, -1), params.p1, params.p2, params.sgm_directions)
     d = np.argmin(agg, axis=2)
     dc = np.clip(d, 1, K - 2) if K >= 3 else d
     r, c = np.indices(d.shape)
