@@ -91,32 +91,33 @@ def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np
     return total
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def ncc_cost(score, nan_cost, out):
     """SGM cost ``(1 − NCC)/2`` (float32, ``nan_cost`` where NaN) of ``score`` (K, H, W),
-    written transposed into ``out`` (H, W, K). O(K·H·W)."""
+    written transposed into ``out`` (H, W, K). Serial: a parallel region costs more than
+    this pass on the shared 2-core machine. O(K·H·W)."""
     K, H, W = score.shape
     one = np.float32(1.0)
     half = np.float32(0.5)
     nc = np.float32(nan_cost)
-    for i in prange(H):
+    for i in range(H):
         for k in range(K):
             for j in range(W):
                 s = score[k, i, j]
                 out[i, j, k] = (one - s) * half if np.isfinite(s) else nc
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def sgm_winner(agg, d_out, off_out):
     """Label of least aggregated cost ``agg`` (H, W, K) per cell (first on ties, as
     ``np.argmin``) into ``d_out`` and the sub-step offset in [−0.5, 0.5] of a parabola
     through the costs around it (0 at the first and last label) into ``off_out``, in the
-    float32 arithmetic of the former numpy code. O(H·W·K)."""
+    float32 arithmetic of the former numpy code. Serial (as :func:`ncc_cost`). O(H·W·K)."""
     H, W, K = agg.shape
     two = np.float32(2.0)
     half = np.float32(0.5)
     eps = np.float32(1e-12)
-    for i in prange(H):
+    for i in range(H):
         for j in range(W):
             a = agg[i, j]
             best = a[0]
