@@ -79,12 +79,67 @@ def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np
 
     Labels are neighbouring steps of the elevation search; a change of one step costs
     ``p1``, a larger jump ``p2``. O(directions · H·W·K) time, O(H·W·K) extra memory.
+
+    Serial on purpose: it is ~2 % of a tile's time, and running the directions (or the
+    paths of one direction) in parallel was measured slower on the shared 2-core machine
+    (extra buffers and thread barriers; see README, dense matching speed).
     """
     cost = np.ascontiguousarray(cost, dtype=np.float32)
     total = np.zeros_like(cost)
     for dr, dc in _DIRS[: int(directions)]:
         _sgm_direction(cost, int(dr), int(dc), np.float32(p1), np.float32(p2), total)
     return total
+
+
+@njit(cache=True)
+def ncc_cost(score, nan_cost, out):
+    """SGM cost ``(1 − NCC)/2`` (float32, ``nan_cost`` where NaN) of ``score`` (K, H, W),
+    written transposed into ``out`` (H, W, K). Serial: a parallel region costs more than
+    this pass on the shared 2-core machine. O(K·H·W)."""
+    K, H, W = score.shape
+    one = np.float32(1.0)
+    half = np.float32(0.5)
+    nc = np.float32(nan_cost)
+    for i in range(H):
+        for k in range(K):
+            for j in range(W):
+                s = score[k, i, j]
+                out[i, j, k] = (one - s) * half if np.isfinite(s) else nc
+
+
+@njit(cache=True)
+def sgm_winner(agg, d_out, off_out):
+    """Label of least aggregated cost ``agg`` (H, W, K) per cell (first on ties, as
+    ``np.argmin``) into ``d_out`` and the sub-step offset in [−0.5, 0.5] of a parabola
+    through the costs around it (0 at the first and last label) into ``off_out``, in the
+    float32 arithmetic of the former numpy code. Serial (as :func:`ncc_cost`). O(H·W·K)."""
+    H, W, K = agg.shape
+    two = np.float32(2.0)
+    half = np.float32(0.5)
+    eps = np.float32(1e-12)
+    for i in range(H):
+        for j in range(W):
+            a = agg[i, j]
+            best = a[0]
+            d = 0
+            for k in range(1, K):
+                if a[k] < best:
+                    best = a[k]
+                    d = k
+            d_out[i, j] = d
+            off = np.float32(0.0)
+            if K >= 3 and d >= 1 and d <= K - 2:
+                cm = a[d - 1]
+                c0 = a[d]
+                cp = a[d + 1]
+                den = cm - two * c0 + cp
+                if den > eps:
+                    off = half * (cm - cp) / den
+                    if off < -half:
+                        off = -half
+                    elif off > half:
+                        off = half
+            off_out[i, j] = off
 
 
 @njit(cache=True)
@@ -185,8 +240,9 @@ def sample_stack(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
             R = Rs[v]
             C = Cs[v]
             p = Ps[v]
-            for j in range(W):
-                for k in range(K):
+            # k outside j: the writes run along contiguous rows of ``out`` (same values)
+            for k in range(K):
+                for j in range(W):
                     z = base[i, j] + k * dz
                     u, w, d = _project(R, C, p, xs[j], ys[i], z)
                     if d <= 0.0 or not np.isfinite(z):
