@@ -9,7 +9,12 @@ of the concave, channelised reach). Here:
 
 1. Concavity: a depth map at the scale of a gully head (``D_h = G_σh ∗ Z − Z``, the
    Gaussian depth of Fig. 3 a-d with a small σ, which is −σ²/2·∇²Z for smooth relief:
-   a plan/profile curvature) deeper than ``k·σ_z`` (the DSM noise) marks incised cells.
+   a plan/profile curvature) deeper than ``k·max(σ_z, ρ)`` marks incised cells, with σ_z
+   the DSM noise at the checkpoints and ρ the surface's own head-scale roughness (the
+   robust spread of that depth map over the site, :func:`surface_roughness`: tillage
+   furrows and crop rows of a photogrammetric DSM are not gullies); cells within 2σ_h
+   of an object standing above the surface (shrubs, hedgerows: :func:`near_raised_objects`)
+   are not judged.
 2. Flow: D8 directions on the filled DEM, contributing area A (m²), slope S along the
    flow measured over the DSM's resolution.
 3. Channel cells: incised cells with ``S ≥ a·A_ha^-b``.
@@ -26,6 +31,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
+import scipy.ndimage as ndi
 from numba import njit
 
 from kitegully import InputError
@@ -50,8 +56,9 @@ class HeadDetectionParams:
         site (≤ 1.5 m wide), so the depth of a head is resolved while field-scale
         relief (≥ 10 m) is smoothed away.
     relief_k : float
-        Incised where the head-scale depth ≥ ``relief_k``·``dsm_sigma_z_m``. [I] 3, as
-        the operator's visibility rule (a 3σ step).
+        Incised where the head-scale depth ≥ ``relief_k``·max(``dsm_sigma_z_m``, surface
+        roughness) (:func:`surface_roughness`). [I] 3, as the operator's visibility rule
+        (a 3σ step).
     dsm_sigma_z_m : float
         Vertical noise of the DSM (m). [I] ``null`` in the config = the SD of DSM minus
         the RTK checkpoints (:func:`dsm_noise_at_checkpoints`): the DSM's own noise where
@@ -216,10 +223,17 @@ def detect_heads(
     cell = grid.cell
     valid = np.isfinite(z)
     zs = gaussian_smooth_fft(z, params.scale_m / cell, workers=workers)
-    incised = np.zeros(z.shape, bool)
-    with np.errstate(invalid="ignore"):
-        incised[valid] = (zs - z)[valid] >= params.relief_k * params.dsm_sigma_z_m
+    relief = np.where(valid, zs - z, np.nan)
     del zs
+    rough = surface_roughness(relief[valid])
+    threshold = params.relief_k * max(params.dsm_sigma_z_m, rough)
+    incised = np.zeros(z.shape, bool)
+    incised[valid] = relief[valid] >= threshold
+    near = near_raised_objects(relief, threshold, params.scale_m / cell)
+    incised &= ~near
+    del relief
+    log.info("automatic heads: incised where the head-scale depth >= %.3g m = %.3g x max(DSM noise %.3g m, "
+             "surface roughness %.3g m)", threshold, params.relief_k, params.dsm_sigma_z_m, rough)
     zsl = gaussian_smooth_fft(z, params.slope_window_m / cell, workers=workers)
     gy, gx = np.gradient(zsl, cell)
     slope = np.hypot(gx, gy)
@@ -232,7 +246,8 @@ def detect_heads(
     n_steps = max(1, int(round(params.min_channel_length_m / cell)))
     cand = np.flatnonzero(_heads(channel, recv, n_steps, 0.5))
     if cand.size == 0:
-        return cand, {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": 0}
+        return cand, {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": 0,
+                      "relief_threshold_m": threshold, "surface_roughness_m": rough}
     fz = filled.ravel()[cand]
     cand = cand[np.argsort(-fz, kind="stable")]
     cells, _down, starts, ends = trace_paths(filled, cand, dirs)
@@ -240,10 +255,44 @@ def detect_heads(
     joined_short = ((ends == END_MERGE) & (lengths < params.min_channel_length_m)) | (ends == END_ON_NETWORK)
     heads = cand[~joined_short]
     stats = {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": int(cand.size),
-             "heads": int(heads.size)}
+             "heads": int(heads.size), "relief_threshold_m": threshold, "surface_roughness_m": rough}
     log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
              stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
     return heads, stats
+
+
+def near_raised_objects(relief: np.ndarray, threshold_m: float, scale_cells: float) -> np.ndarray:
+    """Cells within 2σ of an object standing ``threshold_m`` or more above the head-scale smoothed surface.
+
+    [I] On a photogrammetric DSM, shrubs, hedgerows and tree rows stand on the ground; the
+    Gaussian of the head-scale depth map spreads them over ±2σ (95 % of its weight), so the
+    ground beside them looks incised (on the default twin's DSM most automatic heads sat at
+    the upslope foot of hedgerows). Their own relief is the mirror image: they stand above
+    the smoothed surface by at least the incision threshold. Within 2σ of such a cell the
+    depth map cannot tell an incision from the object's shadow, so no head is taken there.
+    O(n) (a distance transform of the object mask).
+    """
+    raised = np.nan_to_num(relief, nan=0.0) <= -threshold_m
+    if not raised.any():
+        return np.zeros(relief.shape, bool)
+    return ndi.distance_transform_edt(~raised) <= 2.0 * scale_cells
+
+
+def surface_roughness(relief: np.ndarray) -> float:
+    """Robust spread (NMAD, m) of the head-scale depth map over the DSM: the surface's own micro-relief.
+
+    [I] The checkpoints measure the DSM's noise on bare, smooth ground; a photogrammetric
+    surface of fields also carries tillage furrows, crop rows and the gaps between plants,
+    which show in the head-scale depth map as incisions of up to a few decimetres. Gullies
+    cover a few per cent of a site, so the median absolute deviation of that map over all
+    cells (× 1.4826, the SD of a normal background) is the spread of the ungullied surface;
+    an incision must stand out from that as well as from the noise. O(n).
+    """
+    v = np.asarray(relief, dtype=np.float64).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
 
 
 def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points) -> float:
