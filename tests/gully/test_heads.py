@@ -100,35 +100,6 @@ def test_dsm_noise_from_checkpoints_feeds_a_null_sigma():
         HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None))
 
 
-def test_no_head_at_the_foot_of_a_hedgerow_on_a_dsm():
-    # a hedgerow (3 m wide, 2 m high) across the 10 % slope stands on the DSM: a Gaussian of
-    # sigma 2 m spreads it, so the ground upslope of it looks incised; the opened surface does not
-    grid = _grid(300)
-    xs, ys = grid.cell_centres()
-    X, Y = np.meshgrid(xs, ys)
-    z = 0.1 * Y + np.random.default_rng(4).normal(0, 0.01, X.shape)
-    z = (z + 2.0 * np.clip(1 - np.abs(Y - 30.0) / 1.5, 0, None) ** 0.3).astype(np.float32)
-    assert len(_detect(z, grid)[0]) == 0
-    # the channel of the valley test is still found beside the same hedge
-    zv, gv = _valley()
-    Xv, Yv = np.meshgrid(*gv.cell_centres())
-    hedge = 2.0 * np.clip(1 - np.abs(Xv - 20.0) / 1.5, 0, None) ** 0.3  # a hedge along the slope, 20 m off
-    heads, _ = _detect((zv + hedge).astype(np.float32), gv)
-    assert np.hypot(heads[:, 0] - 40.0, heads[:, 1] - 60.0).min() < 2.0
-    assert np.all(np.abs(heads[:, 0] - 40.0) < 3.0)
-
-
-def test_near_raised_objects_marks_the_shadow_of_a_shrub():
-    from kitegully.gully.heads import near_raised_objects
-
-    relief = np.zeros((50, 50))
-    relief[25, 25] = -1.0  # a shrub 1 m above the smoothed surface
-    relief[0, 0] = np.nan
-    near = near_raised_objects(relief, 0.15, scale_cells=5.0)
-    assert near[25, 35] and near[25, 15] and not near[25, 36] and not near[0, 0]
-    assert not near_raised_objects(np.full((5, 5), 0.1), 0.15, 5.0).any()
-
-
 def test_surface_roughness_is_the_spread_of_the_ungullied_surface():
     from kitegully.gully.heads import surface_roughness
 

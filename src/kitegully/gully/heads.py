@@ -12,9 +12,10 @@ of the concave, channelised reach). Here:
    a plan/profile curvature) deeper than ``k·max(σ_z, ρ)`` marks incised cells, with σ_z
    the DSM noise at the checkpoints and ρ the surface's own head-scale roughness (the
    robust spread of that depth map over the site, :func:`surface_roughness`: tillage
-   furrows and crop rows of a photogrammetric DSM are not gullies); cells within 2σ_h
-   of an object standing above the surface (shrubs, hedgerows: :func:`near_raised_objects`)
-   are not judged.
+   furrows and crop rows of a photogrammetric DSM are not gullies). Not solved: on a DSM,
+   the ground at the upslope foot of hedgerows and shrub rows also looks incised at head
+   scale (the Gaussian spreads the raised objects), and most automatic heads on the default
+   twin's DSM sit there (README, Stage 6).
 2. Flow: D8 directions on the filled DEM, contributing area A (m²), slope S along the
    flow measured over the DSM's resolution.
 3. Channel cells: incised cells with ``S ≥ a·A_ha^-b``.
@@ -229,8 +230,6 @@ def detect_heads(
     threshold = params.relief_k * max(params.dsm_sigma_z_m, rough)
     incised = np.zeros(z.shape, bool)
     incised[valid] = relief[valid] >= threshold
-    near = near_raised_objects(relief, threshold, params.scale_m / cell)
-    incised &= ~near
     del relief
     log.info("automatic heads: incised where the head-scale depth >= %.3g m = %.3g x max(DSM noise %.3g m, "
              "surface roughness %.3g m)", threshold, params.relief_k, params.dsm_sigma_z_m, rough)
@@ -259,23 +258,6 @@ def detect_heads(
     log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
              stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
     return heads, stats
-
-
-def near_raised_objects(relief: np.ndarray, threshold_m: float, scale_cells: float) -> np.ndarray:
-    """Cells within 2σ of an object standing ``threshold_m`` or more above the head-scale smoothed surface.
-
-    [I] On a photogrammetric DSM, shrubs, hedgerows and tree rows stand on the ground; the
-    Gaussian of the head-scale depth map spreads them over ±2σ (95 % of its weight), so the
-    ground beside them looks incised (on the default twin's DSM most automatic heads sat at
-    the upslope foot of hedgerows). Their own relief is the mirror image: they stand above
-    the smoothed surface by at least the incision threshold. Within 2σ of such a cell the
-    depth map cannot tell an incision from the object's shadow, so no head is taken there.
-    O(n) (a distance transform of the object mask).
-    """
-    raised = np.nan_to_num(relief, nan=0.0) <= -threshold_m
-    if not raised.any():
-        return np.zeros(relief.shape, bool)
-    return ndi.distance_transform_edt(~raised) <= 2.0 * scale_cells
 
 
 def surface_roughness(relief: np.ndarray) -> float:
