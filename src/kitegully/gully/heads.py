@@ -7,15 +7,15 @@ heads on Mediterranean cropland) and where the surface is concave across the flo
 (Passalacqua et al. 2010 use curvature after smoothing; Clubb et al. 2014 the upstream end
 of the concave, channelised reach). Here:
 
-1. Concavity: a depth map at the scale of a gully head (``D_h = G_σh ∗ Z − Z``, the
+1. Concavity: a depth map at the scale of a gully head (``D_h = G_σh ∗ Z₀ − Z``, Z₀ the
+   ground surface, the
    Gaussian depth of Fig. 3 a-d with a small σ, which is −σ²/2·∇²Z for smooth relief:
    a plan/profile curvature) deeper than ``k·max(σ_z, ρ)`` marks incised cells, with σ_z
    the DSM noise at the checkpoints and ρ the surface's own head-scale roughness (the
    robust spread of that depth map over the site, :func:`surface_roughness`: tillage
-   furrows and crop rows of a photogrammetric DSM are not gullies). Not solved: on a DSM,
-   the ground at the upslope foot of hedgerows and shrub rows also looks incised at head
-   scale (the Gaussian spreads the raised objects), and most automatic heads on the default
-   twin's DSM sit there (README, Stage 6).
+   furrows and crop rows of a photogrammetric DSM are not gullies). The smoothed surface is
+   that of the DEM without raised objects (:func:`ground_surface`): on a DSM the ground at
+   the foot of hedgerows and shrub rows otherwise looks incised at head scale.
 2. Flow: D8 directions on the filled DEM, contributing area A (m²), slope S along the
    flow measured over the DSM's resolution.
 3. Channel cells: incised cells with ``S ≥ a·A_ha^-b``.
@@ -218,15 +218,18 @@ def detect_heads(
 
     Notes
     -----
-    O(n log n) for the two FFT smoothings, O(n) for accumulation and candidate search,
+    O(n log n) for the FFT smoothings, O(n) for accumulation and candidate search,
     O(L) for the tracing. Memory: a few float32/float64 rasters.
     """
     cell = grid.cell
     valid = np.isfinite(z)
-    zs = gaussian_smooth_fft(z, params.scale_m / cell, workers=workers)
+    # roughness: the DSM's own head-scale micro-relief (furrows, crop rows), as the operator sees it
+    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell, workers=workers) - z)[valid])
+    ground = ground_surface(z, cell, params.scale_m, params.slope_window_m, workers)
+    zs = gaussian_smooth_fft(ground, params.scale_m / cell, workers=workers)
+    del ground
     relief = np.where(valid, zs - z, np.nan)
     del zs
-    rough = surface_roughness(relief[valid])
     threshold = params.relief_k * max(params.dsm_sigma_z_m, rough)
     incised = np.zeros(z.shape, bool)
     incised[valid] = relief[valid] >= threshold
@@ -258,6 +261,39 @@ def detect_heads(
     log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
              stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
     return heads, stats
+
+
+def ground_surface(z: np.ndarray, cell_m: float, scale_m: float, noise_window_m: float, workers: int = 1) -> np.ndarray:
+    """The DEM without the objects that stand on the ground, as reference of the head-scale depth map.
+
+    ``Z_L + open(Z_n − Z_L)``: ``Z_n`` the DEM smoothed at ``noise_window_m``, ``Z_L`` the DEM
+    smoothed at ``4·scale_m`` (the local slope and field-scale relief), ``open`` a grey
+    opening (erosion then dilation) with a square of side ``4·scale_m + 6·noise_window_m``.
+    NaN where ``z`` is NaN.
+
+    [I] On a photogrammetric DSM, shrubs, hedgerows and tree rows stand above the ground; a
+    Gaussian of σ = ``scale_m`` spreads them over ±2σ, so the ground at their foot looks
+    incised (most automatic heads on the default twin's DSM sat at the upslope foot of
+    hedgerows). An opening removes raised objects narrower than its element and keeps
+    valleys (gullies are concave: untouched) and level planes; made on the relief about the
+    local slope (``Z_n − Z_L``), its flat element lies along the slope, as the ``plane``
+    head snapping does, so that on a sloping field it does not keep the flanks of an object.
+    The element spans the Gaussian's ±2σ support plus the ±3σ widening of the noise smoothing;
+    the noise smoothing (σ = the matching window) keeps the opening from sinking the
+    surface to the noise's lower envelope. O(n log n) for two FFT smoothings, O(n·k) for
+    the separable min/max filters (k cells across the element).
+    """
+    valid = np.isfinite(z)
+    zn = gaussian_smooth_fft(z, noise_window_m / cell_m, workers=workers) if noise_window_m > 0 else np.asarray(z)
+    zl = gaussian_smooth_fft(z, 4.0 * scale_m / cell_m, workers=workers)
+    k = 2 * max(1, int(round((2.0 * scale_m + 3.0 * noise_window_m) / cell_m))) + 1
+    r = np.where(valid, zn - zl, np.inf).astype(np.float32)
+    er = ndi.minimum_filter(r, size=k, mode="nearest")
+    er[~valid | ~np.isfinite(er)] = -np.inf
+    op = ndi.maximum_filter(er, size=k, mode="nearest")
+    out = (zl + op).astype(np.float32)
+    out[~valid] = np.nan
+    return out
 
 
 def surface_roughness(relief: np.ndarray) -> float:
