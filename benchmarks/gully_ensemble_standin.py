@@ -30,6 +30,7 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 from gully_heads_eval import run as run_gully  # noqa: E402
 from twin_ensemble import BASE, deep_merge, members, summarise  # noqa: E402
 
+from kitegully.twin import TwinParams  # noqa: E402
 from kitegully.twin.site import build_site, generate_epoch  # noqa: E402
 
 log = logging.getLogger("gully_ensemble_standin")
@@ -45,6 +46,7 @@ def main() -> None:
     ap.add_argument("--out", default="results/ensemble_standin")
     ap.add_argument("--set", action="append", default=[], help="gully key=value overrides (YAML value)")
     ap.add_argument("--mask-water", action="store_true", help="stand-in empty over open water, like the DSM")
+    ap.add_argument("--modes", default="digitised,automatic", help="head sources (digitised, automatic, both)")
     a = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     out = REPO / a.out
@@ -59,10 +61,10 @@ def main() -> None:
         twin = out / name / "twin"
         if not (twin / "observed/gully_heads.gpkg").exists():
             t0 = time.perf_counter()
-            site = build_site(cfg["twin"], cfg["site"]["crs"], cfg["seed"], epoch=1)
+            site = build_site(TwinParams.from_config(cfg["twin"]), cfg["site"]["crs"], cfg["seed"], epoch=1)
             generate_epoch(site, twin, texture=False)
             log.info("%s: twin generated in %.0f s", name, time.perf_counter() - t0)
-        for r in run_gully(cfg, str(twin), None, mask_water=a.mask_water):
+        for r in run_gully(cfg, str(twin), None, modes=a.modes.split(","), mask_water=a.mask_water):
             rows.append({"member": name, **r})
     df = pd.DataFrame(rows)
     out.mkdir(parents=True, exist_ok=True)

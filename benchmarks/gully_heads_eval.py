@@ -3,7 +3,8 @@
 Evaluation only (reads the twin's truth). Usage:
     python benchmarks/gully_heads_eval.py --config config/sites/kamech_twin.yaml --twin results/kamech_twin/twin \
         --heads results/kamech_twin/twin/observed/gully_heads.gpkg [--set sigma_m=6 ...] [--out table.csv]
-The stand-in is the truth DTM plus correlated noise (gully.standin): NOT the photogrammetric DSM.
+The stand-in is the truth DTM plus correlated noise (gully.standin): NOT the photogrammetric DSM;
+``--dem results/<site>/dense/dsm.tif`` maps the photogrammetric DSM instead.
 """
 
 from __future__ import annotations
@@ -71,16 +72,20 @@ def run(cfg: dict, twin: str, heads_path: str | None, modes=("digitised", "autom
     return rows
 
 
-def sigma_table(cfg: dict, twin: str, heads_path: str | None, sigmas, thresholds) -> pd.DataFrame:
-    """Area and network scores over sigma x depth threshold (network traced once, digitised heads)."""
+def sigma_table(cfg: dict, twin: str, heads_path: str | None, sigmas, thresholds, dem=None, grid=None) -> pd.DataFrame:
+    """Area and network scores over sigma x depth threshold (network traced once, digitised heads).
+
+    ``dem``/``grid``: map this DEM (e.g. the photogrammetric DSM) instead of the stand-in.
+    """
     from kitegully.evaluate.network import footprint, rasterize_polygons
     from kitegully.gully.network import network_lines
     from kitegully.gully.sensitivity import sensitivity_table
 
     g = cfg["gully"]
     crs = cfg["site"]["crs"]
-    dtm, grid = read_raster(f"{twin}/truth/dtm.tif")
-    dem = noisy_dem(dtm, grid.cell, g["standin"]["noise_sd_m"], g["standin"]["noise_correlation_m"], cfg["seed"])
+    if dem is None:
+        dtm, grid = read_raster(f"{twin}/truth/dtm.tif")
+        dem = noisy_dem(dtm, grid.cell, g["standin"]["noise_sd_m"], g["standin"]["noise_correlation_m"], cfg["seed"])
     hx, hy = read_heads(heads_path or f"{twin}/observed/gully_heads.gpkg", crs)
     res = map_gullies(dem, grid, hx, hy, GullyParams.from_config(g), workers=1)
     ref = read_vector(f"{twin}/observed/field_network.gpkg", crs=crs)
@@ -103,6 +108,7 @@ def main() -> None:
     ap.add_argument("--sigmas", default=None, help="comma list: also a sigma x threshold table (sensitivity_table) "
                     "with the digitised heads' network, against the truth polygons and the unfiltered reference")
     ap.add_argument("--thresholds", default="0.15,0.25")
+    ap.add_argument("--dem", default=None, help="map this DEM (e.g. results/<site>/dense/dsm.tif) instead of the stand-in")
     a = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     cfg = yaml.safe_load(open(a.config))
@@ -110,11 +116,18 @@ def main() -> None:
     for kv in a.set:
         k, v = kv.split("=", 1)
         cfg["gully"][k] = yaml.safe_load(v)
+    dem = grid = None
+    if a.dem:
+        dem, grid = read_raster(a.dem)
+        dem = np.asarray(dem, dtype=np.float32)
     if a.sigmas:
-        print(sigma_table(cfg, a.twin, a.heads, [float(v) for v in a.sigmas.split(",")],
-                          [float(v) for v in a.thresholds.split(",")]).to_string())
+        tab = sigma_table(cfg, a.twin, a.heads, [float(v) for v in a.sigmas.split(",")],
+                          [float(v) for v in a.thresholds.split(",")], dem, grid)
+        print(tab.to_string())
+        if a.out:
+            tab.to_csv(a.out, index=False)
         return
-    rows = run(cfg, a.twin, a.heads, a.modes.split(","), mask_water=a.mask_water)
+    rows = run(cfg, a.twin, a.heads, a.modes.split(","), dem=dem, grid=grid, mask_water=a.mask_water)
     df = pd.DataFrame(rows)
     pd.set_option("display.width", 250)
     print(df.T.to_string())

@@ -15,6 +15,8 @@ Writes ``<out>/summary.csv`` (one row per twin) and ``<out>/summary.md`` (rows, 
     .venv/bin/python benchmarks/twin_ensemble.py --dry-run          # snakemake -n per member
     .venv/bin/python benchmarks/twin_ensemble.py --tiny             # one cheap member: the tiny twin
     .venv/bin/python benchmarks/twin_ensemble.py --collect-only     # score existing results
+    .venv/bin/python benchmarks/twin_ensemble.py --collect-only --regully --results /path/to/results \
+        --out results/ensemble_regully    # map the existing members' DSMs again with the current gully code
 
 The full ensemble (6 Kamech-sized chains) takes about 6 x 10 min on 2 idle cores.
 """
@@ -138,7 +140,7 @@ def _quantity(path: Path, key: str, col: str = "quantity", val: str = "value") -
     return float(s.iloc[0]) if len(s) else float("nan")
 
 
-def collect(cfg: dict, t: dict[str, Path], results: Path) -> dict:
+def collect(cfg: dict, t: dict[str, Path], results: Path, regully: bool = False) -> dict:
     """Every summary number of one member from its result files (NaN where a file is missing)."""
     row: dict = {}
     nan = float("nan")
@@ -155,12 +157,18 @@ def collect(cfg: dict, t: dict[str, Path], results: Path) -> dict:
     if "obia" in t and t["obia"].exists():
         row["kite_bare_soil_oa_pct"] = float(pd.read_csv(t["obia"])["overall_accuracy"].iloc[0])
     site = results / cfg["site"]["name"]
-    row.update(score_heads_both(cfg, site))
+    row.update(score_heads_both(cfg, site, regully))
     return row
 
 
-def score_heads_both(cfg: dict, site: Path) -> dict:
-    """Gully scores with the digitised heads (the rule's map) and with automatic heads (library run)."""
+def score_heads_both(cfg: dict, site: Path, regully: bool = False) -> dict:
+    """Gully scores with the digitised heads (the rule's map) and with automatic heads (library run).
+
+    ``regully``: map the member's dense DSM again with the current gully code and settings for
+    all three head sources (``digitised``, ``automatic``, ``both``; columns ``dig_``, ``auto_``,
+    ``both_``) instead of reading the rule's digitised map: existing members are rescored
+    without rerunning the photogrammetric chain.
+    """
     g = cfg["gully"]
     crs = cfg["site"]["crs"]
     dsm_path = site / "dense/dsm.tif"
@@ -175,6 +183,8 @@ def score_heads_both(cfg: dict, site: Path) -> dict:
     true_xy = np.column_stack([th.geometry.x, th.geometry.y])
     valid = np.isfinite(dem)
     out: dict = {}
+    if regully:
+        return regully_member(g, twin, dem, grid, ref, polys, true_xy, crs)
     # digitised: the pipeline's own products
     gm = site / "gully/gully_map.tif"
     if gm.exists():
@@ -199,6 +209,33 @@ def score_heads_both(cfg: dict, site: Path) -> dict:
     return out
 
 
+def regully_member(g: dict, twin: Path, dem: np.ndarray, grid, ref, polys, true_xy: np.ndarray, crs: str) -> dict:
+    """Scores of ``map_gullies`` with digitised, automatic and both head sources on one member's DSM."""
+    from kitegully.gully.inputs import read_heads
+
+    valid = np.isfinite(dem)
+    hx, hy = read_heads(str(twin / "observed/gully_heads.gpkg"), crs)
+    sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
+    out: dict = {"dsm_sigma_z_at_checkpoints_m": sz}
+    params = GullyParams.from_config(g)
+    xs, ys = grid.cell_centres()
+    for src, key in (("digitised", "dig"), ("automatic", "auto"), ("both", "both")):
+        t0 = time.perf_counter()
+        auto = HeadDetectionParams.from_config(g["automatic_heads"], sz) if src != "digitised" else None
+        x, y = (hx, hy) if src != "automatic" else (np.zeros(0), np.zeros(0))
+        res = map_gullies(dem, grid, x, y, params, workers=1, auto_heads=auto)
+        r, c = np.divmod(res.auto_heads, grid.width)
+        used = np.concatenate([np.column_stack([x, y]), np.column_stack([xs[c], ys[r]])])
+        s = score_gully_run(res.gully, res.extracted_lines, valid, grid, ref, polys, TOLERANCES,
+                            g["validation"]["reference_join_m"], used, true_xy)
+        out.update({f"{key}_{k}": v for k, v in s.items()})
+        out[f"{key}_n_heads"] = len(used)
+        out[f"{key}_mapping_s"] = time.perf_counter() - t0
+        log.info("regully %s: good fit 5 m %.1f %%, FP %.1f %%, IoU %.3f, %d heads", src, s["good_fit_5m_pct"],
+                 s["false_positive_5m_pct"], s.get("iou", float("nan")), len(used))
+    return out
+
+
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
     """Rows plus ``mean`` and ``worst`` rows (worst = max where larger is worse, else min)."""
     num = [c for c in df.columns if c not in NOT_SCORED and pd.api.types.is_numeric_dtype(df[c])]
@@ -214,9 +251,11 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
 MD_COLUMNS = [
     ("member", "twin"), ("gsd_median_m", "GSD (m)"), ("camera_rmse_m", "camera RMSE (m)"), ("camera_max_m", "camera max (m)"),
     ("checkpoint_mean_m", "checkpoint mean (m)"), ("checkpoint_sd_m", "checkpoint SD (m)"), ("dsm_coverage_pct", "DSM coverage (%)"),
-    *[(f"{src}_{cat}_{t:g}m_pct", f"{lab} {short} {t:g} m (%)") for src, lab in (("dig", "digitised"), ("auto", "automatic"))
+    *[(f"{src}_{cat}_{t:g}m_pct", f"{lab} {short} {t:g} m (%)")
+      for src, lab in (("dig", "digitised"), ("auto", "automatic"), ("both", "both"))
       for t in TOLERANCES for cat, short in (("good_fit", "good fit"), ("false_positive", "FP"), ("false_negative", "FN"))],
-    ("dig_iou", "gully IoU (digitised)"), ("auto_iou", "gully IoU (automatic)"),
+    ("dig_iou", "gully IoU (digitised)"), ("auto_iou", "gully IoU (automatic)"), ("both_iou", "gully IoU (both)"),
+    ("auto_n_heads", "automatic heads"),
     ("auto_head_precision", "auto head precision"), ("auto_head_recall", "auto head recall"),
     ("kite_bare_soil_oa_pct", "kite bare-soil OA (%)"),
 ]
@@ -250,10 +289,15 @@ def main() -> None:
     ap.add_argument("--tiny", action="store_true", help="base = the tiny twin, member 'default' only unless --members")
     ap.add_argument("--dry-run", action="store_true", help="snakemake -n per member; nothing is scored")
     ap.add_argument("--collect-only", action="store_true", help="score existing results without running Snakemake")
+    ap.add_argument("--regully", action="store_true",
+                    help="with --collect-only: map each member's existing dense DSM again with the current gully code "
+                         "(digitised, automatic and both heads) instead of reading the rule's gully map")
     ap.add_argument("--results", default="results")
     ap.add_argument("--out", default=None, help="default results/ensemble (results/ensemble_tiny with --tiny)")
     a = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if a.regully and not a.collect_only:
+        raise SystemExit("--regully rescores existing results: use it with --collect-only")
     base = TINY if a.tiny else BASE
     names = a.members.split(",") if a.members else (["default"] if a.tiny else None)
     results = Path(a.results)  # relative to REPO, like the rule outputs
@@ -270,7 +314,7 @@ def main() -> None:
         if a.dry_run:
             continue
         row = {"member": name, "site": cfg["site"]["name"], "seed": cfg["seed"], "base": base.name, "chain_wall_s": wall}
-        row.update(collect(cfg, {k: REPO / v for k, v in t.items()}, REPO / results))
+        row.update(collect(cfg, {k: REPO / v for k, v in t.items()}, REPO / results, a.regully))
         rows.append(row)
         log.info("%s: %s", name, {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()})
     if a.dry_run:
@@ -278,7 +322,10 @@ def main() -> None:
         return
     note = (f"Base site file {base.relative_to(REPO)}; members {', '.join(r['member'] for r in rows)}. "
             "Gully scores: paper protocol (reference lines fed by heads on the DEM), tolerances 2/5/15 m, "
-            "digitised = the rule's map from the twin's digitised heads, automatic = gully.heads: automatic on the same DSM.")
+            + ("all three head sources mapped again on each member's existing dense DSM with the current gully code "
+               "(--regully): digitised = the twin's digitised heads, automatic = gully.heads: automatic, both = digitised "
+               "plus automatic heads beyond the snapping radius." if a.regully else
+               "digitised = the rule's map from the twin's digitised heads, automatic = gully.heads: automatic on the same DSM."))
     write_outputs(pd.DataFrame(rows), out, note)
     log.info("wrote %s and %s", out / "summary.csv", out / "summary.md")
 

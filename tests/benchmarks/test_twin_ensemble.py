@@ -39,3 +39,45 @@ def test_worst_row_takes_the_bad_side_of_each_column():
     assert s.loc["worst", "camera_rmse_m"] == 0.3
     assert s.loc["worst", "checkpoint_mean_m"] == -0.1
     assert s.loc["worst", "dsm_coverage_pct"] == 95.0
+
+
+def test_regully_scores_three_head_sources_on_a_member_dsm(tmp_path):
+    """--regully maps a member's DSM again for digitised, automatic and both heads (constructed member)."""
+    import geopandas as gpd
+    import numpy as np
+    import shapely
+    import yaml
+
+    from kitegully.io.raster import GridSpec
+    from kitegully.io.vectors import write_vector
+
+    crs = "EPSG:32632"
+    cell, n = 0.2, 400
+    grid = GridSpec(500000.0, 4000000.0 + n * cell, cell, n, n, crs)
+    xs, ys = grid.cell_centres()
+    X, Y = np.meshgrid(xs - xs[0], ys - ys[-1])
+    # a 10 % slope draining south into a hollow with a 1 m deep, 2 m wide V channel from y = 60 m down
+    z = 0.1 * Y + 0.05 * np.abs(X - 40.0)
+    z = z - 1.0 * np.clip(1 - np.abs(X - 40.0), 0, None) * np.clip((60.0 - Y) / 0.4, 0, 1)
+    z = (z + np.random.default_rng(0).normal(0, 0.01, z.shape)).astype(np.float32)
+    twin = tmp_path / "twin"
+    line = shapely.LineString([(xs[0] + 40.0, ys[-1] + 60.0), (xs[0] + 40.0, ys[-1])])
+    head = shapely.Point(line.coords[0])
+    write_vector(gpd.GeoDataFrame({"head_id": [1]}, geometry=[shapely.Point(head.x + 1.5, head.y - 1.0)], crs=crs),
+                 twin / "observed/gully_heads.gpkg")
+    rng = np.random.default_rng(1)
+    cx, cy = rng.uniform(5, 30, 50), rng.uniform(5, 75, 50)
+    pd.DataFrame({"id": np.arange(50), "x": xs[0] + cx, "y": ys[-1] + cy,
+                  "z": 0.1 * cy + 0.05 * np.abs(cx - 40.0)}).to_csv(twin / "observed/checkpoints.csv", index=False)
+    ref = gpd.GeoDataFrame({"gully_no": [1]}, geometry=[line], crs=crs)
+    polys = gpd.GeoDataFrame({"gully_id": [1]}, geometry=[line.buffer(1.0)], crs=crs)
+    g = yaml.safe_load((te.BASE).read_text())["gully"]
+    out = te.regully_member(g, twin, z, grid, ref, polys, np.array([[head.x, head.y]]), crs)
+    for key in ("dig", "auto", "both"):
+        assert {f"{key}_good_fit_5m_pct", f"{key}_false_positive_5m_pct", f"{key}_iou", f"{key}_n_heads"} <= set(out)
+    assert out["dig_n_heads"] == 1
+    assert out["dig_good_fit_5m_pct"] > 90
+    assert out["auto_n_heads"] >= 1 and out["auto_good_fit_5m_pct"] > 90
+    # the automatic head of this channel lies within the snapping radius of the digitised one: not added again
+    assert out["both_n_heads"] == 1
+    assert out["dig_iou"] > 0.2

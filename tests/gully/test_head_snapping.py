@@ -94,3 +94,36 @@ def test_trace_smoothing_leaves_the_depth_map_and_water_alone():
     xy = traced_xy(smooth)
     assert np.all(np.abs(xy[:, 1] - yc) <= HALF_FLOOR + CELL)  # smoothing by σ = 0.5 m keeps a 2 m floor
     assert smooth.network.n_paths_to_outlet() == 1
+
+
+def test_plane_snapping_is_not_pulled_downslope_off_a_shallow_incision():
+    # a shallow channel (0.2 m) running across a 10 % slope; a head digitised 3 m upslope of it:
+    # the plain lowest cell within 6 m lies 6 m downslope (0.6 m lower) beyond the channel,
+    # the lowest cell below the local slope plane is in the channel
+    nrow = ncol = 200
+    grid = GridSpec(500000.0, 4000000.0 + nrow * CELL, CELL, ncol, nrow, "EPSG:32632")
+    xs, ys = grid.cell_centres()
+    X, Y = np.meshgrid(xs - xs[0], ys - ys[-1])
+    yc = 20.0
+    z = 0.1 * Y - 0.2 * np.clip(1 - np.abs(Y - yc) / 0.6, 0, None) - 0.01 * X
+    z = z.astype(np.float32)
+    from kitegully.gully.depth import depth_map
+    smoothed, depth = depth_map(z, CELL, 6.0)
+    hx, hy = np.array([xs[100]]), np.array([ys[-1] + yc + 3.0])
+    idx_low, _ = snap_heads(z, grid, hx, hy, 6.0, "lowest")
+    idx_plane, _ = snap_heads(z, grid, hx, hy, 6.0, "plane", smoothed=smoothed)
+    y_of = lambda i: ys[i // ncol] - ys[-1]  # noqa: E731
+    assert abs(y_of(idx_plane[0]) - yc) <= 0.6
+    assert y_of(idx_low[0]) < yc - 2.0
+    with pytest.raises(ValueError, match="needs the smoothed DEM"):
+        snap_heads(z, grid, hx, hy, 6.0, "plane")
+
+
+def test_both_keeps_only_automatic_heads_beyond_the_snapping_radius():
+    from kitegully.gully.pipeline import new_heads
+
+    grid = GridSpec(0.0, 20.0, 1.0, 20, 20, "EPSG:32632")
+    auto = np.array([5 * 20 + 5, 5 * 20 + 15, 15 * 20 + 10])  # cell centres (5.5, 14.5), (15.5, 14.5), (10.5, 4.5)
+    kept = new_heads(auto, grid, np.array([7.0]), np.array([14.0]), radius_m=6.0)
+    assert kept.tolist() == [5 * 20 + 15, 15 * 20 + 10]
+    assert new_heads(auto, grid, np.zeros(0), np.zeros(0), 6.0).tolist() == auto.tolist()

@@ -98,3 +98,61 @@ def test_dsm_noise_from_checkpoints_feeds_a_null_sigma():
     assert p.dsm_sigma_z_m == pytest.approx(sz)
     with pytest.raises(InputError, match="dsm_sigma_z_m: null needs checkpoints"):
         HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None))
+
+
+def test_no_head_at_the_foot_of_a_hedgerow_on_a_dsm():
+    # a hedgerow (3 m wide, 2 m high) across the 10 % slope, ending 10 m from the DEM edges: a
+    # Gaussian of sigma 2 m spreads it, so the ground at its foot looks incised; the ground surface does not
+    grid = _grid(300)
+    X, Y = np.meshgrid(*grid.cell_centres())
+    z = 0.1 * Y + np.random.default_rng(4).normal(0, 0.01, X.shape)
+    hedge = 2.0 * np.clip(1 - np.abs(Y - 30.0) / 1.5, 0, None) ** 0.3 * ((X > 10) & (X < 50))
+    assert len(_detect((z + hedge).astype(np.float32), grid)[0]) == 0
+    # the channel of the valley test is still found with a hedge along the slope 20 m from it
+    zv, gv = _valley()
+    Xv, _ = np.meshgrid(*gv.cell_centres())
+    heads, _ = _detect((zv + 2.0 * np.clip(1 - np.abs(Xv - 20.0) / 1.5, 0, None) ** 0.3).astype(np.float32), gv)
+    assert len(heads) >= 1 and np.hypot(heads[:, 0] - 40.0, heads[:, 1] - 60.0).min() < 2.0
+    assert np.all(np.abs(heads[:, 0] - 40.0) < 3.0)
+
+
+def test_ground_surface_removes_a_shrub_and_keeps_a_sloping_plane_and_a_valley():
+    from kitegully.gully.heads import ground_surface
+
+    grid = _grid(300)
+    X, Y = np.meshgrid(*grid.cell_centres())
+    ground = 0.1 * Y + 0.02 * X - 0.5 * np.clip(1 - np.abs(X - 40.0) / 1.0, 0, None)
+    shrub = 1.5 * (np.hypot(X - 20.0, Y - 30.0) < 1.5)
+    z = (ground + shrub).astype(np.float32)
+    z[:5, :5] = np.nan
+    g = ground_surface(z, CELL, 2.0, 0.0)
+    assert np.all(np.isnan(g[:5, :5]))
+    inner = (slice(60, 240), slice(60, 240))
+    err = np.abs(g - ground)[inner]
+    assert np.nanmax(err) < 0.12  # the shrub is gone; the valley and the slope stay (smoothing of Z_L aside)
+    assert np.nanmax(g[inner][np.hypot(X - 20.0, Y - 30.0)[inner] < 1.5] - ground[inner][np.hypot(X - 20.0, Y - 30.0)[inner] < 1.5]) < 0.12
+
+
+def test_surface_roughness_is_the_spread_of_the_ungullied_surface():
+    from kitegully.gully.heads import surface_roughness
+
+    rng = np.random.default_rng(5)
+    relief = rng.normal(0, 0.07, 100_000)
+    relief[:3000] = 1.0  # 3 % of the cells in gullies do not move it
+    assert surface_roughness(relief) == pytest.approx(0.07, rel=0.05)
+    assert surface_roughness(np.array([np.nan])) == 0.0
+
+
+def test_rough_surface_raises_the_incision_threshold():
+    # furrow-like micro-relief of 0.1 m SD at 1 m: with DSM noise 0.01 m alone the threshold would be 0.03 m
+    z, grid = _valley(noise=0.0)
+    rng = np.random.default_rng(6)
+    import scipy.ndimage as ndi
+
+    rough = ndi.gaussian_filter(rng.standard_normal(z.shape), 1.0 / CELL)
+    z = (z + 0.1 * rough / rough.std()).astype(np.float32)
+    filled, _ = priority_flood_fill(z, 0.0)
+    dirs, _, _ = flow_directions(filled)
+    _, stats = detect_heads(z, filled, dirs, grid, HeadDetectionParams(**dict(P.__dict__, dsm_sigma_z_m=0.01)))
+    assert stats["relief_threshold_m"] == pytest.approx(3 * stats["surface_roughness_m"])
+    assert stats["surface_roughness_m"] > 0.03

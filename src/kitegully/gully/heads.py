@@ -7,9 +7,15 @@ heads on Mediterranean cropland) and where the surface is concave across the flo
 (Passalacqua et al. 2010 use curvature after smoothing; Clubb et al. 2014 the upstream end
 of the concave, channelised reach). Here:
 
-1. Concavity: a depth map at the scale of a gully head (``D_h = G_σh ∗ Z − Z``, the
+1. Concavity: a depth map at the scale of a gully head (``D_h = G_σh ∗ Z₀ − Z``, Z₀ the
+   ground surface, the
    Gaussian depth of Fig. 3 a-d with a small σ, which is −σ²/2·∇²Z for smooth relief:
-   a plan/profile curvature) deeper than ``k·σ_z`` (the DSM noise) marks incised cells.
+   a plan/profile curvature) deeper than ``k·max(σ_z, ρ)`` marks incised cells, with σ_z
+   the DSM noise at the checkpoints and ρ the surface's own head-scale roughness (the
+   robust spread of that depth map over the site, :func:`surface_roughness`: tillage
+   furrows and crop rows of a photogrammetric DSM are not gullies). The smoothed surface is
+   that of the DEM without raised objects (:func:`ground_surface`): on a DSM the ground at
+   the foot of hedgerows and shrub rows otherwise looks incised at head scale.
 2. Flow: D8 directions on the filled DEM, contributing area A (m²), slope S along the
    flow measured over the DSM's resolution.
 3. Channel cells: incised cells with ``S ≥ a·A_ha^-b``.
@@ -26,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
+import scipy.ndimage as ndi
 from numba import njit
 
 from kitegully import InputError
@@ -50,8 +57,9 @@ class HeadDetectionParams:
         site (≤ 1.5 m wide), so the depth of a head is resolved while field-scale
         relief (≥ 10 m) is smoothed away.
     relief_k : float
-        Incised where the head-scale depth ≥ ``relief_k``·``dsm_sigma_z_m``. [I] 3, as
-        the operator's visibility rule (a 3σ step).
+        Incised where the head-scale depth ≥ ``relief_k``·max(``dsm_sigma_z_m``, surface
+        roughness) (:func:`surface_roughness`). [I] 3, as the operator's visibility rule
+        (a 3σ step).
     dsm_sigma_z_m : float
         Vertical noise of the DSM (m). [I] ``null`` in the config = the SD of DSM minus
         the RTK checkpoints (:func:`dsm_noise_at_checkpoints`): the DSM's own noise where
@@ -210,16 +218,24 @@ def detect_heads(
 
     Notes
     -----
-    O(n log n) for the two FFT smoothings, O(n) for accumulation and candidate search,
+    O(n log n) for the FFT smoothings, O(n) for accumulation and candidate search,
     O(L) for the tracing. Memory: a few float32/float64 rasters.
     """
     cell = grid.cell
     valid = np.isfinite(z)
-    zs = gaussian_smooth_fft(z, params.scale_m / cell, workers=workers)
-    incised = np.zeros(z.shape, bool)
-    with np.errstate(invalid="ignore"):
-        incised[valid] = (zs - z)[valid] >= params.relief_k * params.dsm_sigma_z_m
+    # roughness: the DSM's own head-scale micro-relief (furrows, crop rows), as the operator sees it
+    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell, workers=workers) - z)[valid])
+    ground = ground_surface(z, cell, params.scale_m, params.slope_window_m, workers)
+    zs = gaussian_smooth_fft(ground, params.scale_m / cell, workers=workers)
+    del ground
+    relief = np.where(valid, zs - z, np.nan)
     del zs
+    threshold = params.relief_k * max(params.dsm_sigma_z_m, rough)
+    incised = np.zeros(z.shape, bool)
+    incised[valid] = relief[valid] >= threshold
+    del relief
+    log.info("automatic heads: incised where the head-scale depth >= %.3g m = %.3g x max(DSM noise %.3g m, "
+             "surface roughness %.3g m)", threshold, params.relief_k, params.dsm_sigma_z_m, rough)
     zsl = gaussian_smooth_fft(z, params.slope_window_m / cell, workers=workers)
     gy, gx = np.gradient(zsl, cell)
     slope = np.hypot(gx, gy)
@@ -232,7 +248,8 @@ def detect_heads(
     n_steps = max(1, int(round(params.min_channel_length_m / cell)))
     cand = np.flatnonzero(_heads(channel, recv, n_steps, 0.5))
     if cand.size == 0:
-        return cand, {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": 0}
+        return cand, {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": 0,
+                      "relief_threshold_m": threshold, "surface_roughness_m": rough}
     fz = filled.ravel()[cand]
     cand = cand[np.argsort(-fz, kind="stable")]
     cells, _down, starts, ends = trace_paths(filled, cand, dirs)
@@ -240,10 +257,60 @@ def detect_heads(
     joined_short = ((ends == END_MERGE) & (lengths < params.min_channel_length_m)) | (ends == END_ON_NETWORK)
     heads = cand[~joined_short]
     stats = {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": int(cand.size),
-             "heads": int(heads.size)}
+             "heads": int(heads.size), "relief_threshold_m": threshold, "surface_roughness_m": rough}
     log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
              stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
     return heads, stats
+
+
+def ground_surface(z: np.ndarray, cell_m: float, scale_m: float, noise_window_m: float, workers: int = 1) -> np.ndarray:
+    """The DEM without the objects that stand on the ground, as reference of the head-scale depth map.
+
+    ``Z_L + open(Z_n − Z_L)``: ``Z_n`` the DEM smoothed at ``noise_window_m``, ``Z_L`` the DEM
+    smoothed at ``4·scale_m`` (the local slope and field-scale relief), ``open`` a grey
+    opening (erosion then dilation) with a square of side ``4·scale_m + 6·noise_window_m``.
+    NaN where ``z`` is NaN.
+
+    [I] On a photogrammetric DSM, shrubs, hedgerows and tree rows stand above the ground; a
+    Gaussian of σ = ``scale_m`` spreads them over ±2σ, so the ground at their foot looks
+    incised (most automatic heads on the default twin's DSM sat at the upslope foot of
+    hedgerows). An opening removes raised objects narrower than its element and keeps
+    valleys (gullies are concave: untouched) and level planes; made on the relief about the
+    local slope (``Z_n − Z_L``), its flat element lies along the slope, as the ``plane``
+    head snapping does, so that on a sloping field it does not keep the flanks of an object.
+    The element spans the Gaussian's ±2σ support plus the ±3σ widening of the noise smoothing;
+    the noise smoothing (σ = the matching window) keeps the opening from sinking the
+    surface to the noise's lower envelope. O(n log n) for two FFT smoothings, O(n·k) for
+    the separable min/max filters (k cells across the element).
+    """
+    valid = np.isfinite(z)
+    zn = gaussian_smooth_fft(z, noise_window_m / cell_m, workers=workers) if noise_window_m > 0 else np.asarray(z)
+    zl = gaussian_smooth_fft(z, 4.0 * scale_m / cell_m, workers=workers)
+    k = 2 * max(1, int(round((2.0 * scale_m + 3.0 * noise_window_m) / cell_m))) + 1
+    r = np.where(valid, zn - zl, np.inf).astype(np.float32)
+    er = ndi.minimum_filter(r, size=k, mode="nearest")
+    er[~valid | ~np.isfinite(er)] = -np.inf
+    op = ndi.maximum_filter(er, size=k, mode="nearest")
+    out = (zl + op).astype(np.float32)
+    out[~valid] = np.nan
+    return out
+
+
+def surface_roughness(relief: np.ndarray) -> float:
+    """Robust spread (NMAD, m) of the head-scale depth map over the DSM: the surface's own micro-relief.
+
+    [I] The checkpoints measure the DSM's noise on bare, smooth ground; a photogrammetric
+    surface of fields also carries tillage furrows, crop rows and the gaps between plants,
+    which show in the head-scale depth map as incisions of up to a few decimetres. Gullies
+    cover a few per cent of a site, so the median absolute deviation of that map over all
+    cells (× 1.4826, the SD of a normal background) is the spread of the ungullied surface;
+    an incision must stand out from that as well as from the noise. O(n).
+    """
+    v = np.asarray(relief, dtype=np.float64).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
 
 
 def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points) -> float:

@@ -22,7 +22,7 @@ from kitegully.terrain.flow import END_OUTLET, END_PIT, trace_paths
 
 
 #: How a digitised head is moved onto the gully (``gully.head_snap``).
-HEAD_SNAPS = ("lowest", "deepest", "patch")
+HEAD_SNAPS = ("lowest", "deepest", "patch", "plane")
 
 
 def snap_heads(
@@ -34,6 +34,7 @@ def snap_heads(
     method: str = "lowest",
     depth: np.ndarray | None = None,
     patches: np.ndarray | None = None,
+    smoothed: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Snap digitised heads onto a valid cell whose centre lies within ``radius_m``.
 
@@ -51,9 +52,18 @@ def snap_heads(
         ``lowest``: the lowest cell of ``z``; ``deepest``: the cell of greatest ``depth``
         (the incision below the smoothed surface, Fig. 3 a-d); ``patch``: the nearest cell
         of a kept depth patch (``patches`` > 0, Fig. 3 e-f), or the lowest cell when no
-        patch is within reach.
+        patch is within reach; ``plane``: the lowest cell below the local slope plane,
+        i.e. the lowest of ``z − g·(p − p_head)`` with ``g`` the gradient of ``smoothed`` at
+        the head. [I] ``plane`` is ``lowest`` without its downslope bias: on a field of slope
+        S the plain lowest cell within r lies up to r·S below the head (0.6 m at r 6 m and
+        S 10 %), more than the relief of a shallow head (0.15–0.5 m), so a head digitised a
+        few metres beside its incision lands downslope beside it; below the local plane only
+        an incision is low, and vegetation (above the plane) never is, unlike ``deepest``.
     depth, patches : ndarray (H, W), optional
         Depth map (m) for ``deepest``, patch labels for ``patch``.
+    smoothed : ndarray (H, W), optional
+        The Gaussian-smoothed DEM of the depth map (Fig. 3 a-b), for ``plane``: its
+        gradient at the head is the local slope plane (field-scale, without the incision).
 
     Returns
     -------
@@ -68,8 +78,9 @@ def snap_heads(
     """
     if method not in HEAD_SNAPS:
         raise ValueError(f"head snapping must be one of {HEAD_SNAPS}, got {method!r}")
-    if method == "deepest" and depth is None or method == "patch" and patches is None:
-        raise ValueError(f"head snapping {method!r} needs the {'depth map' if method == 'deepest' else 'patch labels'}")
+    needs = {"deepest": ("depth map", depth), "patch": ("patch labels", patches), "plane": ("smoothed DEM", smoothed)}
+    if method in needs and needs[method][1] is None:
+        raise ValueError(f"head snapping {method!r} needs the {needs[method][0]}")
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     row, col = grid.rowcol(x, y)
@@ -99,6 +110,9 @@ def snap_heads(
         on[ok] = np.asarray(patches)[rr[ok], cc[ok]] > 0
         on &= valid
         cost = np.where(on.any(axis=1)[:, None], np.where(on, dist, np.inf), zz)
+    elif method == "plane":
+        gr, gc = _plane_gradient(np.asarray(smoothed), r0, c0)
+        cost = zz - gr[:, None] * dr[None, :] - gc[:, None] * dc[None, :]
     else:
         cost = zz
     best = np.argmin(cost, axis=1)
@@ -106,6 +120,26 @@ def snap_heads(
     inside = valid[k, best]
     index = np.where(inside, rr[k, best] * grid.width + cc[k, best], -1)
     return index.astype(np.int64), inside
+
+
+def _plane_gradient(smoothed: np.ndarray, r0: np.ndarray, c0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradient (m per cell along rows and columns) of ``smoothed`` at cells (r0, c0).
+
+    Central differences, one-sided at the edge; 0 where a neighbour is off the grid or NaN
+    (the plain lowest cell then decides). O(k) for k heads.
+    """
+    h, w = smoothed.shape
+    out = []
+    for axis, n in ((0, h), (1, w)):
+        lo = np.clip(np.where(axis == 0, r0, c0) - 1, 0, n - 1)
+        hi = np.clip(np.where(axis == 0, r0, c0) + 1, 0, n - 1)
+        ri = np.clip(r0, 0, h - 1)
+        ci = np.clip(c0, 0, w - 1)
+        a = smoothed[lo, ci] if axis == 0 else smoothed[ri, lo]
+        b = smoothed[hi, ci] if axis == 0 else smoothed[ri, hi]
+        g = (b - a) / np.maximum(hi - lo, 1)
+        out.append(np.where(np.isfinite(g), g, 0.0))
+    return out[0], out[1]
 
 
 @njit(cache=True)

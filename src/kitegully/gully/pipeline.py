@@ -10,6 +10,7 @@ from typing import Any, Mapping
 import geopandas as gpd
 import numpy as np
 import pandas as pd
+from scipy.spatial import cKDTree
 
 from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import HeadDetectionParams, detect_heads
@@ -59,8 +60,9 @@ class GullyParams:
         interpolates every interior hole.
     head_snap : str
         Where a digitised head is moved to (:data:`kitegully.gully.network.HEAD_SNAPS`):
-        ``lowest`` cell, ``deepest`` cell of the depth map, or nearest cell of a kept
-        depth ``patch``, within ``head_snap_radius_m``.
+        ``lowest`` cell, ``deepest`` cell of the depth map, nearest cell of a kept
+        depth ``patch``, or lowest cell below the local slope ``plane`` (of the smoothed
+        DEM), within ``head_snap_radius_m`` (see :func:`kitegully.gully.network.snap_heads`).
     head_snap_radius_m : float
         Search radius of the head snapping (m), e.g. 3× the digitising SD of the heads (P(r ≤ 3σ) = 1 − e^(−4.5) ≈ 99 % for a 2-D Gaussian error).
     trace_smoothing_m : float
@@ -114,7 +116,8 @@ class GullyResult:
     n_raised: int
     n_flat_routed: int
     timings_s: dict[str, float] = field(default_factory=dict)
-    #: Flat indices of the automatically detected heads (empty unless ``auto_heads`` was given).
+    #: Flat indices of the automatically detected heads that were traced (empty unless ``auto_heads``
+    #: was given; with given heads, only those farther than the snapping radius from all of them).
     auto_heads: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
@@ -184,7 +187,8 @@ def map_gullies(
     t0 = time.perf_counter()
     z_heads, zi, n_holes = tracing_surface(dem, grid, params, workers)
     inside_idx, inside = snap_heads(
-        z_heads, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels
+        z_heads, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels,
+        smoothed=smoothed,
     )
     resolve = params.flat_routing == "resolve"
     if filled is None:
@@ -213,6 +217,7 @@ def map_gullies(
         t0 = time.perf_counter()
         auto_idx, _ = detect_heads(z_heads, filled, dirs if dirs is not None else d8_directions(filled), grid, auto_heads,
                                    workers)
+        auto_idx = new_heads(auto_idx, grid, heads_x, heads_y, params.head_snap_radius_m)
         inside_idx = np.concatenate([inside_idx, auto_idx])
         t["auto_heads_s"] = time.perf_counter() - t0
     del z_heads
@@ -287,6 +292,28 @@ def tracing_surface(
                                       workers=workers)
         z_trace[holes] = np.nan
     return zi, z_trace, n_holes
+
+
+def new_heads(auto_idx: np.ndarray, grid: GridSpec, heads_x: np.ndarray, heads_y: np.ndarray,
+              radius_m: float) -> np.ndarray:
+    """Automatic heads (flat cell indices) farther than ``radius_m`` from every given head.
+
+    ``gully.heads: both`` is the operator accepting a detector's suggestions: [I] an
+    automatic head within the snapping radius of a digitised head is the incision that
+    digitised head snaps to (the same head, found twice), so only those beyond it are new
+    heads the operator did not digitise. With no given heads every automatic head is kept.
+    O((k + m) log m) for k automatic and m given heads.
+    """
+    auto_idx = np.asarray(auto_idx, dtype=np.int64)
+    if auto_idx.size == 0 or np.size(heads_x) == 0:
+        return auto_idx
+    xs, ys = grid.cell_centres()
+    r, c = np.divmod(auto_idx, grid.width)
+    d, _ = cKDTree(np.column_stack([heads_x, heads_y])).query(np.column_stack([xs[c], ys[r]]), k=1)
+    keep = d > radius_m
+    log.info("automatic heads: %d of %d farther than %.3g m from every digitised head (kept)", int(keep.sum()),
+             auto_idx.size, radius_m)
+    return auto_idx[keep]
 
 
 def map_raster(mask: np.ndarray, valid: np.ndarray) -> np.ndarray:
