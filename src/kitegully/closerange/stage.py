@@ -58,9 +58,11 @@ class CloseRangeParams:
 
     Attributes
     ----------
-    default_scenes : tuple of str
-        Scenes built by the default run (``make closerange`` sets all). [I] one scene keeps
-        the default run inside its 20 min budget.
+    scenes : tuple of str or "all"
+        Scenes built by the run (``make closerange`` sets ``all``). [I] one scene keeps the
+        default run inside its 20 min budget.
+    scenes_without_rule : tuple of str
+        Scenes photographed without the folding rule. [P] scene 6.
     walk : dict
         :class:`kitegully.twin.polewalk.PoleWalk` keys (photos per scene, image size, pole height, jitter).
     spheres : SphereDetection
@@ -93,7 +95,8 @@ class CloseRangeParams:
         Colour test of the folding rule's yellow in the orthophoto (HSV).
     """
 
-    default_scenes: tuple[str, ...] = ("scene_10",)
+    scenes: tuple[str, ...] | str = ("scene_10",)
+    scenes_without_rule: tuple[str, ...] = ("scene_06",)
     walk: Mapping[str, Any] = field(default_factory=dict)
     spheres: SphereDetection = SphereDetection()
     sfm_max_num_features: int = 4096
@@ -114,7 +117,9 @@ class CloseRangeParams:
         config_section(cfg, "closerange", (), optional=cls.__dataclass_fields__)
         v: dict[str, Any] = {}
         for k, x in cfg.items():
-            if k == "default_scenes":
+            if k == "scenes":
+                v[k] = "all" if x == "all" else tuple(str(s) for s in x)
+            elif k == "scenes_without_rule":
                 v[k] = tuple(str(s) for s in x)
             elif k == "walk":
                 v[k] = dict(x)
@@ -339,3 +344,81 @@ def photogrammetric_orthophoto(
              scene, record["images_aligned"], record["images_used"], record["tie_points"], record["dense_points"],
              record["holes_pct"], "n/a" if rule is None else f"{rule['scale_error_pct']:.2f} %", t3 - t0)
     return record
+
+
+# --------------------------------------------------------------------------- closerange_summary
+@dataclass
+class CloseRangeTables:
+    """Products of :func:`closerange_tables`."""
+
+    table1: pd.DataFrame
+    accuracy: pd.DataFrame
+
+
+def closerange_tables(
+    records: Sequence[dict], confusion_sfm: Sequence[dict], confusion_direct: Sequence[dict],
+    same_cells: Sequence[tuple[str, str, str]] = (),
+) -> CloseRangeTables:
+    """001 Table 1 per scene next to the paper's, and OBIA accuracy on the photogrammetric vs the direct orthophotos.
+
+    ``records`` are the :func:`photogrammetric_orthophoto` records, the confusions the
+    obia stage's ``confusion.json`` records of the same scenes (photogrammetric and direct
+    renders).  Each table ends with an ``all`` row (means for Table 1, summed confusion
+    matrices for the accuracy).  ``same_cells`` gives per scene the paths of the direct and
+    the photogrammetric classification and the truth mask: the direct classification is then
+    also scored on the cells the photogrammetric one covers (``oa_direct_same_cells_pct``),
+    which separates the effect of the crop from that of the SfM defects.
+    """
+    from kitegully.io.raster import read_raster
+    from kitegully.obia.accuracy import accuracies, confusion_matrix
+
+    t1 = pd.DataFrame([{
+        "scene": r["scene"], "images_used": r["images_used"], "images_aligned": r["images_aligned"],
+        "marker_error_m": r["marker_error_m"], "spheres_measured": r["spheres_measured"],
+        "scale_error_pct": np.nan if r["scale_error_pct"] is None else r["scale_error_pct"],
+        "leg_a_m": np.nan if r["rule"] is None else r["rule"]["leg_a_m"],
+        "leg_b_m": np.nan if r["rule"] is None else r["rule"]["leg_b_m"],
+        "tie_points": r["tie_points"], "dense_points": r["dense_points"], "holes_pct": r["holes_pct"],
+        "time_s": r["timings_s"]["total"],
+    } for r in records])
+    t1 = t1.merge(PAPER_TABLE1, on="scene", how="left")
+    mean = {c: t1[c].mean() for c in t1.columns if c != "scene"}
+    t1.loc[len(t1)] = {"scene": "all", **mean}
+
+    def acc_row(scene, conf):
+        a = accuracies(np.asarray(conf))
+        return {"oa": 100 * a["overall"], "ua_eroded": 100 * a["users"][1], "pa_eroded": 100 * a["producers"][1]}
+
+    direct = {c["scene"]: c for c in confusion_direct}
+    same = {}
+    for (direct_path, sfm_path, truth_path), c in zip(same_cells, confusion_sfm):
+        dc, _ = read_raster(direct_path)
+        sc, _ = read_raster(sfm_path)
+        tr, _ = read_raster(truth_path)
+        same[c["scene"]] = confusion_matrix(dc, tr, valid=(sc != 255) & (dc != 255))
+    rows, tot_s, tot_d, tot_x = [], np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2))
+    for c in confusion_sfm:
+        d = direct[c["scene"]]
+        tot_s += np.asarray(c["confusion"])
+        tot_d += np.asarray(d["confusion"])
+        x_ = acc_row(c["scene"], same[c["scene"]])["oa"] if c["scene"] in same else np.nan
+        if c["scene"] in same:
+            tot_x += same[c["scene"]]
+        s_, d_ = acc_row(c["scene"], c["confusion"]), acc_row(c["scene"], d["confusion"])
+        rows.append({"scene": c["scene"], "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"], "oa_direct_same_cells_pct": x_,
+                     "oa_paper_pct": PAPER_OA.get(c["scene"]),
+                     "ua_eroded_sfm_pct": s_["ua_eroded"], "pa_eroded_sfm_pct": s_["pa_eroded"],
+                     "ua_eroded_direct_pct": d_["ua_eroded"], "pa_eroded_direct_pct": d_["pa_eroded"],
+                     "area_sfm_m2": c["area_auto_m2"], "area_ref_in_crop_m2": c["area_ref_m2"],
+                     "area_direct_m2": d["area_auto_m2"], "area_ref_full_m2": d["area_ref_m2"]})
+    if rows:
+        s_, d_ = acc_row("all", tot_s), acc_row("all", tot_d)
+        rows.append({"scene": "all", "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"],
+                     "oa_direct_same_cells_pct": acc_row("all", tot_x)["oa"] if same else np.nan, "oa_paper_pct": PAPER_OA["all"],
+                     "ua_eroded_sfm_pct": s_["ua_eroded"], "pa_eroded_sfm_pct": s_["pa_eroded"],
+                     "ua_eroded_direct_pct": d_["ua_eroded"], "pa_eroded_direct_pct": d_["pa_eroded"]})
+    acc = pd.DataFrame(rows)
+    if len(acc):
+        log.info("OBIA over %d scenes: OA %.1f %% on the photogrammetric orthophotos, %.1f %% on the direct renders (paper 94.3 %%)",
+                 len(rows) - 1, acc["oa_sfm_pct"].iloc[-1], acc["oa_direct_pct"].iloc[-1])
+    return CloseRangeTables(t1, acc)
