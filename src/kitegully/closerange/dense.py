@@ -48,6 +48,9 @@ class PairMatching:
         Disconnected disparity blobs smaller than this are removed.
     disparity_margin_px : float
         Added to both ends of the disparity range seen in the sparse points.
+    min_texture_dn : float
+        Pixels whose grey values vary less than this (SD over the block, DN) are not
+        matched. [I] 2 DN, twice the photos' read noise: sky and blown-out soil.
     max_tie_disagreement_px : float
         A pair whose disparities disagree with the SfM tie points seen in both photos by
         more than this (median, px at the matching scale) is left out: its rectification or
@@ -70,6 +73,7 @@ class PairMatching:
     speckle_window_px: int = 100
     disparity_margin_px: float = 16.0
     max_tie_disagreement_px: float = 1.0
+    min_texture_dn: float = 2.0
     min_baseline_angle_deg: float = 60.0
     max_convergence_deg: float = 25.0
     max_partner_steps: int = 3
@@ -178,6 +182,12 @@ def match_pair(
     d = sgbm.compute(ga, gb).astype(np.float32) / 16.0
     ok = d > min_d - 0.5  # SGBM marks no match with min_d - 1 (the range may be negative: b left of a)
     ok &= valid_a
+    # no texture, no match: SGM's smoothness term carries a disparity across sky and uniform
+    # areas, which triangulates to a surface that is not there
+    gf = ga.astype(np.float32)
+    k = (bs, bs)
+    local_sd = np.sqrt(np.maximum(cv2.blur(gf * gf, k) - cv2.blur(gf, k) ** 2, 0))
+    ok &= local_sd >= p.min_texture_dn
     # check against the bundle: the SfM tie points seen in both photos must get their disparity
     iu, iv = np.rint(ua[inside]).astype(int), np.rint(va[inside]).astype(int)
     iu, iv = np.clip(iu, 0, w - 1), np.clip(iv, 0, h - 1)
