@@ -1,8 +1,9 @@
 """The folding rule's two 1 m legs measured in the photogrammetric model (001 sect. 2.2, scale check).
 
 The rule (yellow, 2 cm wide, black decimetre marks) is found in the orthophoto by its
-colour: saturated yellow (hue 35–75°, saturation >= ``min_saturation``, value >= ``min_value``),
-which neither grass (green, hue > 75°) nor soil and dry grass (saturation < ~0.5) reach.
+colour: yellow (hue 35–75°, value >= ``min_value``) and more saturated than its
+surroundings by ``min_saturation`` (a 2 cm rule in 2 cm cells is mixed with the grass
+beside it), which neither green grass (hue > 75°) nor pale soil and dry grass reach.
 The two legs are two straight lines through those cells (RANSAC, then least squares on the
 inliers); the corner is their intersection and each leg ends at its farthest inlier
 (+ half a cell: the cell centre lies half a cell inside the painted end).  The 3-D length
@@ -55,7 +56,7 @@ def _line_ransac(P: np.ndarray, tol: float, rng: np.random.Generator, iterations
 
 
 def measure_folding_rule(
-    ortho: np.ndarray, dem: np.ndarray, grid: GridSpec, rng: np.random.Generator, min_saturation: float = 0.6,
+    ortho: np.ndarray, dem: np.ndarray, grid: GridSpec, rng: np.random.Generator, min_saturation: float = 0.07,
     min_value: float = 0.45, leg_length_m: float = 1.0,
 ) -> dict | None:
     """Lengths of the two legs of the folding rule in an orthophoto + DEM; None if not found.
@@ -64,7 +65,8 @@ def measure_folding_rule(
     ----------
     ortho : (3, rows, cols) uint8; dem : (rows, cols) float (NaN = no data); grid : their grid.
     rng : random stream for RANSAC.
-    min_saturation, min_value : colour test of the rule's yellow.
+    min_saturation : saturation above the 9-cell median of the surroundings.
+    min_value : HSV value of the rule's yellow.
     leg_length_m : nominal leg length ([P] 1 m).
 
     Returns
@@ -74,7 +76,10 @@ def measure_folding_rule(
     nominal plan length are found.
     """
     h, s, v = _hsv(ortho[:3])
-    yellow = (h >= 35) & (h <= 75) & (s >= min_saturation) & (v >= min_value) & np.isfinite(dem)
+    # saturated relative to the surroundings: a 2 cm rule in 2 cm cells is mixed with grass
+    # (saturation ~0.45 where the pure paint has 0.78), dry grass is yellowish but pale
+    s_bg = ndimage.median_filter(s, size=9)
+    yellow = (h >= 35) & (h <= 75) & (s - s_bg >= min_saturation) & (v >= min_value) & np.isfinite(dem)
     # the black decimetre marks split the strip: close them, keep the largest piece
     closed = ndimage.binary_closing(yellow, structure=np.ones((3, 3)), iterations=2) & ndimage.binary_dilation(yellow, iterations=2)
     lab, n = ndimage.label(closed, structure=np.ones((3, 3)))
