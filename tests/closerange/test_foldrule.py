@@ -49,3 +49,9 @@ def test_no_rule_gives_none():
     ortho, dem, grid = _scene()
     ortho[:] = np.array([60, 110, 40], np.uint8)[:, None, None]
     assert measure_folding_rule(ortho, dem, grid, np.random.default_rng(0)) is None
+
+
+def test_two_streaks_at_a_shallow_angle_are_not_the_rule():
+    ortho, dem, grid = _scene(slope_deg=0.0)
+    r = measure_folding_rule(ortho, dem, grid, np.random.default_rng(0), max_plan_angle_deg=95.0)
+    assert r is None

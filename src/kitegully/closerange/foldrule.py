@@ -57,7 +57,7 @@ def _line_ransac(P: np.ndarray, tol: float, rng: np.random.Generator, iterations
 
 def measure_folding_rule(
     ortho: np.ndarray, dem: np.ndarray, grid: GridSpec, rng: np.random.Generator, min_saturation: float = 0.07,
-    min_value: float = 0.45, leg_length_m: float = 1.0,
+    min_value: float = 0.45, leg_length_m: float = 1.0, max_plan_angle_deg: float = 60.0,
 ) -> dict | None:
     """Lengths of the two legs of the folding rule in an orthophoto + DEM; None if not found.
 
@@ -68,12 +68,13 @@ def measure_folding_rule(
     min_saturation : saturation above the 9-cell median of the surroundings.
     min_value : HSV value of the rule's yellow.
     leg_length_m : nominal leg length ([P] 1 m).
+    max_plan_angle_deg : two lines meeting at less than this angle in plan are not the rule.
 
     Returns
     -------
     dict with ``leg_a_m, leg_b_m, scale_error_pct, corner_xy, end_a_xy, end_b_xy, angle_deg``
     (angle between the legs in plan), or None when fewer than 2 legs of at least half the
-    nominal plan length are found.
+    nominal length are found or they meet at less than ``max_plan_angle_deg``.
     """
     h, s, v = _hsv(ortho[:3])
     # saturated relative to the surroundings: a 2 cm rule in 2 cm cells is mixed with grass
@@ -135,6 +136,10 @@ def measure_folding_rule(
     if min(legs) < 0.5 * leg_length_m:
         return None
     cosang = abs(float(d1 @ d2))
+    if np.degrees(np.arccos(min(cosang, 1.0))) < max_plan_angle_deg:
+        # orthogonal legs stay within ~25° of a right angle in plan on slopes up to 35°;
+        # two straight yellow streaks at a shallower angle are not the rule
+        return None
     return {
         "leg_a_m": legs[0], "leg_b_m": legs[1],
         "scale_error_pct": 100.0 * max(abs(l - leg_length_m) for l in legs) / leg_length_m,
