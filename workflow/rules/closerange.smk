@@ -141,8 +141,9 @@ if "closerange" in config and "obia" in config and IS_TWIN:
             "../scripts/closerange_summary.py"
 
 
-    add_targets(
-        result("obia", "closerange_sfm.csv"),
-        result("obia", "closerange_accuracy.csv"),
-        *expand(_cr("scene_figure.png"), scene=CR_SCENES),
-    )
+    if CR_SCENES:
+        add_targets(
+            result("obia", "closerange_sfm.csv"),
+            result("obia", "closerange_accuracy.csv"),
+            *expand(_cr("scene_figure.png"), scene=CR_SCENES),
+        )
