@@ -15,6 +15,7 @@ STAGES = [
     "gully",
     "polygons",
     "obia",
+    "closerange",
     "change",
     "stereo",
     "lowcost",

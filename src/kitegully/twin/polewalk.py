@@ -219,8 +219,9 @@ def prepare_pole_scene(scene: CloseRangeScene, sphere_radius_m: float, folding_r
     centres = []
     for k in range(1, n + 1):
         blob = lab == k
-        ring = ndimage.binary_dilation(blob, iterations=3) & ~blob
-        ground = float(np.median(dem[ring]))
+        # the generator raised the blob to ground + r + cap (cap = r at the centre): the
+        # ground under the sphere, where the survey put its centre - r, is the top - 2r
+        ground = float(dem[blob].max()) - 2.0 * sphere_radius_m
         dem[blob] = ground
         rr, cc = np.nonzero(blob)
         xs, ys = g.x0 + (cc.mean() + 0.5) * g.cell, g.y0 - (rr.mean() + 0.5) * g.cell

@@ -1,0 +1,56 @@
+"""Sphere centres triangulated from unlabelled detection rays and paired with the survey (issue 20)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kitegully import InputError
+from kitegully.closerange.model import match_markers, triangulate_spheres
+
+
+def _ring_rays(S, n_cams=12, noise_rad=2e-4, seed=0):
+    """Rays from a ring of cameras (radius 6 m, 3 m up) to the spheres, with angular noise, plus one stray ray per camera."""
+    rng = np.random.default_rng(seed)
+    O, D, pid = [], [], []
+    for k in range(n_cams):
+        a = 2 * np.pi * k / n_cams
+        C = np.array([6 * np.cos(a), 6 * np.sin(a), 3.0])
+        for s in S:
+            d = s - C + rng.normal(0, noise_rad * np.linalg.norm(s - C), 3)
+            O.append(C), D.append(d / np.linalg.norm(d)), pid.append(k)
+        stray = rng.normal(0, 1, 3) - np.array([0, 0, 3.0])  # a bright pebble seen once
+        O.append(C), D.append(stray / np.linalg.norm(stray)), pid.append(k)
+    return np.array(O), np.array(D), np.array(pid)
+
+
+S_TRUE = np.array([[2.0, 1.0, 0.1], [-2.5, 0.5, 0.3], [0.5, -3.0, 0.2], [-1.0, 2.5, 0.0]])
+
+
+def test_unlabelled_rays_give_the_four_spheres_and_drop_stray_detections():
+    O, D, pid = _ring_rays(S_TRUE)
+    found = triangulate_spheres(O, D, pid, tolerance=0.01)
+    assert len(found) == 4
+    X = np.array([f[0] for f in found])
+    err = np.min(np.linalg.norm(X[:, None] - S_TRUE[None], axis=2), axis=1)
+    assert err.max() < 0.005  # 0.2 mrad at ~7 m is ~1.4 mm per ray
+    assert all(len(f[1]) == 12 for f in found)
+
+
+def test_model_spheres_are_paired_with_a_shuffled_survey_and_the_similarity_recovered():
+    rng = np.random.default_rng(1)
+    model = S_TRUE / 1.7  # arbitrary SfM scale, rotated and shifted below
+    c, s = np.cos(0.6), np.sin(0.6)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    world = 1.7 * model @ R.T + np.array([545000.0, 4090000.0, 2300.0])
+    order = [2, 0, 3, 1]
+    survey = world[order] + rng.normal(0, 0.01, (4, 3))
+    sim, rows, perm, res = match_markers(model, survey, ["S1", "S2", "S3", "S4"])
+    assert [order[p] for p in perm] == rows  # survey row paired with the right model sphere
+    assert abs(sim.scale - 1.7) < 0.01
+    assert np.linalg.norm(res, axis=1).mean() < 0.03
+
+
+def test_fewer_than_three_spheres_is_one_sentence():
+    with pytest.raises(InputError, match=r"^only 2 sphere\(s\) triangulated in the model and 4 surveyed: at least 3 \(of S1, S2, S3, S4\)"):
+        match_markers(S_TRUE[:2], S_TRUE, ["S1", "S2", "S3", "S4"])
