@@ -29,13 +29,24 @@ from scipy.ndimage import map_coordinates
 from skimage.morphology import thin
 
 from kitegully.io.raster import GridSpec
-from kitegully.polygons.skeleton import longest_path
+from kitegully.polygons.skeleton import branch_paths, longest_path
 from kitegully.polygons.thalweg import resample_line, snakes_smooth
 
 log = logging.getLogger(__name__)
 
 #: Depth reference surfaces (``polygons.morphometry.reference``).
 REFERENCES = ("lower_end", "line", "spill")
+#: Which medial-axis branches carry sections (``polygons.morphometry.branches``).
+BRANCHES = ("all", "longest")
+
+
+def _smooth_path(rr: np.ndarray, cc: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float,
+                 beta: float) -> shapely.LineString | None:
+    xs, ys = grid.xy(r0 + rr, c0 + cc)
+    xy = resample_line(np.column_stack([xs, ys]), smooth_step)
+    if len(xy) < 2:
+        return None
+    return shapely.LineString(snakes_smooth(xy, alpha, beta))
 
 
 def medial_axis(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float, beta: float) -> shapely.LineString | None:
@@ -44,11 +55,29 @@ def medial_axis(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step:
     rr, cc = longest_path(skel)
     if rr.size < 2:
         return None
-    xs, ys = grid.xy(r0 + rr, c0 + cc)
-    xy = resample_line(np.column_stack([xs, ys]), smooth_step)
-    if len(xy) < 2:
-        return None
-    return shapely.LineString(snakes_smooth(xy, alpha, beta))
+    return _smooth_path(rr, cc, grid, r0, c0, smooth_step, alpha, beta)
+
+
+def medial_network(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float, beta: float,
+                   min_extension_m: float) -> list[tuple[shapely.LineString, float]]:
+    """Smoothed branches of the thinned mask's pruned medial network with their trims (m).
+
+    The first branch is the longest path (:func:`medial_axis`); each further one is a
+    tributary reaching at least ``min_extension_m`` beyond its parent's edge, and its first
+    ``trim`` metres (the parent's inscribed radius at the junction) lie inside the parent
+    (:func:`kitegully.polygons.skeleton.branch_paths`).
+    """
+    filled = ndi.binary_fill_holes(mask)
+    skel = thin(filled)
+    radius = ndi.distance_transform_edt(np.pad(filled, 1))[1:-1, 1:-1]
+    out = []
+    for rr, cc, trim in branch_paths(skel, radius, min_extension_m / grid.cell):
+        if rr.size < 2:
+            continue
+        line = _smooth_path(rr, cc, grid, r0, c0, smooth_step, alpha, beta)
+        if line is not None and line.length > 0:
+            out.append((line, trim * grid.cell))
+    return out
 
 
 def _section_piece(poly, px: float, py: float, nx: float, ny: float, half: float):
@@ -87,6 +116,36 @@ def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndar
     return float(d.max()), area
 
 
+def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid: GridSpec, search: float, step: float) -> float:
+    """Distance (m) from a section end outwards to the first rim (breakline) cell within ``search``; 0 if none."""
+    k = np.arange(0, int(np.floor(search / step)) + 1)
+    x = end_xy[0] + out_dir[0] * k * step
+    y = end_xy[1] + out_dir[1] * k * step
+    r, c = grid.rowcol(x, y)
+    r = np.round(np.asarray(r)).astype(int)
+    c = np.round(np.asarray(c)).astype(int)
+    ok = (r >= 0) & (r < rims.shape[0]) & (c >= 0) & (c < rims.shape[1])
+    hit = np.zeros(k.size, bool)
+    hit[ok] = rims[r[ok], c[ok]]
+    return float(k[np.argmax(hit)] * step) if hit.any() else 0.0
+
+
+def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, search: float) -> tuple[shapely.LineString, float]:
+    """The clipped section prolonged at each end to the nearest rim (breakline) cell within ``search`` m.
+
+    Returns the prolonged line and the offset (m) of the clipped section's start along it.
+    """
+    a, b = np.asarray(piece.coords[0])[:2], np.asarray(piece.coords[-1])[:2]
+    L = float(np.hypot(*(b - a)))
+    if L == 0:
+        return piece, 0.0
+    u = (b - a) / L
+    step = 0.5 * grid.cell
+    oa = _rim_offset(a, -u, rims, grid, search, step)
+    ob = _rim_offset(b, u, rims, grid, search, step)
+    return shapely.LineString([a - oa * u, b + ob * u]), oa
+
+
 def measure_sections(
     labels: np.ndarray,
     polygons: gpd.GeoDataFrame,
@@ -98,6 +157,9 @@ def measure_sections(
     smooth_step: float,
     alpha: float,
     beta: float,
+    branches: str = "all",
+    rims: np.ndarray | None = None,
+    rim_search_m: float = 0.0,
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -118,22 +180,37 @@ def measure_sections(
         Depth reference (:data:`REFERENCES`).
     smooth_step, alpha, beta : float
         Vertex spacing (m) and snakes weights of the axis smoothing.
+    branches : str
+        ``longest``: sections along the longest path only (the paper's pruned medial axis);
+        ``all``: along every branch of the pruned medial network that reaches at least half
+        a spacing beyond its parent's edge (one slab of its own; :func:`medial_network`).
+    rims : ndarray bool or None
+        Rim (breakline) cells; when given, the depth reference is taken at the section's
+        ends prolonged outwards to the nearest rim cell within ``rim_search_m`` (width
+        stays the clipped length).
+    rim_search_m : float
+        Search distance beyond the polygon edge for the rim (m).
 
     Returns
     -------
     axes : GeoDataFrame
-        ``polygon_id, length_m`` and the medial axis.
+        ``polygon_id, branch, length_m, trim_m`` and the medial axis (branch 0 = longest path).
     sections : GeoDataFrame
-        ``polygon_id, station_m, width_m, depth_m, area_m2, slab_m`` and the 3-D draped line.
+        ``polygon_id, branch, station_m, width_m, depth_m, area_m2, slab_m`` and the 3-D draped line.
     morph : DataFrame
-        Per polygon: area, axis length, sections, mean/max width and depth, volume.
+        Per polygon: area, axis length (all branches), sections, mean/max width and depth, volume.
 
     Notes
     -----
     O(Σ bounding-box cells) for the thinning plus O(sections · section length / cell).
+    Slabs: a branch of length L with trim t gets n = round((L − t) / spacing) sections
+    (at least one), each standing for a slab of (L − t) / n, so the slabs of all branches
+    tile the network once and volume = Σ area · slab.
     """
     if reference not in REFERENCES:
         raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
+    if branches not in BRANCHES:
+        raise ValueError(f"branches must be one of {BRANCHES}, got {branches!r}")
     dem64 = np.asarray(dem, np.float64)
     lev64 = np.asarray(level, np.float64)
     objs = ndi.find_objects(labels)
@@ -146,49 +223,60 @@ def measure_sections(
         poly = geom_of[pid]
         r0, c0 = max(sl[0].start - 1, 0), max(sl[1].start - 1, 0)
         r1, c1 = min(sl[0].stop + 1, labels.shape[0]), min(sl[1].stop + 1, labels.shape[1])
-        axis = medial_axis(labels[r0:r1, c0:c1] == pid, grid, r0, c0, smooth_step, alpha, beta)
+        sub = labels[r0:r1, c0:c1] == pid
+        if branches == "all":
+            net = medial_network(sub, grid, r0, c0, smooth_step, alpha, beta, 0.5 * spacing)
+        else:
+            axis = medial_axis(sub, grid, r0, c0, smooth_step, alpha, beta)
+            net = [(axis, 0.0)] if axis is not None and axis.length > 0 else []
         row = {"polygon_id": pid, "area_m2": poly.area, "length_m": 0.0, "n_sections": 0, "mean_width_m": np.nan,
                "max_width_m": np.nan, "mean_depth_m": np.nan, "max_depth_m": np.nan, "volume_m3": 0.0}
-        if axis is None or axis.length <= 0:
-            morph.append(row)
-            continue
-        L = axis.length
-        n = max(1, int(round(L / spacing)))
-        slab = L / n
         half = float(np.hypot(r1 - r0, c1 - c0)) * grid.cell + 1.0
-        ax_rec.append({"polygon_id": pid, "length_m": L, "geometry": axis})
-        ws, ds, vol = [], [], 0.0
-        for k in range(n):
-            s0 = (k + 0.5) * slab
-            a = axis.interpolate(max(s0 - 0.5 * slab, 0.0))
-            b = axis.interpolate(min(s0 + 0.5 * slab, L))
-            p = axis.interpolate(s0)
-            tx, ty = b.x - a.x, b.y - a.y
-            tn = np.hypot(tx, ty)
-            if tn == 0:
+        ws, ds, vol, total_len = [], [], 0.0, 0.0
+        for bi, (axis, trim) in enumerate(net):
+            L = axis.length
+            usable = L - trim
+            if usable < 0.5 * spacing and bi > 0:
                 continue
-            piece = _section_piece(poly, p.x, p.y, -ty / tn, tx / tn, half)
-            if piece is None:
-                continue
-            s, x, y, z = drape(piece, dem64, grid, step)
-            lev = None
-            if reference == "spill":
-                _, _, _, lev = drape(piece, lev64, grid, step)
-            depth, area = section_profile(s, z, reference, lev)
-            vol += area * slab
-            ws.append(piece.length)
-            ds.append(depth)
-            sec_rec.append({"polygon_id": pid, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
-                            "slab_m": slab, "geometry": shapely.LineString(np.column_stack([x, y, z]))})
-        row.update({"length_m": L, "n_sections": len(ws), "volume_m3": vol})
+            usable = max(usable, 1e-9)
+            total_len += usable
+            ax_rec.append({"polygon_id": pid, "branch": bi, "length_m": L, "trim_m": trim, "geometry": axis})
+            n = max(1, int(round(usable / spacing)))
+            slab = usable / n
+            for k in range(n):
+                s0 = trim + (k + 0.5) * slab
+                a = axis.interpolate(max(s0 - 0.5 * slab, 0.0))
+                b = axis.interpolate(min(s0 + 0.5 * slab, L))
+                p = axis.interpolate(s0)
+                tx, ty = b.x - a.x, b.y - a.y
+                tn = np.hypot(tx, ty)
+                if tn == 0:
+                    continue
+                piece = _section_piece(poly, p.x, p.y, -ty / tn, tx / tn, half)
+                if piece is None:
+                    continue
+                line = piece
+                if rims is not None and rim_search_m > 0:
+                    line, _ = extend_to_rims(piece, rims, grid, rim_search_m)
+                s, x, y, z = drape(line, dem64, grid, step)
+                lev = None
+                if reference == "spill":
+                    _, _, _, lev = drape(line, lev64, grid, step)
+                depth, area = section_profile(s, z, reference, lev)
+                vol += area * slab
+                ws.append(piece.length)
+                ds.append(depth)
+                sec_rec.append({"polygon_id": pid, "branch": bi, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
+                                "slab_m": slab, "geometry": shapely.LineString(np.column_stack([x, y, z]))})
+        row.update({"length_m": total_len, "n_sections": len(ws), "volume_m3": vol})
         if ws:
             row.update({"mean_width_m": float(np.mean(ws)), "max_width_m": float(np.max(ws)),
                         "mean_depth_m": float(np.mean(ds)), "max_depth_m": float(np.max(ds))})
         morph.append(row)
-    axes = gpd.GeoDataFrame(ax_rec or {"polygon_id": [], "length_m": []}, geometry="geometry" if ax_rec else [], crs=grid.crs)
-    sections = gpd.GeoDataFrame(sec_rec or {"polygon_id": [], "station_m": [], "width_m": [], "depth_m": [], "area_m2": [], "slab_m": []},
+    axes = gpd.GeoDataFrame(ax_rec or {"polygon_id": [], "branch": [], "length_m": [], "trim_m": []}, geometry="geometry" if ax_rec else [], crs=grid.crs)
+    sections = gpd.GeoDataFrame(sec_rec or {"polygon_id": [], "branch": [], "station_m": [], "width_m": [], "depth_m": [], "area_m2": [], "slab_m": []},
                                 geometry="geometry" if sec_rec else [], crs=grid.crs)
-    log.info("morphometry: %d polygons, %d medial axes, %d cross-sections, volume %.1f m3", len(morph), len(ax_rec), len(sec_rec),
+    log.info("morphometry: %d polygons, %d medial-axis branches, %d cross-sections, volume %.1f m3", len(morph), len(ax_rec), len(sec_rec),
              sum(r["volume_m3"] for r in morph))
     cols = ["polygon_id", "area_m2", "length_m", "n_sections", "mean_width_m", "max_width_m", "mean_depth_m", "max_depth_m", "volume_m3"]
     return axes, sections, pd.DataFrame(morph, columns=cols)
