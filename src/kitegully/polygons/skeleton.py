@@ -270,9 +270,10 @@ def branch_paths(skel: np.ndarray, radius: np.ndarray, min_extension: float) -> 
             a = starts[0]
             dist, paths = nx.single_source_dijkstra(R.subgraph(comp), a, weight="length")
             b = max(dist, key=dist.get)
-            if best is None or dist[b] > best[0]:
-                best = (dist[b], a, paths[b])
-        if best is None or best[0] <= 0:
+            reach = dist[b] - (float(radius[a]) if a in taken else 0.0)  # beyond the parent's edge
+            if best is None or reach > best[0]:
+                best = (reach, a, paths[b])
+        if best is None or best[0] < min_extension:  # what is left lies inside the branches taken (junction knots)
             break
         _, a, path = best
         out.append((*_path_pixels(G, path), float(radius[a]) if a in taken else 0.0))
