@@ -80,6 +80,47 @@ def medial_network(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_st
     return out
 
 
+def prolong_to_outline(axis: shapely.LineString, poly, start: bool, end: bool, look_m: float) -> shapely.LineString:
+    """The axis prolonged at its free ends, straight on, to the polygon outline.
+
+    Thinning stops a medial axis at the centre of the last inscribed circle, about a half
+    width short of the polygon's end; prolonged, the slabs of its sections tile the polygon's
+    whole length. The direction is that of the last ``look_m`` of the axis, and a prolongation
+    is at most twice the end's distance to the outline plus 1 m (a rounded or square end).
+    """
+    xy = np.asarray(axis.coords)[:, :2]
+    if len(xy) < 2 or axis.length == 0:
+        return axis
+    boundary = poly.boundary
+
+    def tip(p_end: np.ndarray, p_in: np.ndarray) -> np.ndarray | None:
+        d = p_end - p_in
+        n = np.hypot(*d)
+        if n == 0:
+            return None
+        reach = 2.0 * boundary.distance(shapely.Point(p_end)) + 1.0
+        ray = shapely.LineString([p_end, p_end + d / n * reach])
+        hit = ray.intersection(boundary)
+        if hit.is_empty:
+            return None
+        pts = np.asarray([g.coords[0] for g in getattr(hit, "geoms", [hit]) if not g.is_empty])
+        return pts[np.argmin(np.hypot(*(pts[:, :2] - p_end).T))][:2]
+
+    L = axis.length
+    out = [xy]
+    if start:
+        q = np.asarray(axis.interpolate(min(look_m, L)).coords[0])[:2]
+        t = tip(xy[0], q)
+        if t is not None:
+            out.insert(0, t[None, :])
+    if end:
+        q = np.asarray(axis.interpolate(max(L - look_m, 0.0)).coords[0])[:2]
+        t = tip(xy[-1], q)
+        if t is not None:
+            out.append(t[None, :])
+    return shapely.LineString(np.concatenate(out))
+
+
 def _section_piece(poly, px: float, py: float, nx: float, ny: float, half: float):
     line = shapely.LineString([(px - half * nx, py - half * ny), (px + half * nx, py + half * ny)])
     inter = line.intersection(poly)
@@ -172,6 +213,7 @@ def measure_sections(
     branches: str = "all",
     rims: np.ndarray | None = None,
     rim_search_m: float = 0.0,
+    prolong: bool = False,
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -202,6 +244,9 @@ def measure_sections(
         stays the clipped length).
     rim_search_m : float
         Search distance beyond the polygon edge for the rim (m).
+    prolong : bool
+        Prolong the axes' free ends to the outline (:func:`prolong_to_outline`), so that the
+        slabs cover the polygon's ends too.
 
     Returns
     -------
@@ -246,6 +291,8 @@ def measure_sections(
         half = float(np.hypot(r1 - r0, c1 - c0)) * grid.cell + 1.0
         ws, ds, vol, total_len = [], [], 0.0, 0.0
         for bi, (axis, trim) in enumerate(net):
+            if prolong:
+                axis = prolong_to_outline(axis, poly, start=bi == 0, end=True, look_m=2.0 * smooth_step)
             L = axis.length
             usable = L - trim
             if usable < 0.5 * spacing and bi > 0:
