@@ -157,12 +157,13 @@ def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndar
     return float(d.max()), area
 
 
-def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid: GridSpec, search: float, step: float,
-                dem: np.ndarray) -> float:
+def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid: GridSpec, search: float, step: float) -> float:
     """Distance (m) from a section end outwards to the rim within ``search``; 0 if none.
 
-    The rim is the highest DEM point of the first run of rim (breakline band) cells the
-    prolonged section crosses: the top of the convex edge, where the wall meets the surface.
+    The rim is the middle of the first run of rim cells the prolonged section crosses: the
+    rim cells are the breakline skeleton dilated by the barrier growth, so their middle is
+    the breakline itself (the upper edge). The highest point of the run would be biased
+    upwards by the DSM's noise and by the surface rising beyond the edge.
     """
     k = np.arange(0, int(np.floor(search / step)) + 1)
     x = end_xy[0] + out_dir[0] * k * step
@@ -177,13 +178,10 @@ def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid:
         return 0.0
     i0 = int(np.argmax(hit))
     i1 = i0 + (int(np.argmin(hit[i0:])) if not hit[i0:].all() else hit.size - i0)  # end of the first run
-    rf, cf = grid.rowcol(x[i0:i1], y[i0:i1])
-    z = map_coordinates(dem, [rf, cf], order=1, mode="nearest")  # as the section is draped
-    zr = np.where(np.isnan(z), -np.inf, z)
-    return float(k[i0 + int(np.argmax(zr))] * step)
+    return float(0.5 * (k[i0] + k[i1 - 1]) * step)
 
 
-def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, search: float, dem: np.ndarray) -> tuple[shapely.LineString, float]:
+def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, search: float) -> tuple[shapely.LineString, float]:
     """The clipped section prolonged at each end to the nearest rim within ``search`` m (:func:`_rim_offset`).
 
     Returns the prolonged line and the offset (m) of the clipped section's start along it.
@@ -194,8 +192,8 @@ def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, 
         return piece, 0.0
     u = (b - a) / L
     step = 0.5 * grid.cell
-    oa = _rim_offset(a, -u, rims, grid, search, step, dem)
-    ob = _rim_offset(b, u, rims, grid, search, step, dem)
+    oa = _rim_offset(a, -u, rims, grid, search, step)
+    ob = _rim_offset(b, u, rims, grid, search, step)
     return shapely.LineString([a - oa * u, b + ob * u]), oa
 
 
@@ -316,7 +314,7 @@ def measure_sections(
                     continue
                 line = piece
                 if rims is not None and rim_search_m > 0:
-                    line, _ = extend_to_rims(piece, rims, grid, rim_search_m, dem64)
+                    line, _ = extend_to_rims(piece, rims, grid, rim_search_m)
                 s, x, y, z = drape(line, dem64, grid, step)
                 lev = None
                 if reference == "spill":
