@@ -76,13 +76,11 @@ def test_section_ends_move_out_to_the_rim_band():
     rims = np.zeros((200, 200), bool)
     rims[:, 40] = rims[:, 160] = True  # x = 20.25 m and 80.25 m
     piece = shapely.LineString([(22.0, 50.0), (78.0, 50.0)])
-    dem = np.zeros((200, 200))
-    dem[:, 40] = dem[:, 160] = 1.0  # the top of the convex edge lies on the band
-    rims[:, 39] = rims[:, 41] = rims[:, 159] = rims[:, 161] = True  # a 3-cell band
-    line, off = extend_to_rims(piece, rims, grid, 4.5, dem)
+    rims[:, 39] = rims[:, 41] = rims[:, 159] = rims[:, 161] = True  # the breakline dilated to a 3-cell band: its middle is the rim
+    line, off = extend_to_rims(piece, rims, grid, 4.5)
     assert off == pytest.approx(1.75, abs=0.26) and line.coords[0][0] == pytest.approx(20.25, abs=0.26)
     assert line.coords[-1][0] == pytest.approx(80.25, abs=0.26)
-    same, off0 = extend_to_rims(piece, rims, grid, 0.5, dem)  # rims farther than the search: unchanged
+    same, off0 = extend_to_rims(piece, rims, grid, 0.5)  # rims farther than the search: unchanged
     assert off0 == 0.0 and same.equals(piece)
 
 
