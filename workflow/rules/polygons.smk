@@ -6,7 +6,8 @@ if "polygons" in config:
     POLY = config["polygons"]
     POLY_CAT = "Gully polygons"
     POLY_ATTRIBUTION = config["site"].get("attribution")
-    POLY_DEM = POLY["dem_file"] or result("dense", "dsm.tif")
+    # null dem_file: the DEM twin's TLS-like DTM on a DEM twin site (issue 16), else the dense DSM
+    POLY_DEM = POLY["dem_file"] or (result("twin", "observed/dtm.tif") if "dem_twin" in config else result("dense", "dsm.tif"))
     POLY_T = [float(t) for t in POLY["conditioning"]["thresholds_m"]]
     POLY_METHOD = {k: v for k, v in POLY.items() if k not in ("dem_file", "evaluation", "figure_max_px")}
 
