@@ -1,19 +1,25 @@
 """Medial axes and cross-sections of the gully polygons (Höfle et al. 2013 sect. 4.2-4.3, Figs 10-11).
 
-Per polygon: grassfire thinning of its raster to a one-cell skeleton, pruned to the
-longest path (the medial axis), smoothed with snakes. Cross-sections orthogonal to the
-axis, one at the middle of each of ``n = round(L / spacing)`` equal slabs of the axis
-(``L / n`` ≈ spacing apart), clipped to the polygon and draped on the DEM:
+Per polygon: grassfire thinning of its raster to a one-cell skeleton, and either its longest
+path (the paper's pruned medial axis, ``branches="longest"``) or its pruned medial network
+(``"all"``: the longest path, then every branch reaching half a spacing beyond its parent's
+edge, :func:`kitegully.polygons.skeleton.branch_paths`), smoothed with snakes and optionally
+prolonged at their free ends to the outline (:func:`prolong_to_outline`). Cross-sections
+orthogonal to each branch, one at the middle of each of ``n = round(L' / spacing)`` equal
+slabs of its measured length ``L'`` (the branch less its part inside the parent), clipped to
+the polygon and draped on the DEM:
 
 - width = clipped length (m);
 - depth = max(z_ref − z) (m);
 - area = ∫ max(z_ref − z, 0) ds (m²), trapezoidal at half-cell steps;
-- volume = Σ area · L / n (m³).
+- volume = Σ area · L' / n (m³).
 
 Reference surface ``z_ref`` (:data:`REFERENCES`): ``lower_end`` = elevation of the lower
-end of the clipped section, level across ([I] METHODS.md 3.2 step 9); ``line`` = straight
-line between the two ends; ``spill`` = the sink-fill level of the conditioned DEM (the
-spill surface of the pool the section lies in).
+end of the section, level across ([I] METHODS.md 3.2 step 9); ``line`` = straight line
+between the two ends; ``spill`` = the sink-fill level of the conditioned DEM (the spill
+surface of the pool the section lies in). With rim cells given, the ends are first
+prolonged outwards to the rim (:func:`extend_to_rims`), so the reference stands on the
+upper edges rather than on the pool's outline.
 """
 
 from __future__ import annotations
