@@ -107,6 +107,9 @@ def test_rims_restore_the_depth_of_a_polygon_that_ends_inside_them():
     assert np.median(s_in["depth_m"]) < 1.9  # the pool's edge is already 0.1 m+ down the U's wall
     assert np.median(s_rim["depth_m"]) == pytest.approx(2.0, abs=0.05)
     assert np.median(s_rim["width_m"]) == pytest.approx(np.median(s_in["width_m"]))  # width stays the clipped length
+    # the stored line is the clipped section (its length = width); the reference span reaches the rims
+    assert np.allclose(s_rim.geometry.length, s_rim["width_m"], atol=1e-6)
+    assert (s_rim["reference_length_m"] > s_rim["width_m"] + 2.0).all()
 
 
 def test_bad_branch_and_rim_settings_are_one_sentence():

@@ -257,7 +257,9 @@ def measure_sections(
     axes : GeoDataFrame
         ``polygon_id, branch, length_m, trim_m`` and the medial axis (branch 0 = longest path).
     sections : GeoDataFrame
-        ``polygon_id, branch, station_m, width_m, depth_m, area_m2, slab_m`` and the 3-D draped line.
+        ``polygon_id, branch, station_m, width_m, depth_m, area_m2, slab_m, reference_length_m``
+        (length of the section between the points its depth reference stands on: the rims
+        when found, else the clipped ends) and the clipped section draped on the DEM (3-D).
     morph : DataFrame
         Per polygon: area, axis length (all branches), sections, mean/max width and depth, volume.
 
@@ -329,15 +331,18 @@ def measure_sections(
                 vol += area * slab
                 ws.append(piece.length)
                 ds.append(depth)
+                if line is not piece:  # the stored section is the clipped one (width = its length), draped
+                    _, x, y, z = drape(piece, dem64, grid, step)
                 sec_rec.append({"polygon_id": pid, "branch": bi, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
-                                "slab_m": slab, "geometry": shapely.LineString(np.column_stack([x, y, z]))})
+                                "slab_m": slab, "reference_length_m": line.length, "geometry": shapely.LineString(np.column_stack([x, y, z]))})
         row.update({"length_m": total_len, "n_sections": len(ws), "volume_m3": vol})
         if ws:
             row.update({"mean_width_m": float(np.mean(ws)), "max_width_m": float(np.max(ws)),
                         "mean_depth_m": float(np.mean(ds)), "max_depth_m": float(np.max(ds))})
         morph.append(row)
     axes = gpd.GeoDataFrame(ax_rec or {"polygon_id": [], "branch": [], "length_m": [], "trim_m": []}, geometry="geometry" if ax_rec else [], crs=grid.crs)
-    sections = gpd.GeoDataFrame(sec_rec or {"polygon_id": [], "branch": [], "station_m": [], "width_m": [], "depth_m": [], "area_m2": [], "slab_m": []},
+    sections = gpd.GeoDataFrame(sec_rec or {"polygon_id": [], "branch": [], "station_m": [], "width_m": [], "depth_m": [], "area_m2": [], "slab_m": [],
+                                        "reference_length_m": []},
                                 geometry="geometry" if sec_rec else [], crs=grid.crs)
     log.info("morphometry: %d polygons, %d medial-axis branches, %d cross-sections, volume %.1f m3", len(morph), len(ax_rec), len(sec_rec),
              sum(r["volume_m3"] for r in morph))
