@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem stereo kamech-full tiles-check lowcost closerange
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -77,6 +77,13 @@ lowcost: $(STAMP)
 closerange: $(STAMP)
 	@$(CONFIG_CHECK)
 	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) --config 'closerange={scenes: all}' $(SNAKE_ARGS) -- closerange_summary
+
+# Gully polygons (issue 16): the paper's settings against ours on the peat valley (~4 min), and the
+# stage on every ensemble member's DSM that `make ensemble` has written (~1 min per member):
+# results/benchmarks/polygons_paper_settings.md, polygons_ensemble.md.
+polygons-benchmarks: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_paper_settings.py
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_ensemble.py $(POLYGONS_ENSEMBLE_ARGS)
 
 clean-venv:
 	rm -rf $(VENV)

@@ -12,9 +12,10 @@ DTM at 0.5 m. This script builds such a DTM with known gullies and runs the stag
 - TLS-like survey: white noise of SD 0.034 m (the paper's registration SD) and 3 % of the
   cells empty in small clusters (occlusion), filled by the stage's moving planes.
 
-The stage runs with the default site's polygons settings except the paper's own transect
-half length (40 m, for gullies up to 51 m wide) and TCI threshold (9, a nearly level
-valley); scores, morphometry errors and Table 1 are computed as the twin evaluation rules do.
+The site itself is now ``config/sites/peat_valley.yaml`` (a DEM twin run through Snakemake);
+this script builds the same DTM (``kitegully.twin.peat_valley``) and runs the stage with the
+site's polygons settings in one process; scores, morphometry errors and Table 1 are computed
+as the twin evaluation rules do.
 
 Usage::
 
@@ -30,14 +31,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-import scipy.ndimage as ndi
 
 from kitegully.config import load_yaml
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.evaluation import evaluate_against_truth, regenerate_table1
 from kitegully.polygons.stage import PolygonParams, measure_polygons
-from kitegully.seeds import rng_for
-from kitegully.twin.gullies import Gully, Segments, carve
+from kitegully.twin.gullies import Gully
+from kitegully.twin.peat_valley import PeatValleyParams, make_peat_valley
 from kitegully.twin.site import centrelines, polygons
 
 REPO = Path(__file__).resolve().parents[1]
@@ -45,40 +45,11 @@ CRS = "EPSG:32718"
 U_EXPONENT = 4.0
 
 
-def build_site(seed: int, cell: float = 0.5) -> tuple[np.ndarray, GridSpec, list[Gully]]:
-    """The peat-valley DTM (m, NaN = occluded) and its gullies."""
-    rng = rng_for(seed, "benchmark", "peat_valley")
-    W, H = 400.0, 240.0
-    grid = GridSpec(500000.0, 8430000.0, cell, int(W / cell), int(H / cell), CRS)
-    xs, ys = grid.cell_centres()
-    x, y = np.meshgrid(xs - grid.x0, ys - (grid.y0 - H))
-    z = 4400.0 - 0.01 * x + 0.02 * np.abs(y - H / 2)  # 1 % down-valley, 2 % up to the valley sides
-    noise = ndi.gaussian_filter(rng.standard_normal(x.shape), 5.0 / cell)
-    z += 0.1 * noise / noise.std()
-    # main channel west to east, meandering, widening and deepening downstream
-    s = np.arange(0.0, W + 1.0, 1.0)
-    mx = grid.x0 + s
-    my = grid.y0 - H / 2 + 25.0 * np.sin(2 * np.pi * s / 260.0)
-    t = s / s[-1]
-    main = Gully(0, "wadi", "valley", "U", mx, my, width=8.0 + 37.0 * t**1.5, depth=2.4 + 3.6 * t)
-    gullies = [main]
-    for k, (s0, side, L) in enumerate(((90.0, 1, 70.0), (190.0, -1, 80.0), (290.0, 1, 60.0)), start=1):
-        j = int(s0)
-        ang = np.arctan2(my[j + 1] - my[j - 1], mx[j + 1] - mx[j - 1]) + side * np.radians(120.0)
-        u = np.arange(L, -1.0, -1.0)  # head first
-        tx = mx[j] + u * np.cos(ang)
-        ty = my[j] + u * np.sin(ang) + 4.0 * np.sin(u / 15.0)
-        tt = 1.0 - u / L
-        w = 3.5 + (6.5 * tt if k != 2 else 6.5 * tt**0.5)
-        d = 2.4 + 1.1 * tt
-        gullies.append(Gully(k, "gully", "left" if side < 0 else "right", "U", tx, ty, joins=0, join_index=j, width=w, depth=d))
-    segs = Segments.from_network(gullies, U_EXPONENT)
-    depth, _ = carve(segs, grid.x0, grid.y0, cell, grid.height, grid.width, 2.0)
-    dtm = z - depth
-    dtm += rng.normal(0.0, 0.034, dtm.shape)
-    holes = ndi.gaussian_filter(rng.standard_normal(dtm.shape), 1.5) > 2.0 * ndi.gaussian_filter(rng.standard_normal(dtm.shape), 1.5).std()
-    dtm[holes] = np.nan
-    return dtm.astype(np.float32), grid, gullies
+def build_site(seed: int) -> tuple[np.ndarray, GridSpec, list[Gully]]:
+    """The peat-valley DTM (m, NaN = occluded) and its gullies: the site's DEM twin (kitegully.twin.peat_valley)."""
+    site = load_yaml(REPO / "config" / "sites" / "peat_valley.yaml")
+    twin = make_peat_valley(PeatValleyParams.from_config(site["dem_twin"]), seed, CRS)
+    return twin.observed.data, twin.observed.grid, twin.gullies
 
 
 def main() -> None:
@@ -86,9 +57,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=2013)
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_peat_valley.md"))
     args = ap.parse_args()
-    site = load_yaml(REPO / "config" / "sites" / "kamech_twin.yaml")["polygons"]
-    cfg = {**site, "transects": {**site["transects"], "half_length_m": 40.0},  # [P] 40 m for gullies up to 51 m wide
-           "thalweg": {**site["thalweg"], "tci_threshold": 9.0}}  # [P] a nearly level valley, as the paper's
+    cfg = load_yaml(REPO / "config" / "sites" / "peat_valley.yaml")["polygons"]  # the site's settings (40 m transects, TCI > 9 [P])
     dtm, grid, gullies = build_site(args.seed)
     truth_cl = centrelines(gullies, 0.1, 10.0, CRS)
     truth_poly = polygons(gullies, 0.1, CRS)

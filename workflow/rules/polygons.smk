@@ -6,7 +6,8 @@ if "polygons" in config:
     POLY = config["polygons"]
     POLY_CAT = "Gully polygons"
     POLY_ATTRIBUTION = config["site"].get("attribution")
-    POLY_DEM = POLY["dem_file"] or result("dense", "dsm.tif")
+    # null dem_file: the DEM twin's TLS-like DTM on a DEM twin site (issue 16), else the dense DSM
+    POLY_DEM = POLY["dem_file"] or (result("twin", "observed/dtm.tif") if "dem_twin" in config else result("dense", "dsm.tif"))
     POLY_T = [float(t) for t in POLY["conditioning"]["thresholds_m"]]
     POLY_METHOD = {k: v for k, v in POLY.items() if k not in ("dem_file", "evaluation", "figure_max_px")}
 
@@ -63,6 +64,8 @@ if "polygons" in config:
     POLY_TARGETS = [rules.polygons_map.output, rules.polygons_figure.output.figure]
 
     if IS_TWIN:
+        # U profile exponent of the true gullies: the photographed twin's or the DEM twin's (issue 16)
+        POLY_U_EXPONENT = config["twin"]["gullies"]["u_shape_exponent"] if "twin" in config else config["dem_twin"]["u_shape_exponent"]
         POLY_TRUTH = {"truth": result("twin", "truth/gully_polygons.gpkg"), "centrelines": result("twin", "truth/gully_centrelines.gpkg")}
 
         # Evaluation rules: the only polygon rules that read truth/.
@@ -80,7 +83,7 @@ if "polygons" in config:
                 operators=POLY["evaluation"]["operators"],
                 thresholds=POLY_T,
                 auto_threshold=POLY["morphometry"]["threshold_m"],
-                u_exponent=config["twin"]["gullies"]["u_shape_exponent"],
+                u_exponent=POLY_U_EXPONENT,
                 seed=config["seed"],
                 max_px=POLY["figure_max_px"],
                 attribution=POLY_ATTRIBUTION,
@@ -102,7 +105,7 @@ if "polygons" in config:
                 volumes=result("polygons", "volume_errors.csv"),
             params:
                 cfg={k: v for k, v in POLY["evaluation"].items() if k != "operators"},
-                u_exponent=config["twin"]["gullies"]["u_shape_exponent"],
+                u_exponent=POLY_U_EXPONENT,
             log:
                 logfile("polygons", "evaluate"),
             script:

@@ -89,3 +89,23 @@ if IS_TWIN and "twin" in config:
         rules.twin_epoch2.output,
         rules.twin_figures.output,
     )
+
+
+# A DEM twin (issue 16): a terrain with known gullies surveyed as a dense DTM only (no photographs);
+# the observed DTM is what the DEM stages read (polygons.dem_file), the truth only evaluation rules.
+if IS_TWIN and "dem_twin" in config:
+
+    rule twin_dem:
+        output:
+            dtm=result("twin", "observed/dtm.tif"),
+            truth_dtm=result("twin", "truth/dtm.tif"),
+            centrelines=result("twin", "truth/gully_centrelines.gpkg"),
+            polygons=result("twin", "truth/gully_polygons.gpkg"),
+        params:
+            cfg=config["dem_twin"],
+            crs=config["site"]["crs"],
+            seed=config["seed"],
+        log:
+            logfile("twin", "dem"),
+        script:
+            "../scripts/twin_peat_valley.py"

@@ -1,19 +1,25 @@
 """Medial axes and cross-sections of the gully polygons (Höfle et al. 2013 sect. 4.2-4.3, Figs 10-11).
 
-Per polygon: grassfire thinning of its raster to a one-cell skeleton, pruned to the
-longest path (the medial axis), smoothed with snakes. Cross-sections orthogonal to the
-axis, one at the middle of each of ``n = round(L / spacing)`` equal slabs of the axis
-(``L / n`` ≈ spacing apart), clipped to the polygon and draped on the DEM:
+Per polygon: grassfire thinning of its raster to a one-cell skeleton, and either its longest
+path (the paper's pruned medial axis, ``branches="longest"``) or its pruned medial network
+(``"all"``: the longest path, then every branch reaching half a spacing beyond its parent's
+edge, :func:`kitegully.polygons.skeleton.branch_paths`), smoothed with snakes and optionally
+prolonged at their free ends to the outline (:func:`prolong_to_outline`). Cross-sections
+orthogonal to each branch, one at the middle of each of ``n = round(L' / spacing)`` equal
+slabs of its measured length ``L'`` (the branch less its part inside the parent), clipped to
+the polygon and draped on the DEM:
 
 - width = clipped length (m);
 - depth = max(z_ref − z) (m);
 - area = ∫ max(z_ref − z, 0) ds (m²), trapezoidal at half-cell steps;
-- volume = Σ area · L / n (m³).
+- volume = Σ area · L' / n (m³).
 
 Reference surface ``z_ref`` (:data:`REFERENCES`): ``lower_end`` = elevation of the lower
-end of the clipped section, level across ([I] METHODS.md 3.2 step 9); ``line`` = straight
-line between the two ends; ``spill`` = the sink-fill level of the conditioned DEM (the
-spill surface of the pool the section lies in).
+end of the section, level across ([I] METHODS.md 3.2 step 9); ``line`` = straight line
+between the two ends; ``spill`` = the sink-fill level of the conditioned DEM (the spill
+surface of the pool the section lies in). With rim cells given, the ends are first
+prolonged outwards to the rim (:func:`extend_to_rims`), so the reference stands on the
+upper edges rather than on the pool's outline.
 """
 
 from __future__ import annotations
@@ -29,13 +35,24 @@ from scipy.ndimage import map_coordinates
 from skimage.morphology import thin
 
 from kitegully.io.raster import GridSpec
-from kitegully.polygons.skeleton import longest_path
+from kitegully.polygons.skeleton import branch_paths, longest_path
 from kitegully.polygons.thalweg import resample_line, snakes_smooth
 
 log = logging.getLogger(__name__)
 
 #: Depth reference surfaces (``polygons.morphometry.reference``).
 REFERENCES = ("lower_end", "line", "spill")
+#: Which medial-axis branches carry sections (``polygons.morphometry.branches``).
+BRANCHES = ("all", "longest")
+
+
+def _smooth_path(rr: np.ndarray, cc: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float,
+                 beta: float) -> shapely.LineString | None:
+    xs, ys = grid.xy(r0 + rr, c0 + cc)
+    xy = resample_line(np.column_stack([xs, ys]), smooth_step)
+    if len(xy) < 2:
+        return None
+    return shapely.LineString(snakes_smooth(xy, alpha, beta))
 
 
 def medial_axis(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float, beta: float) -> shapely.LineString | None:
@@ -44,11 +61,70 @@ def medial_axis(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step:
     rr, cc = longest_path(skel)
     if rr.size < 2:
         return None
-    xs, ys = grid.xy(r0 + rr, c0 + cc)
-    xy = resample_line(np.column_stack([xs, ys]), smooth_step)
-    if len(xy) < 2:
-        return None
-    return shapely.LineString(snakes_smooth(xy, alpha, beta))
+    return _smooth_path(rr, cc, grid, r0, c0, smooth_step, alpha, beta)
+
+
+def medial_network(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float, beta: float,
+                   min_extension_m: float) -> list[tuple[shapely.LineString, float]]:
+    """Smoothed branches of the thinned mask's pruned medial network with their trims (m).
+
+    The first branch is the longest path (:func:`medial_axis`); each further one is a
+    tributary reaching at least ``min_extension_m`` beyond its parent's edge, and its first
+    ``trim`` metres (the parent's inscribed radius at the junction) lie inside the parent
+    (:func:`kitegully.polygons.skeleton.branch_paths`).
+    """
+    filled = ndi.binary_fill_holes(mask)
+    skel = thin(filled)
+    radius = ndi.distance_transform_edt(np.pad(filled, 1))[1:-1, 1:-1]
+    out = []
+    for rr, cc, trim in branch_paths(skel, radius, min_extension_m / grid.cell):
+        if rr.size < 2:
+            continue
+        line = _smooth_path(rr, cc, grid, r0, c0, smooth_step, alpha, beta)
+        if line is not None and line.length > 0:
+            out.append((line, trim * grid.cell))
+    return out
+
+
+def prolong_to_outline(axis: shapely.LineString, poly, start: bool, end: bool, look_m: float) -> shapely.LineString:
+    """The axis prolonged at its free ends, straight on, to the polygon outline.
+
+    Thinning stops a medial axis at the centre of the last inscribed circle, about a half
+    width short of the polygon's end; prolonged, the slabs of its sections tile the polygon's
+    whole length. The direction is that of the last ``look_m`` of the axis, and a prolongation
+    is at most twice the end's distance to the outline plus 1 m (a rounded or square end).
+    """
+    xy = np.asarray(axis.coords)[:, :2]
+    if len(xy) < 2 or axis.length == 0:
+        return axis
+    boundary = poly.boundary
+
+    def tip(p_end: np.ndarray, p_in: np.ndarray) -> np.ndarray | None:
+        d = p_end - p_in
+        n = np.hypot(*d)
+        if n == 0:
+            return None
+        reach = 2.0 * boundary.distance(shapely.Point(p_end)) + 1.0
+        ray = shapely.LineString([p_end, p_end + d / n * reach])
+        hit = ray.intersection(boundary)
+        if hit.is_empty:
+            return None
+        pts = np.asarray([g.coords[0] for g in getattr(hit, "geoms", [hit]) if not g.is_empty])
+        return pts[np.argmin(np.hypot(*(pts[:, :2] - p_end).T))][:2]
+
+    L = axis.length
+    out = [xy]
+    if start:
+        q = np.asarray(axis.interpolate(min(look_m, L)).coords[0])[:2]
+        t = tip(xy[0], q)
+        if t is not None:
+            out.insert(0, t[None, :])
+    if end:
+        q = np.asarray(axis.interpolate(max(L - look_m, 0.0)).coords[0])[:2]
+        t = tip(xy[-1], q)
+        if t is not None:
+            out.append(t[None, :])
+    return shapely.LineString(np.concatenate(out))
 
 
 def _section_piece(poly, px: float, py: float, nx: float, ny: float, half: float):
@@ -87,6 +163,46 @@ def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndar
     return float(d.max()), area
 
 
+def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid: GridSpec, search: float, step: float) -> float:
+    """Distance (m) from a section end outwards to the rim within ``search``; 0 if none.
+
+    The rim is the middle of the first run of rim cells the prolonged section crosses: the
+    rim cells are the breakline skeleton dilated by the barrier growth, so their middle is
+    the breakline itself (the upper edge). The highest point of the run would be biased
+    upwards by the DSM's noise and by the surface rising beyond the edge.
+    """
+    k = np.arange(0, int(np.floor(search / step)) + 1)
+    x = end_xy[0] + out_dir[0] * k * step
+    y = end_xy[1] + out_dir[1] * k * step
+    r, c = grid.rowcol(x, y)
+    r = np.round(np.asarray(r)).astype(int)
+    c = np.round(np.asarray(c)).astype(int)
+    ok = (r >= 0) & (r < rims.shape[0]) & (c >= 0) & (c < rims.shape[1])
+    hit = np.zeros(k.size, bool)
+    hit[ok] = rims[r[ok], c[ok]]
+    if not hit.any():
+        return 0.0
+    i0 = int(np.argmax(hit))
+    i1 = i0 + (int(np.argmin(hit[i0:])) if not hit[i0:].all() else hit.size - i0)  # end of the first run
+    return float(0.5 * (k[i0] + k[i1 - 1]) * step)
+
+
+def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, search: float) -> tuple[shapely.LineString, float]:
+    """The clipped section prolonged at each end to the nearest rim within ``search`` m (:func:`_rim_offset`).
+
+    Returns the prolonged line and the offset (m) of the clipped section's start along it.
+    """
+    a, b = np.asarray(piece.coords[0])[:2], np.asarray(piece.coords[-1])[:2]
+    L = float(np.hypot(*(b - a)))
+    if L == 0:
+        return piece, 0.0
+    u = (b - a) / L
+    step = 0.5 * grid.cell
+    oa = _rim_offset(a, -u, rims, grid, search, step)
+    ob = _rim_offset(b, u, rims, grid, search, step)
+    return shapely.LineString([a - oa * u, b + ob * u]), oa
+
+
 def measure_sections(
     labels: np.ndarray,
     polygons: gpd.GeoDataFrame,
@@ -98,6 +214,10 @@ def measure_sections(
     smooth_step: float,
     alpha: float,
     beta: float,
+    branches: str = "all",
+    rims: np.ndarray | None = None,
+    rim_search_m: float = 0.0,
+    prolong: bool = False,
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -118,22 +238,42 @@ def measure_sections(
         Depth reference (:data:`REFERENCES`).
     smooth_step, alpha, beta : float
         Vertex spacing (m) and snakes weights of the axis smoothing.
+    branches : str
+        ``longest``: sections along the longest path only (the paper's pruned medial axis);
+        ``all``: along every branch of the pruned medial network that reaches at least half
+        a spacing beyond its parent's edge (one slab of its own; :func:`medial_network`).
+    rims : ndarray bool or None
+        Rim (breakline) cells; when given, the depth reference is taken at the section's
+        ends prolonged outwards to the nearest rim cell within ``rim_search_m`` (width
+        stays the clipped length).
+    rim_search_m : float
+        Search distance beyond the polygon edge for the rim (m).
+    prolong : bool
+        Prolong the axes' free ends to the outline (:func:`prolong_to_outline`), so that the
+        slabs cover the polygon's ends too.
 
     Returns
     -------
     axes : GeoDataFrame
-        ``polygon_id, length_m`` and the medial axis.
+        ``polygon_id, branch, length_m, trim_m`` and the medial axis (branch 0 = longest path).
     sections : GeoDataFrame
-        ``polygon_id, station_m, width_m, depth_m, area_m2, slab_m`` and the 3-D draped line.
+        ``polygon_id, branch, station_m, width_m, depth_m, area_m2, slab_m, reference_length_m``
+        (length of the section between the points its depth reference stands on: the rims
+        when found, else the clipped ends) and the clipped section draped on the DEM (3-D).
     morph : DataFrame
-        Per polygon: area, axis length, sections, mean/max width and depth, volume.
+        Per polygon: area, axis length (all branches), sections, mean/max width and depth, volume.
 
     Notes
     -----
     O(Σ bounding-box cells) for the thinning plus O(sections · section length / cell).
+    Slabs: a branch of length L with trim t gets n = round((L − t) / spacing) sections
+    (at least one), each standing for a slab of (L − t) / n, so the slabs of all branches
+    tile the network once and volume = Σ area · slab.
     """
     if reference not in REFERENCES:
         raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
+    if branches not in BRANCHES:
+        raise ValueError(f"branches must be one of {BRANCHES}, got {branches!r}")
     dem64 = np.asarray(dem, np.float64)
     lev64 = np.asarray(level, np.float64)
     objs = ndi.find_objects(labels)
@@ -146,49 +286,65 @@ def measure_sections(
         poly = geom_of[pid]
         r0, c0 = max(sl[0].start - 1, 0), max(sl[1].start - 1, 0)
         r1, c1 = min(sl[0].stop + 1, labels.shape[0]), min(sl[1].stop + 1, labels.shape[1])
-        axis = medial_axis(labels[r0:r1, c0:c1] == pid, grid, r0, c0, smooth_step, alpha, beta)
+        sub = labels[r0:r1, c0:c1] == pid
+        if branches == "all":
+            net = medial_network(sub, grid, r0, c0, smooth_step, alpha, beta, 0.5 * spacing)
+        else:
+            axis = medial_axis(sub, grid, r0, c0, smooth_step, alpha, beta)
+            net = [(axis, 0.0)] if axis is not None and axis.length > 0 else []
         row = {"polygon_id": pid, "area_m2": poly.area, "length_m": 0.0, "n_sections": 0, "mean_width_m": np.nan,
                "max_width_m": np.nan, "mean_depth_m": np.nan, "max_depth_m": np.nan, "volume_m3": 0.0}
-        if axis is None or axis.length <= 0:
-            morph.append(row)
-            continue
-        L = axis.length
-        n = max(1, int(round(L / spacing)))
-        slab = L / n
         half = float(np.hypot(r1 - r0, c1 - c0)) * grid.cell + 1.0
-        ax_rec.append({"polygon_id": pid, "length_m": L, "geometry": axis})
-        ws, ds, vol = [], [], 0.0
-        for k in range(n):
-            s0 = (k + 0.5) * slab
-            a = axis.interpolate(max(s0 - 0.5 * slab, 0.0))
-            b = axis.interpolate(min(s0 + 0.5 * slab, L))
-            p = axis.interpolate(s0)
-            tx, ty = b.x - a.x, b.y - a.y
-            tn = np.hypot(tx, ty)
-            if tn == 0:
+        ws, ds, vol, total_len = [], [], 0.0, 0.0
+        for bi, (axis, trim) in enumerate(net):
+            if prolong:
+                axis = prolong_to_outline(axis, poly, start=bi == 0, end=True, look_m=2.0 * smooth_step)
+            L = axis.length
+            usable = L - trim
+            if usable < 0.5 * spacing and bi > 0:
                 continue
-            piece = _section_piece(poly, p.x, p.y, -ty / tn, tx / tn, half)
-            if piece is None:
-                continue
-            s, x, y, z = drape(piece, dem64, grid, step)
-            lev = None
-            if reference == "spill":
-                _, _, _, lev = drape(piece, lev64, grid, step)
-            depth, area = section_profile(s, z, reference, lev)
-            vol += area * slab
-            ws.append(piece.length)
-            ds.append(depth)
-            sec_rec.append({"polygon_id": pid, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
-                            "slab_m": slab, "geometry": shapely.LineString(np.column_stack([x, y, z]))})
-        row.update({"length_m": L, "n_sections": len(ws), "volume_m3": vol})
+            usable = max(usable, 1e-9)
+            total_len += usable
+            ax_rec.append({"polygon_id": pid, "branch": bi, "length_m": L, "trim_m": trim, "geometry": axis})
+            n = max(1, int(round(usable / spacing)))
+            slab = usable / n
+            for k in range(n):
+                s0 = trim + (k + 0.5) * slab
+                a = axis.interpolate(max(s0 - 0.5 * slab, 0.0))
+                b = axis.interpolate(min(s0 + 0.5 * slab, L))
+                p = axis.interpolate(s0)
+                tx, ty = b.x - a.x, b.y - a.y
+                tn = np.hypot(tx, ty)
+                if tn == 0:
+                    continue
+                piece = _section_piece(poly, p.x, p.y, -ty / tn, tx / tn, half)
+                if piece is None:
+                    continue
+                line = piece
+                if rims is not None and rim_search_m > 0:
+                    line, _ = extend_to_rims(piece, rims, grid, rim_search_m)
+                s, x, y, z = drape(line, dem64, grid, step)
+                lev = None
+                if reference == "spill":
+                    _, _, _, lev = drape(line, lev64, grid, step)
+                depth, area = section_profile(s, z, reference, lev)
+                vol += area * slab
+                ws.append(piece.length)
+                ds.append(depth)
+                if line is not piece:  # the stored section is the clipped one (width = its length), draped
+                    _, x, y, z = drape(piece, dem64, grid, step)
+                sec_rec.append({"polygon_id": pid, "branch": bi, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
+                                "slab_m": slab, "reference_length_m": line.length, "geometry": shapely.LineString(np.column_stack([x, y, z]))})
+        row.update({"length_m": total_len, "n_sections": len(ws), "volume_m3": vol})
         if ws:
             row.update({"mean_width_m": float(np.mean(ws)), "max_width_m": float(np.max(ws)),
                         "mean_depth_m": float(np.mean(ds)), "max_depth_m": float(np.max(ds))})
         morph.append(row)
-    axes = gpd.GeoDataFrame(ax_rec or {"polygon_id": [], "length_m": []}, geometry="geometry" if ax_rec else [], crs=grid.crs)
-    sections = gpd.GeoDataFrame(sec_rec or {"polygon_id": [], "station_m": [], "width_m": [], "depth_m": [], "area_m2": [], "slab_m": []},
+    axes = gpd.GeoDataFrame(ax_rec or {"polygon_id": [], "branch": [], "length_m": [], "trim_m": []}, geometry="geometry" if ax_rec else [], crs=grid.crs)
+    sections = gpd.GeoDataFrame(sec_rec or {"polygon_id": [], "branch": [], "station_m": [], "width_m": [], "depth_m": [], "area_m2": [], "slab_m": [],
+                                        "reference_length_m": []},
                                 geometry="geometry" if sec_rec else [], crs=grid.crs)
-    log.info("morphometry: %d polygons, %d medial axes, %d cross-sections, volume %.1f m3", len(morph), len(ax_rec), len(sec_rec),
+    log.info("morphometry: %d polygons, %d medial-axis branches, %d cross-sections, volume %.1f m3", len(morph), len(ax_rec), len(sec_rec),
              sum(r["volume_m3"] for r in morph))
     cols = ["polygon_id", "area_m2", "length_m", "n_sections", "mean_width_m", "max_width_m", "mean_depth_m", "max_depth_m", "volume_m3"]
     return axes, sections, pd.DataFrame(morph, columns=cols)

@@ -78,7 +78,10 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
     a = ax[2]
     if len(sections) and len(morph):
         pid = int(morph.sort_values("length_m", ascending=False)["polygon_id"].iloc[0])
-        s = sections[sections["polygon_id"] == pid].sort_values("station_m")
+        s = sections[sections["polygon_id"] == pid]
+        if "branch" in s:  # the main stem (branch 0); tributaries have their own stations
+            s = s[s["branch"] == 0]
+        s = s.sort_values("station_m")
         a.bar(s["station_m"], s["area_m2"], width=0.8 * s["slab_m"].iloc[0], color="0.7", label="cross-sectional area (m²)")
         a.set_xlabel(f"distance along the medial axis of polygon {pid} (m)")
         a.set_ylabel("area (m²)")
@@ -89,8 +92,9 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
         h1, l1 = a.get_legend_handles_labels()
         h2, l2 = b.get_legend_handles_labels()
         a.legend(h1 + h2, l1 + l2, loc="upper right", fontsize=7)
-        ax[1].plot(*axes[axes["polygon_id"] == pid].geometry.iloc[0].xy, color="yellow", linewidth=1.2)
-    a.set_title("(c) cross-sections every ~10 m along the longest medial axis (yellow in b)")
+        main_axis = axes[(axes["polygon_id"] == pid) & ((axes["branch"] == 0) if "branch" in axes else True)]
+        ax[1].plot(*main_axis.geometry.iloc[0].xy, color="yellow", linewidth=1.2)
+    a.set_title("(c) cross-sections every ~10 m along the main medial axis (yellow in b)")
     save_figure(fig, path, attribution)
 
 

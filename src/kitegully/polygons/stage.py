@@ -18,7 +18,7 @@ from kitegully.io.raster import GridSpec
 from kitegully.polygons.breaklines import CURVATURES, detect_breaklines, low_sides
 from kitegully.polygons.conditioning import barrier_mask, fill_depth, gully_mask, polygons_from_labels, rasterize_lines
 from kitegully.polygons.dem_prep import prepare_dem
-from kitegully.polygons.morphometry import REFERENCES, measure_sections
+from kitegully.polygons.morphometry import BRANCHES, REFERENCES, measure_sections
 from kitegully.polygons.skeleton import skeleton_paths
 from kitegully.polygons.thalweg import thalweg_lines, topographic_convergence_index
 from kitegully.polygons.transects import clip_transects, make_transects, transect_stations
@@ -103,6 +103,16 @@ class PolygonParams:
         Cross-section spacing (m) [P 10].
     reference : str
         Depth reference surface (:data:`kitegully.polygons.morphometry.REFERENCES`) [I].
+    branches : str
+        Medial-axis branches that carry sections: ``all`` (every branch of the pruned medial
+        network reaching half a spacing beyond its parent's edge [I]) or ``longest`` (the
+        longest path only, METHODS 3.2 step 8) (:data:`kitegully.polygons.morphometry.BRANCHES`).
+    rim_search_m : float
+        Depth reference taken at the section ends prolonged to the nearest rim (breakline
+        band) within this distance beyond the polygon edge (m) [I]; 0 = at the polygon edge.
+    prolong_axes : bool
+        Prolong the medial axes' free ends straight on to the polygon outline [I]: thinning
+        stops an axis about a half width short of each end, so its slabs miss the ends.
     """
 
     cell_m: float = 0.5
@@ -139,6 +149,9 @@ class PolygonParams:
     morph_threshold_m: float = 0.5
     section_spacing_m: float = 10.0
     reference: str = "lower_end"
+    branches: str = "longest"
+    rim_search_m: float = 0.0
+    prolong_axes: bool = False
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "PolygonParams":
@@ -152,7 +165,7 @@ class PolygonParams:
         tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"])
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
                                                                           "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"])
-        m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference"])
+        m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"])
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
@@ -168,6 +181,7 @@ class PolygonParams:
             min_area_m2=c["min_area_m2"], keep_on_thalweg=c["keep_on_thalweg"],
             terrain_held=c["terrain_held"], below_rims=c["below_rims"],
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
+            branches=m["branches"], rim_search_m=float(m["rim_search_m"]), prolong_axes=bool(m["prolong_axes"]),
         )
 
     def __post_init__(self) -> None:
@@ -175,6 +189,10 @@ class PolygonParams:
             raise InputError(f"polygons.breaklines.curvature: must be one of {CURVATURES}, got {self.curvature!r}")
         if self.reference not in REFERENCES:
             raise InputError(f"polygons.morphometry.reference: must be one of {REFERENCES}, got {self.reference!r}")
+        if self.branches not in BRANCHES:
+            raise InputError(f"polygons.morphometry.branches: must be one of {BRANCHES}, got {self.branches!r}")
+        if self.rim_search_m < 0:
+            raise InputError(f"polygons.morphometry.rim_search_m: must be 0 or more, got {self.rim_search_m}")
         if self.window_cells < 3 or self.window_cells % 2 == 0:
             raise InputError(f"polygons.breaklines.window_cells: must be odd and at least 3, got {self.window_cells}")
         if self.bridge not in ("all", "transects"):
@@ -294,7 +312,9 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
 
     t = time.perf_counter()
     axes, sections, morph = measure_sections(labels[p.morph_threshold_m], polys[p.morph_threshold_m], dem, level, grid,
-                                             p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha, p.snakes_beta)
+                                             p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
+                                             p.branches, barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells), p.rim_search_m,
+                                             p.prolong_axes)
     T["morphometry_s"] = time.perf_counter() - t
     T["total_s"] = time.perf_counter() - t0
 
@@ -320,7 +340,8 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     ]
     rows += [(f"polygons t = {thr} m (count / m2)", f"{len(polys[thr])} / {polys[thr]['area_m2'].sum():.1f}") for thr in p.thresholds_m]
     rows += [("medial axes", len(axes)), ("cross-sections", len(sections)), ("volume (m3)", round(float(morph["volume_m3"].sum()), 1)),
-             ("depth reference", p.reference)]
+             ("depth reference", p.reference), ("section branches", p.branches),
+             ("rim search beyond the polygon (m)", p.rim_search_m), ("axes prolonged to the outline", p.prolong_axes)]
     rows += [(f"time {k[:-2]} (s)", round(v, 2)) for k, v in T.items()]
     summary = pd.DataFrame(rows, columns=["quantity", "value"]).astype({"value": str})
     log.info("polygons done in %.1f s (%s)", T["total_s"], ", ".join(f"{k} {v:.1f}" for k, v in T.items()))

@@ -1,0 +1,128 @@
+#!/usr/bin/env python
+"""The polygons stage on every ensemble member's photogrammetric DSM (issue 16 targets, issue 15 ensemble).
+
+For each member of the twin ensemble (``default`` = config/sites/kamech_twin.yaml, ``ensN`` =
+config/sites/ensemble/ensN.yaml merged on top of it) whose dense DSM exists under
+``<root>/<site>/dense/dsm.tif`` (written by ``benchmarks/twin_ensemble.py``), the script runs
+the stage's library entry points (:func:`kitegully.polygons.measure_polygons` with
+:meth:`PolygonParams.from_config` of the member's merged ``polygons`` section) and scores the
+t = 0.5 m polygons and their cross-sections against the member's truth
+(:func:`kitegully.polygons.evaluate_against_truth`), as the ``polygons_evaluate`` rule does.
+
+Reported per member, then mean and worst, against the issue-16 targets: IoU of the gullies
+wider than 2 m (their cells) ≥ 0.6, median absolute width error ≤ 1 m, median absolute depth
+error ≤ 0.15 m, total volume within 15 %.
+
+Usage::
+
+    .venv/bin/python benchmarks/polygons_ensemble.py [--root results] [--members default,ens1,...]
+
+Writes ``results/benchmarks/polygons_ensemble.csv`` and ``.md``. A member whose DSM or truth
+is missing is listed as skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "src"))
+
+from kitegully.config import load_yaml  # noqa: E402
+from kitegully.io.raster import Raster  # noqa: E402
+from kitegully.io.vectors import read_vector  # noqa: E402
+from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
+
+BASE = REPO / "config" / "sites" / "kamech_twin.yaml"
+ENSEMBLE_DIR = REPO / "config" / "sites" / "ensemble"
+TARGETS = {"iou_wide": (">=", 0.6), "width_med_abs_m": ("<=", 1.0), "depth_med_abs_m": ("<=", 0.15), "volume_error_pct": ("abs<=", 15.0)}
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def member_config(member: str) -> dict:
+    """The member's merged site configuration (base site file + its override file)."""
+    cfg = load_yaml(BASE)
+    if member != "default":
+        cfg = _merge(cfg, load_yaml(ENSEMBLE_DIR / f"{member}.yaml"))
+    return cfg
+
+
+def score_member(member: str, root: Path) -> dict:
+    """Run the stage on one member's DSM and score it; ``status`` says why a member was skipped."""
+    cfg = member_config(member)
+    site = root / cfg["site"]["name"]
+    dsm, truth = site / "dense" / "dsm.tif", site / "twin" / "truth"
+    row: dict = {"member": member, "site": cfg["site"]["name"]}
+    missing = [str(p) for p in (dsm, truth / "gully_polygons.gpkg", truth / "gully_centrelines.gpkg") if not p.exists()]
+    if missing:
+        return {**row, "status": f"skipped: no {missing[0]}"}
+    poly = cfg["polygons"]
+    r = Raster.read(dsm)
+    t0 = time.perf_counter()
+    res = measure_polygons(r.data, r.grid, PolygonParams.from_config(poly), dem_name=str(dsm))
+    run_s = time.perf_counter() - t0
+    ev = evaluate_against_truth(res.polygons[poly["morphometry"]["threshold_m"]], res.sections, read_vector(truth / "gully_polygons.gpkg"),
+                                read_vector(truth / "gully_centrelines.gpkg"), res.grid,
+                                {k: v for k, v in poly["evaluation"].items() if k != "operators"}, cfg["twin"]["gullies"]["u_shape_exponent"])
+    sc = ev["scores"].set_index("kind")
+    e = ev["errors"].set_index("quantity")
+    return {**row, "status": "ok", "iou_wide": sc.loc["wide", "iou"], "iou_all": sc.loc["all", "iou"], "recall_all": sc.loc["all", "recall"],
+            "precision_all": sc.loc["all", "precision"], "sections": int(len(res.sections)),
+            "width_med_abs_m": e.loc["width (m)", "median_abs_error"], "depth_med_abs_m": e.loc["depth (m)", "median_abs_error"],
+            "depth_med_m": e.loc["depth (m)", "median_error"], "area_med_abs_m2": e.loc["area (m2)", "median_abs_error"],
+            "volume_error_pct": e.loc["volume, all sections vs all true gullies (m3)", "error_pct"], "run_s": run_s}
+
+
+def summarise(df: pd.DataFrame) -> pd.DataFrame:
+    """Mean and worst of the scored members, and whether each target is met by the mean and the worst."""
+    ok = df[df["status"] == "ok"]
+    rows = []
+    for col, (op, lim) in TARGETS.items():
+        v = ok[col].to_numpy(float)
+        if op == ">=":
+            worst, met = v.min(), lambda x: x >= lim
+        elif op == "<=":
+            worst, met = v.max(), lambda x: x <= lim
+        else:
+            worst, met = v[np.argmax(np.abs(v))], lambda x: abs(x) <= lim
+        mean = v.mean()
+        rows.append({"quantity": col, "target": f"{op.replace('abs', '|x| ')} {lim:g}", "members": len(v), "mean": mean, "worst": worst,
+                     "mean meets": bool(met(mean)), "worst meets": bool(met(worst))})
+    return pd.DataFrame(rows)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--root", default=str(REPO / "results"), help="results folder holding <site>/dense/dsm.tif and <site>/twin/truth/")
+    ap.add_argument("--members", default="default," + ",".join(p.stem for p in sorted(ENSEMBLE_DIR.glob("*.yaml"))))
+    ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_ensemble"))
+    args = ap.parse_args()
+    rows = []
+    for m in args.members.split(","):
+        rows.append(score_member(m, Path(args.root)))
+        print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
+    df = pd.DataFrame(rows)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    df.to_csv(out.with_suffix(".csv"), index=False)
+    text = "# Polygons stage on the ensemble members' photogrammetric DSMs\n\n" + df.to_markdown(index=False, floatfmt=".3g") + "\n"
+    if (df["status"] == "ok").any():
+        text += "\n## Mean and worst against the issue-16 targets\n\n" + summarise(df).to_markdown(index=False, floatfmt=".3g") + "\n"
+    out.with_suffix(".md").write_text(text, encoding="utf-8")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

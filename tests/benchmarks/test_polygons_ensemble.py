@@ -1,0 +1,39 @@
+"""benchmarks/polygons_ensemble.py: member configs, skipped members and the mean/worst rows."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import polygons_ensemble as pe  # noqa: E402
+
+
+def test_member_config_merges_the_override_on_the_default_site():
+    d, e = pe.member_config("default"), pe.member_config("ens1")
+    assert d["site"]["name"] == "kamech_twin" and e["site"]["name"] == "ens1"
+    assert e["polygons"] == d["polygons"]  # the method is the default site's
+    assert e["seed"] != d["seed"]
+
+
+def test_a_member_without_a_dsm_is_skipped(tmp_path):
+    row = pe.score_member("ens2", tmp_path)
+    assert row["status"].startswith("skipped: no ") and row["status"].endswith("ens2/dense/dsm.tif")
+
+
+def test_mean_and_worst_against_the_targets():
+    df = pd.DataFrame([
+        {"status": "ok", "iou_wide": 0.7, "width_med_abs_m": 0.8, "depth_med_abs_m": 0.1, "volume_error_pct": -5.0},
+        {"status": "ok", "iou_wide": 0.5, "width_med_abs_m": 1.4, "depth_med_abs_m": 0.2, "volume_error_pct": 20.0},
+        {"status": "skipped: no dsm"},
+    ])
+    s = pe.summarise(df).set_index("quantity")
+    assert s.loc["iou_wide", "mean"] == 0.6 and s.loc["iou_wide", "worst"] == 0.5
+    assert bool(s.loc["iou_wide", "mean meets"]) and not bool(s.loc["iou_wide", "worst meets"])
+    assert s.loc["width_med_abs_m", "worst"] == 1.4 and not bool(s.loc["width_med_abs_m", "mean meets"])
+    assert s.loc["volume_error_pct", "worst"] == 20.0 and bool(s.loc["volume_error_pct", "mean meets"])
+    assert (s["members"] == 2).all()
