@@ -14,7 +14,7 @@ from kitegully.polygons.morphometry import extend_to_rims, measure_sections, sec
 from kitegully.polygons.skeleton import branch_paths
 from kitegully.polygons.stage import PolygonParams
 
-from polygon_synthetic import CRS, notch_dem, true_area
+from .polygon_synthetic import CRS, notch_dem, true_area
 from kitegully.io.raster import GridSpec
 
 

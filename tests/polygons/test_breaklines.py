@@ -8,7 +8,7 @@ import pytest
 from kitegully import InputError
 from kitegully.polygons.breaklines import convexity, detect_breaklines, quadratic_coefficients
 
-from polygon_synthetic import notch_dem
+from .polygon_synthetic import notch_dem
 
 
 def test_quadratic_coefficients_exact_on_a_quadric():

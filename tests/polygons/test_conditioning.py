@@ -50,7 +50,7 @@ def test_dams_make_pools_on_a_sloping_channel():
 
 def test_pools_below_the_rims_kept_compartments_beyond_them_dropped():
     from kitegully.polygons.breaklines import detect_breaklines, low_sides
-    from polygon_synthetic import notch_dem
+    from .polygon_synthetic import notch_dem
 
     dem, grid, xc = notch_dem("V", width=8.0, depth=2.0, cross_slope=0.05)
     xs, _ = grid.cell_centres()

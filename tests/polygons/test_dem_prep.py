@@ -9,7 +9,7 @@ from kitegully import InputError
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.dem_prep import fill_moving_planes, min_z_resample
 
-from polygon_synthetic import CRS
+from .polygon_synthetic import CRS
 
 
 def test_min_z_keeps_the_lowest_source_cell():

@@ -12,7 +12,7 @@ from kitegully.io.raster import GridSpec
 from kitegully.polygons.evaluation import polygon_scores, table1, EvaluationParams
 from kitegully.polygons.manual import OperatorParams, operator_outlines
 
-from polygon_synthetic import CRS
+from .polygon_synthetic import CRS
 
 GRID = GridSpec(0.0, 100.0, 0.5, 200, 200, CRS)
 

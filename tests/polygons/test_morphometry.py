@@ -10,7 +10,7 @@ from kitegully.polygons.conditioning import polygons_from_labels
 from kitegully.polygons.morphometry import measure_sections
 from kitegully.polygons.stage import PolygonParams, measure_polygons
 
-from polygon_synthetic import notch_dem, true_area
+from .polygon_synthetic import notch_dem, true_area
 
 WIDTH, DEPTH = 8.0, 2.0
 

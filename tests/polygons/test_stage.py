@@ -10,7 +10,7 @@ from kitegully.config import load_yaml
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.stage import PolygonParams, measure_polygons
 
-from polygon_synthetic import CRS
+from .polygon_synthetic import CRS
 
 
 def test_params_from_the_site_config(repo_root):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kitegully.polygons.thalweg import mfd_catchment_area, snakes_smooth, thalweg_lines, topographic_convergence_index
-from polygon_synthetic import notch_dem
+from .polygon_synthetic import notch_dem
 
 
 def test_mfd_conserves_area_on_a_plane():
