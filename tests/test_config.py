@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from kitegully import InputError
-from kitegully.config import load_yaml, validate_config
+from kitegully.config import checked_choice, checked_number, load_yaml, validate_config
 from kitegully.tether.config import check_tether_config
 
 from snakemake_utils import REPO, run_snakemake
@@ -77,3 +77,23 @@ def test_snakemake_refuses_a_bad_config_before_running(tmp_path):
     assert proc.returncode != 0
     assert f"Invalid configuration: {path}: unknown key 'site.colour'" in proc.stdout + proc.stderr
     assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize("value, low, strict, message", [
+    (0, 0.0, True, r"^dense\.cell_m: must be positive, got 0$"),
+    (-1, 0.0, False, r"^dense\.cell_m: must be at least 0, got -1$"),
+    (2, 3, False, r"^dense\.cell_m: must be at least 3, got 2$"),
+    ("1.0", 0.0, True, r"^dense\.cell_m: must be positive, got '1\.0'$"),
+    (True, 0.0, True, r"^dense\.cell_m: must be positive, got True$"),
+])
+def test_checked_number_names_the_key_and_the_bound(value, low, strict, message):
+    with pytest.raises(InputError, match=message):
+        checked_number({"cell_m": value}, "cell_m", "dense", low, strict=strict)
+
+
+def test_checked_number_and_choice_return_good_values():
+    assert checked_number({"k": 3}, "k", "s", 3, strict=False) == 3
+    assert checked_number({"k": 0.5}, "k", "s") == 0.5
+    assert checked_choice({"m": "laz"}, "m", "georef", ("laz", "las")) == "laz"
+    with pytest.raises(InputError, match=r"^georef\.m: must be one of laz, las, got 'tif'$"):
+        checked_choice({"m": "tif"}, "m", "georef", ("laz", "las"))

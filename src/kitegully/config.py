@@ -165,6 +165,69 @@ def config_section(cfg: Any, where: str, keys: Iterable[str], optional: Iterable
         raise InputError(f"{where}: unknown key '{unknown[0]}' (allowed here: {', '.join(sorted(allowed))})")
     return cfg
 
+def checked_number(cfg: Mapping[str, Any], key: str, where: str, low: float = 0.0, strict: bool = True) -> Any:
+    """Return ``cfg[key]`` after checking that it is a number above (or at least) ``low``.
+
+    The one bound check of the stages' ``from_config`` classmethods, so every section
+    words the same mistake the same way.
+
+    Parameters
+    ----------
+    cfg
+        The config section.
+    key
+        The key to check.
+    where
+        The section's key path for the message, e.g. ``"dense.orthophoto"``.
+    low
+        The bound.
+    strict
+        True: the value must be above ``low`` (``low`` = 0 reads "positive"); False: at least ``low``.
+
+    Returns
+    -------
+    int or float
+        The value as given.
+
+    Raises
+    ------
+    InputError
+        ``"<where>.<key>: must be positive, got <value>"`` (or "above"/"at least").
+    """
+    v = cfg[key]
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and (v > low if strict else v >= low)
+    if not ok:
+        bound = "positive" if strict and low == 0 else f"{'above' if strict else 'at least'} {low:g}"
+        raise InputError(f"{where}.{key}: must be {bound}, got {v!r}")
+    return v
+
+
+def checked_choice(cfg: Mapping[str, Any], key: str, where: str, allowed: Iterable[Any]) -> Any:
+    """Return ``cfg[key]`` after checking that it is one of ``allowed``.
+
+    Parameters
+    ----------
+    cfg, key, where
+        As for :func:`checked_number`.
+    allowed
+        The accepted values.
+
+    Returns
+    -------
+    Any
+        The value as given.
+
+    Raises
+    ------
+    InputError
+        ``"<where>.<key>: must be one of a, b, got <value>"``.
+    """
+    allowed = tuple(allowed)
+    if cfg[key] not in allowed:
+        raise InputError(f"{where}.{key}: must be one of {', '.join(map(str, allowed))}, got {cfg[key]!r}")
+    return cfg[key]
+
+
 def _check_site_crs(config: Mapping[str, Any], sources: Iterable[str | Path]) -> None:
     """``site.crs`` must be a projected CRS in metres; the error names the file that set it."""
     from kitegully.inputs.crs import site_crs  # pyproj is only needed once the schema passed

@@ -64,7 +64,7 @@ def test_dense_params_take_a_number_or_auto():
     dense = load_yaml(REPO / "config/sites/tiny_twin.yaml")["dense"]
     for ok in ("auto", 0.2):
         assert DenseParams.from_config({**copy.deepcopy(dense), "cell_m": ok}).cell_m == ok
-    for bad, msg in (("Auto", "must be a number of metres or 'auto'"), (0, "must be above 0")):
+    for bad, msg in (("Auto", "must be a number of metres or 'auto'"), (0, "must be positive")):
         with pytest.raises(InputError, match=f"dense.cell_m: {msg}"):
             DenseParams.from_config({**copy.deepcopy(dense), "cell_m": bad})
 

@@ -37,7 +37,7 @@ import pandas as pd
 from scipy import stats
 
 from kitegully import InputError
-from kitegully.config import config_section
+from kitegully.config import checked_number, config_section
 from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
@@ -87,12 +87,10 @@ class DatumParams:
         config_section(cfg, "dense.datum", cls.__dataclass_fields__)
         p = cls(enabled=bool(cfg["enabled"]), window_m=float(cfg["window_m"]), confidence=float(cfg["confidence"]),
                 min_gcps=int(cfg["min_gcps"]), outlier_nmad=float(cfg["outlier_nmad"]), min_sd_m=float(cfg["min_sd_m"]))
-        if p.window_m <= 0:
-            raise InputError(f"dense.datum.window_m: must be positive, got {cfg['window_m']!r}")
+        checked_number(cfg, "window_m", "dense.datum")
+        checked_number(cfg, "min_gcps", "dense.datum", 3, strict=False)
         if not 0.5 <= p.confidence < 1:
             raise InputError(f"dense.datum.confidence: must lie in [0.5, 1), got {cfg['confidence']!r}")
-        if p.min_gcps < 3:
-            raise InputError(f"dense.datum.min_gcps: must be at least 3, got {cfg['min_gcps']!r}")
         if p.outlier_nmad <= 0 or p.min_sd_m < 0:
             raise InputError("dense.datum: outlier_nmad must be positive and min_sd_m at least 0")
         return p

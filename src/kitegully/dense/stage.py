@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from kitegully import InputError
-from kitegully.config import config_section
+from kitegully.config import checked_number, config_section
 from kitegully.dense.cell import choose_cell
 from kitegully.dense.datum import DatumParams, check_datum
 from kitegully.dense.matching import MatchParams
@@ -34,13 +34,6 @@ from kitegully.io.raster import GridSpec, write_raster
 from kitegully.io.tables import write_table
 
 log = logging.getLogger(__name__)
-
-
-def _positive(cfg: Mapping[str, Any], key: str, where: str, low: float = 0.0, strict: bool = True) -> float:
-    v = cfg[key]
-    if not (v > low if strict else v >= low):
-        raise InputError(f"{where}.{key}: must be {'above' if strict else 'at least'} {low:g}, got {v!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -71,10 +64,10 @@ class OrthoParams:
     def from_config(cls, cfg: Mapping[str, Any]) -> "OrthoParams":
         """Build from ``dense.orthophoto``; raises InputError naming a bad key."""
         config_section(cfg, "dense.orthophoto", cls.__dataclass_fields__)
-        _positive(cfg, "upsample", "dense.orthophoto", 1, strict=False)
-        _positive(cfg, "tile_cells", "dense.orthophoto", 16, strict=False)
-        _positive(cfg, "overlap_m", "dense.orthophoto", strict=False)
-        _positive(cfg, "occlusion_tolerance_m", "dense.orthophoto", strict=False)
+        checked_number(cfg, "upsample", "dense.orthophoto", 1, strict=False)
+        checked_number(cfg, "tile_cells", "dense.orthophoto", 16, strict=False)
+        checked_number(cfg, "overlap_m", "dense.orthophoto", strict=False)
+        checked_number(cfg, "occlusion_tolerance_m", "dense.orthophoto", strict=False)
         return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
 
 
@@ -100,7 +93,7 @@ class ShadingParams:
         config_section(cfg, "dense.shading", cls.__dataclass_fields__)
         if not (0 <= cfg["azimuth_deg"] <= 360 and 0 < cfg["altitude_deg"] <= 90):
             raise InputError("dense.shading: azimuth_deg must lie in 0-360 and altitude_deg in (0, 90]")
-        _positive(cfg, "openness_radius_m", "dense.shading")
+        checked_number(cfg, "openness_radius_m", "dense.shading")
         return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
 
 
@@ -162,7 +155,7 @@ class DenseParams:
         if cfg["cell_m"] != "auto":
             if isinstance(cfg["cell_m"], (str, bool)) or cfg["cell_m"] is None:
                 raise InputError(f"dense.cell_m: must be a number of metres or 'auto', got {cfg['cell_m']!r}")
-            _positive(cfg, "cell_m", "dense")
+            checked_number(cfg, "cell_m", "dense")
         ext = cfg["extent"]
         if ext is not None and ext != "site":
             config_section(ext, "dense.extent", ("xmin", "ymin", "xmax", "ymax"))
@@ -173,7 +166,7 @@ class DenseParams:
             raise InputError(f"dense.extent_percentile: must lie in 0-10, got {cfg['extent_percentile']!r}")
         for key, low in (("tile_cells", 16), ("overlap_cells", 0), ("max_cached_images", 2), ("figure_max_px", 100),
                          ("threads", 1)):
-            _positive(cfg, key, "dense", low, strict=False)
+            checked_number(cfg, key, "dense", low, strict=False)
         config_section(cfg["matching"], "dense.matching", MatchParams.__dataclass_fields__)
         return cls(
             cell_m=cfg["cell_m"], extent=ext, extent_percentile=cfg["extent_percentile"], tile_cells=cfg["tile_cells"],

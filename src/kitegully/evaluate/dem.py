@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from kitegully import InputError
-from kitegully.config import config_section
+from kitegully.config import checked_number, config_section
 from kitegully.io.raster import GridSpec
 
 STAT_NAMES = ("mean", "median", "sd", "rmse", "nmad", "p05", "p95", "n")
@@ -31,10 +31,10 @@ VALIDATE_KEYS = ("bare_classes", "vegetation_classes", "histogram_bins", "error_
 
 
 def _common_checks(cfg: Mapping[str, Any]) -> None:
-    if "error_limit_m" in cfg and not cfg["error_limit_m"] > 0:
-        raise InputError(f"validate.error_limit_m: must be positive, got {cfg['error_limit_m']!r}")
-    if "figure_max_px" in cfg and cfg["figure_max_px"] < 100:
-        raise InputError(f"validate.figure_max_px: must be at least 100, got {cfg['figure_max_px']!r}")
+    if "error_limit_m" in cfg:
+        checked_number(cfg, "error_limit_m", "validate")
+    if "figure_max_px" in cfg:
+        checked_number(cfg, "figure_max_px", "validate", 100, strict=False)
 
 
 @dataclass(frozen=True)
@@ -96,8 +96,7 @@ class ProfileParams:
         if cfg["reference"] not in ("dtm", "dsm"):
             raise InputError(f"validate.profile.reference: must be dtm or dsm, got {cfg['reference']!r}")
         for key in ("auto_length_m", "spacing_m"):
-            if not cfg[key] > 0:
-                raise InputError(f"validate.profile.{key}: must be positive, got {cfg[key]!r}")
+            checked_number(cfg, key, "validate.profile")
         line = cfg["polyline"]
         if line is not None and (len(line) < 2 or any(len(v) != 2 for v in line)):
             raise InputError("validate.profile.polyline: must be null or at least two [x, y] vertices")

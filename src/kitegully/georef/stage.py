@@ -18,7 +18,7 @@ import pandas as pd
 import pycolmap
 
 from kitegully import InputError
-from kitegully.config import config_section
+from kitegully.config import checked_choice, checked_number, config_section
 from kitegully.georef import export
 from kitegully.georef.bundle import Block, BundleSettings
 from kitegully.georef.control import georeference_block
@@ -42,12 +42,6 @@ def _choice(value: Any, allowed: tuple, where: str) -> Any:
         raise InputError(f"{where}: must be one of {', '.join(map(str, allowed))}, got {value!r}")
     return value
 
-
-def _positive(value: Any, where: str, zero_ok: bool = False) -> float:
-    v = float(value)
-    if not (v >= 0 if zero_ok else v > 0):
-        raise InputError(f"{where}: must be {'at least 0' if zero_ok else 'positive'}, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -85,11 +79,11 @@ class GeorefQA:
         if n < 3:
             raise InputError(f"georef.qa.min_gcps_trusted: must be at least 3, got {n}")
         return cls(
-            max_triangulation_px=_positive(cfg["max_triangulation_px"], "georef.qa.max_triangulation_px"),
-            max_residual_m=_positive(cfg["max_residual_m"], "georef.qa.max_residual_m"),
-            coords_tolerance_m=_positive(cfg["coords_tolerance_m"], "georef.qa.coords_tolerance_m", zero_ok=True),
+            max_triangulation_px=float(checked_number(cfg, "max_triangulation_px", "georef.qa")),
+            max_residual_m=float(checked_number(cfg, "max_residual_m", "georef.qa")),
+            coords_tolerance_m=float(checked_number(cfg, "coords_tolerance_m", "georef.qa", strict=False)),
             min_gcps_trusted=n,
-            required_accuracy_m=_positive(cfg["required_accuracy_m"], "georef.qa.required_accuracy_m"),
+            required_accuracy_m=float(checked_number(cfg, "required_accuracy_m", "georef.qa")),
         )
 
 
@@ -108,13 +102,13 @@ def bundle_settings_from_config(cfg: Mapping[str, Any], sigma_gcp_xy_m: float, s
     if int(cfg["max_iterations"]) < 1:
         raise InputError(f"georef.bundle.max_iterations: must be at least 1, got {cfg['max_iterations']!r}")
     return BundleSettings(
-        sigma_tie_px=_positive(cfg["sigma_tie_px"], "georef.bundle.sigma_tie_px"),
-        sigma_gcp_px=_positive(cfg["sigma_gcp_px"], "georef.bundle.sigma_gcp_px"),
+        sigma_tie_px=float(checked_number(cfg, "sigma_tie_px", "georef.bundle")),
+        sigma_gcp_px=float(checked_number(cfg, "sigma_gcp_px", "georef.bundle")),
         sigma_gcp_xy_m=sigma_gcp_xy_m, sigma_gcp_z_m=sigma_gcp_z_m, refine=refine,
-        loss=_choice(cfg["loss"], LOSSES, "georef.bundle.loss"),
-        loss_scale=_positive(cfg["loss_scale"], "georef.bundle.loss_scale"),
+        loss=checked_choice(cfg, "loss", "georef.bundle", LOSSES),
+        loss_scale=float(checked_number(cfg, "loss_scale", "georef.bundle")),
         max_iterations=int(cfg["max_iterations"]),
-        rel_tolerance=_positive(cfg["rel_tolerance"], "georef.bundle.rel_tolerance"),
+        rel_tolerance=float(checked_number(cfg, "rel_tolerance", "georef.bundle")),
     )
 
 
@@ -196,7 +190,7 @@ class GeorefParams:
                                        "gcp_pixel_offset_px", "method", "tape_file", "sigma_gcp_xy_m", "sigma_gcp_z_m",
                                        "max_tie_points", "tie_grid", "qa", "bundle", "figure", "cloud_format"),
                        optional=("camera_from_first_epoch",))
-        method = _choice(cfg["method"], METHODS, "georef.method")
+        method = checked_choice(cfg, "method", "georef", METHODS)
         if method == "tape_horn" and not cfg["tape_file"]:
             raise InputError("georef.tape_file: the tape_horn method needs a file of taped distances")
         grid = cfg["tie_grid"]
@@ -205,13 +199,13 @@ class GeorefParams:
         if int(cfg["max_tie_points"]) < 0:
             raise InputError(f"georef.max_tie_points: must be at least 0, got {cfg['max_tie_points']!r}")
         fig = config_section(cfg["figure"], "georef.figure", ("arrow_scale",))
-        sxy = _positive(cfg["sigma_gcp_xy_m"], "georef.sigma_gcp_xy_m")
-        sz = _positive(cfg["sigma_gcp_z_m"], "georef.sigma_gcp_z_m")
+        sxy = float(checked_number(cfg, "sigma_gcp_xy_m", "georef"))
+        sz = float(checked_number(cfg, "sigma_gcp_z_m", "georef"))
         return cls(
-            gcp_format=_choice(cfg["gcp_format"], GCP_FORMATS, "georef.gcp_format"),
+            gcp_format=checked_choice(cfg, "gcp_format", "georef", GCP_FORMATS),
             csv_crs=cfg["csv_crs"],
-            gcp_pixel_frame=_choice(cfg["gcp_pixel_frame"], PIXEL_FRAMES, "georef.gcp_pixel_frame"),
-            gcp_pixel_scale=_positive(cfg["gcp_pixel_scale"], "georef.gcp_pixel_scale"),
+            gcp_pixel_frame=checked_choice(cfg, "gcp_pixel_frame", "georef", PIXEL_FRAMES),
+            gcp_pixel_scale=float(checked_number(cfg, "gcp_pixel_scale", "georef")),
             gcp_pixel_offset_px=float(cfg["gcp_pixel_offset_px"]),
             method=method,
             tape_file=cfg["tape_file"] or None,
@@ -222,7 +216,7 @@ class GeorefParams:
             qa=GeorefQA.from_config(cfg["qa"]),
             bundle=bundle_settings_from_config(cfg["bundle"], sxy, sz),
             arrow_scale=None if fig["arrow_scale"] is None else float(fig["arrow_scale"]),
-            cloud_format=_choice(cfg["cloud_format"], ("laz", "las"), "georef.cloud_format"),
+            cloud_format=checked_choice(cfg, "cloud_format", "georef", ("laz", "las")),
             camera_from_first_epoch=bool(cfg.get("camera_from_first_epoch", False)),
         )
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from kitegully import InputError
-from kitegully.config import config_section
+from kitegully.config import checked_number, config_section
 from kitegully.io.tables import write_table
 from kitegully.sfm.images import ImageInfo, list_images, prepare_images
 from kitegully.sfm.priors import positions_from_log
@@ -27,11 +27,6 @@ log = logging.getLogger(__name__)
 
 MATCHING_METHODS = ("auto", "sequential", "exhaustive", "spatial")
 
-
-def _at_least(cfg: Mapping[str, Any], key: str, low: float, where: str) -> Any:
-    if cfg[key] < low:
-        raise InputError(f"{where}.{key}: must be at least {low}, got {cfg[key]!r}")
-    return cfg[key]
 
 
 @dataclass(frozen=True)
@@ -82,10 +77,9 @@ class SfmMatching:
         if cfg["method"] not in MATCHING_METHODS:
             raise InputError(f"sfm.matching.method: must be one of {', '.join(MATCHING_METHODS)}, got {cfg['method']!r}")
         for key, low in (("overlap", 1), ("exhaustive_max_images", 2), ("spatial_max_neighbors", 1)):
-            _at_least(cfg, key, low, "sfm.matching")
+            checked_number(cfg, key, "sfm.matching", low, strict=False)
         for key in ("log_max_gap_s", "gps_sigma_m", "spatial_max_distance_m"):
-            if not cfg[key] > 0:
-                raise InputError(f"sfm.matching.{key}: must be positive, got {cfg[key]!r}")
+            checked_number(cfg, key, "sfm.matching")
         return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
 
 
@@ -151,11 +145,10 @@ class SfmParams:
                 raise InputError(f"sfm.{key}: must be one of {', '.join(allowed)}, got {cfg[key]!r}")
         for key, low in (("max_image_size", 0), ("max_num_features", 100), ("min_num_matches", 5), ("threads", 1),
                          ("jpeg_quality", 50), ("first_octave", -1)):
-            _at_least(cfg, key, low, "sfm")
+            checked_number(cfg, key, "sfm", low, strict=False)
         if cfg["jpeg_quality"] > 100 or cfg["first_octave"] > 2:
             raise InputError("sfm.jpeg_quality must be at most 100 and sfm.first_octave at most 2")
-        if not cfg["default_focal_factor"] > 0:
-            raise InputError(f"sfm.default_focal_factor: must be positive, got {cfg['default_focal_factor']!r}")
+        checked_number(cfg, "default_focal_factor", "sfm")
         if not isinstance(cfg["deterministic"], bool):
             raise InputError(f"sfm.deterministic: must be true or false, got {cfg['deterministic']!r}")
         values = {k: cfg[k] for k in cls.__dataclass_fields__ if k != "matching"}
