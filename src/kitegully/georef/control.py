@@ -238,11 +238,12 @@ def georeference_block(
     X_model, rp_model = triangulate_gcps(block_model, obs)
     method = params.method
     plan_only = None
-    if method != "tape_horn" and not heights_are_placeholders(survey[:, 2]):
-        check_height_units(block_model, obs, X_model, survey_local, gcp_source)
-    if method != "tape_horn" and heights_are_placeholders(survey[:, 2]):
-        survey_local, plan_only = plan_only_heights(block_model, obs, X_model, survey_local)
-        method = "similarity"
+    if method != "tape_horn":
+        if heights_are_placeholders(survey[:, 2]):
+            survey_local, plan_only = plan_only_heights(block_model, obs, X_model, survey_local)
+            method = "similarity"
+        else:
+            check_height_units(block_model, obs, X_model, survey_local, gcp_source)
     use = select_gcps(obs, X_model, rp_model, survey_local, qa, method)
     log.info("GCPs used: %s", ", ".join(obs[k].gcp.gcp_id for k in np.flatnonzero(use)))
     local, sim, report = solve(block_model, obs, survey_local, X_model, use, method, settings, tape_edges)
