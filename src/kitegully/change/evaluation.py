@@ -87,9 +87,28 @@ def headcut_table(measured: pd.DataFrame, true1: pd.DataFrame, true2: pd.DataFra
         gid.append(g), dist.append(float(d[i])), tr.append(float(ret.get(g, np.nan)))
     out["true_gully_id"], out["digitising_offset_m"], out["true_retreat_m"] = gid, dist, tr
     out["error_m"] = out["retreat_m"] - out["true_retreat_m"]
-    if "retreat_heads_m" in out:
-        out["error_heads_m"] = out["retreat_heads_m"] - out["true_retreat_m"]
+    for k in ("mid", "dod"):
+        if f"retreat_{k}_m" in out:
+            out[f"error_{k}_m"] = out[f"retreat_{k}_m"] - out["true_retreat_m"]
     return out
+
+
+def headcut_rows(ht: pd.DataFrame) -> list[tuple[str, float, str]]:
+    """Summary rows: n, median and 90th percentile of |error| for heads that retreated (true > 0) and stable heads
+    (true = 0: false retreat), for the stated estimate and the half-height and DoD-reach estimates beside it."""
+    rows: list[tuple[str, float, str]] = []
+    if "true_retreat_m" not in ht or "error_m" not in ht:
+        return rows
+    for label, sel in (("heads that retreated", ht["true_retreat_m"] > 0), ("stable heads", ht["true_retreat_m"] == 0)):
+        for k, name in (("", "lip, stated"), ("_mid", "half height"), ("_dod", "DoD reach")):
+            col = f"error{k}_m"
+            if col not in ht:
+                continue
+            e = ht.loc[sel & ht[col].notna(), col].abs()
+            rows += [(f"headcut |error| n, {label}, {name}", float(len(e)), "count"),
+                     (f"headcut |error| median, {label}, {name}", float(e.median()) if len(e) else np.nan, "m"),
+                     (f"headcut |error| p90, {label}, {name}", float(e.quantile(0.9)) if len(e) else np.nan, "m")]
+    return rows
 
 
 def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, str], truth1: str, truth2: str,
@@ -171,8 +190,10 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
         ("headcuts matched", len(hc), "count"),
         ("headcut median |error| (all matched heads)", float(hc["error_m"].abs().median()) if len(hc) else np.nan, "m"),
         ("headcut median |error| (heads that retreated)", float(hc_moving["error_m"].abs().median()) if len(hc_moving) else np.nan, "m"),
-        ("headcut median |error|, head-to-head estimate", float(hc["error_heads_m"].abs().median()) if len(hc) and "error_heads_m" in hc else np.nan, "m"),
-        ("target: headcut median |error| <= 0.5 m", float(len(hc) > 0 and hc["error_m"].abs().median() <= 0.5), "1 = met"),
+        # the target is over heads that really retreated: a stable head measured 0 says nothing about retreat
+        ("target: headcut median |error| <= 0.5 m (heads that retreated)",
+         float(len(hc_moving) > 0 and hc_moving["error_m"].abs().median() <= 0.5), "1 = met"),
+        *headcut_rows(ht),
         ("false detection rate on unchanged cells, 95 %", float(prob["false_rate"]) * 100, "%"),
         ("target: false detections <= 5 % at 95 %", float(prob["false_rate"] <= 0.05), "1 = met"),
         ("detection rate of change > 2 sigma, 95 %", float(prob["detection_rate"]) * 100, "%"),

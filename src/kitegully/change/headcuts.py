@@ -1,21 +1,48 @@
-"""Headcut retreat per digitised head, measured on the two DEMs.
+"""Headcut retreat per digitised head, measured on the two DEMs along the epoch-1 thalweg.
 
-For each head digitised at epoch 1, in a disc of ``search_radius_m`` around it and on each
-DEM separately: incision depth = (Gaussian-smoothed surface, σ = ``incision_sigma_m``) −
-DEM; channel cells are those incised deeper than ``min_incision_m``; the channel piece
-(8-connected) nearest to the digitised point is this gully, and its head is its highest
-cell (a gully runs downhill from its head). A first estimate is the horizontal distance between the
-epoch-1 and epoch-2 heads (and its component along the epoch-1 upslope direction; a head
-that moves downhill is a measurement artefact). The stated estimate, ``retreat_m``, reads
-the retreat from the DoD itself: the piece of significant lowering
-(DoD < −``lowering_m``) that touches the epoch-1 head (within ``touch_m``), and how far it
-reaches upslope of that head along the epoch-1 upslope direction (0 if none). It does not
-depend on finding the epoch-2 head on a noisy DEM, only the epoch-1 one.
+Model ([I], issue 17 session 6). A head is where the channel's incision begins: along the
+thalweg the incision depth rises from the hillslope level ``D_top`` (≈ 0) to the channel's
+``D_bot`` over a head ramp of length L (L ≈ 0 for a vertical headwall, L = the retreat for a
+head that was cut back as a wedge). A DEM made by dense matching sees this profile
+convolved with its matching window of width w (a symmetric kernel):
+
+* the half-height point (depth = ``D_top + ½ (D_bot − D_top)``) of a step or of any ramp
+  symmetric about its centre does not move under a symmetric kernel; the foot and top
+  points of a step move by ± w/2;
+* a linear ramp longer than w is unchanged by the kernel except at its two rounded
+  corners, so the straight line through its 25 % and 75 % crossings, extrapolated to
+  ``D_top``, still meets the hillslope at the lip (where the incision begins); for a step
+  the same line meets it w/2 upslope of the step, the same offset at both epochs, which
+  cancels in the retreat.
+
+The stated head of each epoch is that extrapolated **lip** (sub-cell: the crossings are
+interpolated linearly between profile stations ``profile_step_m`` apart); the
+retreat is lip₁ − lip₂ along the epoch-1 downstream axis (upslope positive, signed: a
+negative value on a stable head is measurement noise, kept so its spread stays visible).
+The half-height retreat (``retreat_mid_m``) and the former estimate, the upslope reach of
+significant DoD lowering from the epoch-1 head (``retreat_dod_m``), are reported beside it.
+
+Steps per head: (1) on epoch 1's ground surface (grey opening over ``object_window_m``: shrub
+crowns narrower than the window are removed, channels, being pits, are kept), cells incised
+more than ``min_incision_m`` below a Gaussian-smoothed surface (σ = ``incision_sigma_m``) are
+channel; the piece nearest the digitised point within ``search_radius_m`` is this gully and
+its highest cell the coarse head; the mean of the piece's cells within ``window_m`` of it is
+the profile origin, and the direction from there to the mean of its cells within
+``axis_length_m`` the downstream axis. (2) Along that axis, from
+``search_radius_m`` upslope to ``window_m + 1.5 m`` downstream, each DEM's depth profile is
+the bank level (median ground elevation ``window_m`` to ``2·window_m`` beyond the thalweg band
+on both sides, averaged) minus the thalweg (the lowest DEM elevation within
+``thalweg_halfwidth_m`` of the axis). (3) ``D_bot`` = median depth from ``window_m`` to
+``window_m + 1.5 m`` downstream of the coarse head (the smoothed step has reached full depth
+there); walking upslope, a crossing of a level is the first station below it that stays
+below it over half a window; ``D_top`` = median depth one to three windows upslope of the
+half-height crossing (two passes, the first with ``D_top`` = 0).
 """
 
 from __future__ import annotations
 
 import logging
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -26,6 +53,12 @@ from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
 
+#: Columns of the headcut table.
+COLUMNS = ["head_id", "x_digitised", "y_digitised", "x1", "y1", "incision1_m", "x2", "y2", "incision2_m", "axis_x", "axis_y",
+           "retreat_m", "retreat_mid_m", "retreat_dod_m"]
+
+_PLATEAU_M = 1.5  # [I] length of the stretch whose median is the channel depth D_bot (several windows' worth of stations)
+
 
 def _smooth_nan(z: np.ndarray, sigma_cells: float) -> np.ndarray:
     ok = np.isfinite(z)
@@ -35,50 +68,150 @@ def _smooth_nan(z: np.ndarray, sigma_cells: float) -> np.ndarray:
         return np.where(den > 0.05, num / den, np.nan)
 
 
-def find_head(z: np.ndarray, grid: GridSpec, x: float, y: float, params: ChangeParams) -> tuple[float, float, float]:
-    """(x, y, incision depth) of the channel head nearest (x, y) on DEM ``z``; NaNs if none.
+def ground_surface(z: np.ndarray, window_cells: int) -> np.ndarray:
+    """Grey opening of ``z`` over a square of ``window_cells``: objects narrower than it (shrubs) removed, pits kept.
 
-    Works on a window of radius + 4σ around the point: O(window cells).
+    NaN stays NaN. O(cells · window).
+    """
+    ok = np.isfinite(z)
+    if not ok.any():
+        return np.full(z.shape, np.nan)
+    zf = np.where(ok, z, np.nanmax(z))
+    return np.where(ok, ndimage.grey_opening(zf, size=(window_cells, window_cells)), np.nan)
+
+
+def _window(grid: GridSpec, x: float, y: float, pad: int) -> tuple[int, int, int, int, float, float]:
+    r0f, c0f = (float(v[0]) for v in grid.rowcol(np.array([x]), np.array([y])))
+    r0, c0 = int(round(r0f)), int(round(c0f))
+    return max(r0 - pad, 0), min(r0 + pad + 1, grid.height), max(c0 - pad, 0), min(c0 + pad + 1, grid.width), r0f, c0f
+
+
+def locate_channel(z: np.ndarray, grid: GridSpec, x: float, y: float, params: ChangeParams) -> tuple[float, float, float, float] | None:
+    """Coarse head (x, y) and unit downstream axis (tx, ty) of the channel nearest (x, y) on DEM ``z``; None if none.
+
+    Works on a window of radius + 4σ around the point: O(window cells · object window).
     """
     c = grid.cell
     rad = params.headcut_search_radius_m / c
     sig = params.headcut_incision_sigma_m / c
-    pad = int(np.ceil(rad + 4 * sig))
-    r0f, c0f = grid.rowcol(np.array([x]), np.array([y]))
-    r0, c0 = int(round(float(r0f[0]))), int(round(float(c0f[0])))
-    ra, rb = max(r0 - pad, 0), min(r0 + pad + 1, grid.height)
-    ca, cb = max(c0 - pad, 0), min(c0 + pad + 1, grid.width)
+    ra, rb, ca, cb, r0f, c0f = _window(grid, x, y, int(np.ceil(rad + 4 * sig)))
     if ra >= rb or ca >= cb:
-        return np.nan, np.nan, np.nan
+        return None
     win = z[ra:rb, ca:cb].astype(np.float64)
-    depth = _smooth_nan(win, sig) - win
+    G = ground_surface(win, max(3, int(round(params.stable_object_window_m / c)) | 1))
+    depth = _smooth_nan(G, sig) - G
     rr, cc = np.mgrid[ra:rb, ca:cb]
-    disc = np.hypot(rr - r0f[0], cc - c0f[0]) <= rad
-    chan = disc & (depth > params.headcut_min_incision_m)
+    dist = np.hypot(rr - r0f, cc - c0f)
+    chan = (dist <= rad) & (depth > params.headcut_min_incision_m)
     if not chan.any():
-        return np.nan, np.nan, np.nan
+        return None
     lab, _ = ndimage.label(chan, structure=np.ones((3, 3)))
-    d2 = np.where(chan, np.hypot(rr - r0f[0], cc - c0f[0]), np.inf)
-    near = lab.ravel()[int(np.argmin(d2))]
-    piece = lab == near
-    k = int(np.nanargmax(np.where(piece, win, -np.inf)))
+    piece = lab == lab.ravel()[int(np.argmin(np.where(chan, dist, np.inf)))]
+    k = int(np.nanargmax(np.where(piece, G, -np.inf)))
     hr, hc = np.unravel_index(k, win.shape)
-    xs, ys = grid.xy(ra + hr, ca + hc)
-    return float(xs), float(ys), float(depth[hr, hc])
+    dh = np.hypot(rr - (ra + hr), cc - (ca + hc)) * c
+    near = piece & (dh <= params.headcut_axis_length_m)
+    top = piece & (dh <= params.headcut_window_m)
+    # origin: the mean of the channel cells within a window of the highest one (the channel's
+    # centre near its head, not a corner cell); axis: from there to the mean of the cells within
+    # axis_length_m (points downstream whatever the channel's width; a principal axis does not
+    # where the piece near the head is a blob, e.g. at a junction)
+    ox, oy = float(np.mean(cc[top])), float(-np.mean(rr[top]))
+    v = np.array([float(np.mean(cc[near])) - ox, float(-np.mean(rr[near])) - oy])
+    n = float(np.hypot(*v))
+    if n < 0.5 * params.headcut_window_m / c:
+        return None
+    hx, hy = grid.xy(-oy, ox)
+    return float(hx), float(hy), float(v[0] / n), float(v[1] / n)
+
+
+def depth_profile(z: np.ndarray, ground: np.ndarray, grid: GridSpec, origin: tuple[int, int], x0: float, y0: float,
+                  t: np.ndarray, s: np.ndarray, params: ChangeParams) -> np.ndarray:
+    """Incision depth (m) at stations ``s`` (m, downstream positive) along the axis ``t`` through (x0, y0).
+
+    ``z`` and ``ground`` are windows of the DEM and its ground surface whose first cell is
+    ``origin`` (row, col) of ``grid``. Bank level (median of the ground ``window_m`` to
+    ``2·window_m`` beyond the thalweg band, mean of both sides) minus the thalweg (lowest
+    DEM elevation within ``thalweg_halfwidth_m``). Bilinear sampling every half cell across.
+    """
+    du = grid.cell / 2
+    a, w = params.headcut_thalweg_halfwidth_m, params.headcut_window_m
+    nrm = np.array([-t[1], t[0]])
+
+    def sample(arr, u):
+        S, U = np.meshgrid(s, u, indexing="ij")
+        r, c = grid.rowcol(x0 + S * t[0] + U * nrm[0], y0 + S * t[1] + U * nrm[1])
+        v = ndimage.map_coordinates(arr, [r.ravel() - origin[0], c.ravel() - origin[1]], order=1, mode="constant",
+                                    cval=np.nan, prefilter=False)
+        return v.reshape(S.shape)
+
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN stations (voids) stay NaN
+        thal = np.nanmin(sample(z, np.arange(-a, a + 1e-9, du)), axis=1)
+        ub = np.arange(a + w, a + 2 * w + 1e-9, du)
+        banks = np.vstack([np.nanmedian(sample(ground, sgn * ub), axis=1) for sgn in (1.0, -1.0)])
+        return np.nanmean(banks, axis=0) - thal
+
+
+def _crossing(s: np.ndarray, d: np.ndarray, i0: int, level: float, run: int) -> float:
+    """Walking upslope from station ``i0``: where ``d`` falls below ``level`` and stays below over ``run`` stations.
+
+    Linear interpolation between the first such station and the nearest station downstream
+    of it at or above the level (sub-station precision). NaN when there is none.
+    """
+    for i in range(min(i0, len(s) - 1), run - 1, -1):
+        if not (np.isfinite(d[i]) and d[i] < level):
+            continue
+        stretch = d[i - run + 1:i + 1]
+        if np.nanmedian(stretch) >= level:
+            continue
+        k = i + 1
+        while k < len(s) and not (np.isfinite(d[k]) and d[k] >= level):
+            k += 1
+        if k >= len(s):
+            return np.nan
+        j = k - 1 if np.isfinite(d[k - 1]) else i
+        return float(s[j] + (level - d[j]) / (d[k] - d[j]) * (s[k] - s[j]))
+    return np.nan
+
+
+def locate_head(s: np.ndarray, d: np.ndarray, params: ChangeParams) -> dict[str, float]:
+    """Lip, half-height point, ``D_top`` and ``D_bot`` of the head on a depth profile (see module docstring).
+
+    ``s`` must start upslope (negative) and reach ``window_m + 1.5 m`` downstream of 0 (the
+    coarse head). NaN where the profile never crosses.
+    """
+    w = params.headcut_window_m
+    step = float(s[1] - s[0])
+    run = max(1, int(round(0.5 * w / step)))
+    i0 = int(np.searchsorted(s, w))
+    bot = (s >= w) & (s <= w + _PLATEAU_M)
+    out = dict(lip=np.nan, mid=np.nan, top=np.nan, bottom=np.nan)
+    if not np.any(np.isfinite(d[bot])):
+        return out
+    Db = float(np.nanmedian(d[bot]))
+    Dt = 0.0
+    for _ in range(2):
+        mid = _crossing(s, d, i0, Dt + 0.5 * (Db - Dt), run)
+        if not np.isfinite(mid) or Db <= Dt:
+            return dict(out, bottom=Db)
+        up = (s >= mid - 3 * w) & (s <= mid - w)
+        Dt = float(np.nanmedian(d[up])) if np.any(np.isfinite(d[up])) else 0.0
+    mid = _crossing(s, d, i0, Dt + 0.5 * (Db - Dt), run)
+    a = _crossing(s, d, i0, Dt + 0.25 * (Db - Dt), run)
+    b = _crossing(s, d, i0, Dt + 0.75 * (Db - Dt), run)
+    lip = a - 0.5 * (b - a) if np.isfinite(a) and np.isfinite(b) and b >= a else np.nan
+    return dict(lip=lip, mid=mid, top=Dt, bottom=Db)
 
 
 def dod_reach(dod: np.ndarray, grid: GridSpec, x1: float, y1: float, up: np.ndarray, radius_m: float,
               lowering_m: float, touch_m: float) -> float:
-    """Upslope reach (m) of the significant-lowering piece touching (x1, y1); 0 when none touches."""
+    """Upslope reach (m) of the significant-lowering piece touching (x1, y1); 0 when none touches (the pre-session-6 estimate)."""
     c = grid.cell
-    pad = int(np.ceil(radius_m / c))
-    r0f, c0f = grid.rowcol(np.array([x1]), np.array([y1]))
-    r0, c0 = int(round(float(r0f[0]))), int(round(float(c0f[0])))
-    ra, rb = max(r0 - pad, 0), min(r0 + pad + 1, grid.height)
-    ca, cb = max(c0 - pad, 0), min(c0 + pad + 1, grid.width)
+    ra, rb, ca, cb, r0f, c0f = _window(grid, x1, y1, int(np.ceil(radius_m / c)))
     win = dod[ra:rb, ca:cb]
     rr, cc = np.mgrid[ra:rb, ca:cb]
-    dist = np.hypot(rr - r0f[0], cc - c0f[0]) * c
+    dist = np.hypot(rr - r0f, cc - c0f) * c
     low = (dist <= radius_m) & (win < -lowering_m)
     if not low.any():
         return 0.0
@@ -87,14 +220,14 @@ def dod_reach(dod: np.ndarray, grid: GridSpec, x1: float, y1: float, up: np.ndar
     if touching.size == 0:
         return 0.0
     piece = np.isin(lab, touching)
-    px = (cc[piece] - c0f[0]) * c
-    py = -(rr[piece] - r0f[0]) * c
+    px = (cc[piece] - c0f) * c
+    py = -(rr[piece] - r0f) * c
     return float(max(0.0, np.max(px * up[0] + py * up[1])))
 
 
 def measure_headcut_retreat(z1: np.ndarray, z2: np.ndarray, grid: GridSpec, heads: pd.DataFrame,
                             params: ChangeParams, lowering_m: float | None = None) -> pd.DataFrame:
-    """Head position on each DEM and the retreat between them, per digitised head.
+    """Head (lip) position on each DEM and the retreat between them, per digitised head.
 
     Parameters
     ----------
@@ -102,42 +235,63 @@ def measure_headcut_retreat(z1: np.ndarray, z2: np.ndarray, grid: GridSpec, head
         Epoch-1 and co-registered epoch-2 DEMs on ``grid``.
     heads : DataFrame
         ``head_id, x, y`` of the heads digitised at epoch 1.
+    params : ChangeParams
+        ``headcut_*`` keys and ``stable_object_window_m`` (the ground surface's window).
     lowering_m : float, optional
-        Significant lowering for the DoD estimate (m); default ``min_incision_m``.
+        Significant lowering of the DoD-reach estimate (m); default ``min_incision_m``.
 
     Returns
     -------
     DataFrame
-        ``head_id, x_digitised, y_digitised, x1, y1, x2, y2``, ``retreat_m`` (the stated
-        estimate: DoD reach upslope of the epoch-1 head), ``retreat_heads_m`` (head to head)
-        and ``retreat_heads_upslope_m`` (its upslope component).
+        :data:`COLUMNS`: ``x1, y1`` / ``x2, y2`` the lips on the epoch-1 axis, ``incision*_m``
+        the channel depth below the hillslope level (D_bot − D_top), ``axis_x, axis_y`` the
+        downstream unit axis, ``retreat_m`` (stated: lip₁ − lip₂, m, upslope positive),
+        ``retreat_mid_m`` (half-height points) and ``retreat_dod_m`` (DoD reach).
+
+    Notes
+    -----
+    O(heads · (local window cells · object window + profile stations · across samples)).
     """
-    z1s = None
-    rows = []
-    dod = z2 - z1
+    c = grid.cell
     low = params.headcut_min_incision_m if lowering_m is None else lowering_m
+    kground = max(3, int(round(params.stable_object_window_m / c)) | 1)
+    step = params.headcut_profile_step_m
+    s = np.arange(-params.headcut_search_radius_m, params.headcut_window_m + _PLATEAU_M + 1e-9, step)
+    span = params.headcut_search_radius_m + params.headcut_thalweg_halfwidth_m + 2 * params.headcut_window_m + kground * c
+    rows = []
     for hid, x, y in zip(heads["head_id"], heads["x"], heads["y"]):
-        x1, y1, d1 = find_head(z1, grid, x, y, params)
-        x2, y2, d2 = find_head(z2, grid, x1 if np.isfinite(x1) else x, y1 if np.isfinite(y1) else y, params)
-        dist = float(np.hypot(x2 - x1, y2 - y1))
-        up = reach = np.nan
-        if np.isfinite(x1):
-            # upslope direction at the epoch-1 head from the smoothed epoch-1 surface
-            if z1s is None:
-                z1s = ndimage.gaussian_filter(np.nan_to_num(z1, nan=float(np.nanmean(z1))), params.headcut_incision_sigma_m / grid.cell)
-                gy, gx = np.gradient(z1s, grid.cell)
-            r, c = (int(round(float(v[0]))) for v in grid.rowcol(np.array([x1]), np.array([y1])))
-            g = np.array([gx[r, c], -gy[r, c]])
-            n = np.hypot(*g)
-            u = g / n if n > 0 else np.array([np.nan, np.nan])
-            if np.isfinite(dist):
-                up = float(np.dot([x2 - x1, y2 - y1], u))
-            if n > 0:
-                reach = dod_reach(dod, grid, x1, y1, u, params.headcut_search_radius_m, low, 2 * grid.cell + 0.5)
-        rows.append(dict(head_id=hid, x_digitised=x, y_digitised=y, x1=x1, y1=y1, incision1_m=d1, x2=x2, y2=y2,
-                         incision2_m=d2, retreat_m=reach, retreat_heads_m=dist, retreat_heads_upslope_m=up))
-    df = pd.DataFrame(rows)
-    log.info("headcuts: %d heads, %d found on DEM 1, median retreat %.2f m (DoD reach), %.2f m (head to head)", len(df),
-             int(df["x1"].notna().sum()), float(df["retreat_m"].median()) if len(df) else np.nan,
-             float(df["retreat_heads_m"].median()) if len(df) else np.nan)
+        row = dict.fromkeys(COLUMNS, np.nan)
+        row.update(head_id=hid, x_digitised=x, y_digitised=y)
+        ch = locate_channel(z1, grid, float(x), float(y), params)
+        if ch is not None:
+            hx, hy, tx, ty = ch
+            t = np.array([tx, ty])
+            ra, rb, ca, cb, _, _ = _window(grid, hx, hy, int(np.ceil(span / c)) + 2)
+            found = []
+            for z in (z1, z2):
+                zw = z[ra:rb, ca:cb].astype(np.float64)
+                prof = depth_profile(zw, ground_surface(zw, kground), grid, (ra, ca), hx, hy, t, s, params)
+                found.append(locate_head(s, prof, params))
+            h1, h2 = found
+            row.update(axis_x=tx, axis_y=ty, incision1_m=h1["bottom"] - h1["top"], incision2_m=h2["bottom"] - h2["top"],
+                       x1=hx + h1["lip"] * tx, y1=hy + h1["lip"] * ty, x2=hx + h2["lip"] * tx, y2=hy + h2["lip"] * ty,
+                       retreat_m=h1["lip"] - h2["lip"], retreat_mid_m=h1["mid"] - h2["mid"])
+            lx, ly = (hx + h1["lip"] * tx, hy + h1["lip"] * ty) if np.isfinite(h1["lip"]) else (hx, hy)
+            row["retreat_dod_m"] = _dod_reach_local(z1, z2, grid, lx, ly, -t, params, low)
+        rows.append(row)
+    df = pd.DataFrame(rows, columns=COLUMNS)
+    if len(df):
+        log.info("headcuts: %d heads, %d located on both DEMs; median retreat %.2f m (lip), %.2f m (half height), %.2f m (DoD reach)",
+                 len(df), int(df["retreat_m"].notna().sum()), float(df["retreat_m"].median()),
+                 float(df["retreat_mid_m"].median()), float(df["retreat_dod_m"].median()))
     return df
+
+
+def _dod_reach_local(z1: np.ndarray, z2: np.ndarray, grid: GridSpec, x: float, y: float, up: np.ndarray,
+                     params: ChangeParams, lowering_m: float) -> float:
+    """:func:`dod_reach` on the DoD of a window around (x, y) only."""
+    pad = int(np.ceil(params.headcut_search_radius_m / grid.cell)) + 1
+    ra, rb, ca, cb, _, _ = _window(grid, x, y, pad)
+    sub = grid.window(ra, ca, rb - ra, cb - ca)
+    return dod_reach(z2[ra:rb, ca:cb] - z1[ra:rb, ca:cb], sub, x, y, up, params.headcut_search_radius_m, lowering_m,
+                     2 * grid.cell + 0.5)

@@ -77,8 +77,28 @@ class ChangeParams:
         Gaussian σ (m) of the smoothed surface from which the incision depth is measured
         ([I] 5 m: a few gully widths).
     headcut_min_incision_m : float
-        Cells incised deeper than this (m) are channel ([I] 0.25 m, the gully stage's
-        depth threshold).
+        Cells incised deeper than this (m) below the smoothed ground surface are channel
+        ([I] 0.25 m, the gully stage's depth threshold). The ground surface is the grey
+        opening over ``stable_object_window_m`` (shrub crowns narrower than it removed).
+    headcut_window_m : float
+        Horizontal resolution of the DEMs (m): the width w of the kernel that smoothed the
+        head's step. [I] The dense-matching window, (2 × ``dense.matching.window_half_cells``
+        + 1) × cell = 5 × 0.2 = 1.0 m on the twin; a LiDAR DEM: its cell. The channel depth is
+        read from w to w + 1.5 m downstream of the coarse head (the smoothed step is at full
+        depth there), the banks lie w to 2w beyond the thalweg band (outside the smoothed
+        channel), a level crossing must hold over w/2, and the hillslope level is read one to
+        three windows upslope of the half-height point.
+    headcut_thalweg_halfwidth_m : float
+        Half-width (m) of the band across the axis in which the thalweg (lowest elevation) is
+        searched. [I] 0.75 m: half the widest head expected (heads 0.3-1.5 m wide), which also
+        absorbs an axis error of ~15° over a 3 m retreat.
+    headcut_axis_length_m : float
+        The channel cells within this distance (m) of the coarse head give the downstream
+        axis (their mean position). [I] 4 m: longer than the largest season's retreat (3 m)
+        plus a window, short enough that a gully bends little.
+    headcut_profile_step_m : float
+        Station spacing along the axis (m). [I] 0.1 m, half a 0.2 m cell: crossings are
+        interpolated linearly between stations.
     widening_margin_m : float
         Each epoch-1 cross-section is extended by this at both ends before the edges are
         found on both DEMs ([I] 3 m: room for a season's bank retreat, about the largest
@@ -132,6 +152,10 @@ class ChangeParams:
     headcut_search_radius_m: float = 10.0
     headcut_incision_sigma_m: float = 5.0
     headcut_min_incision_m: float = 0.25
+    headcut_window_m: float = 1.0
+    headcut_thalweg_halfwidth_m: float = 0.75
+    headcut_axis_length_m: float = 4.0
+    headcut_profile_step_m: float = 0.1
     widening_margin_m: float = 3.0
     widening_min_depth_m: float = 0.25
     widening_end_m: float = 1.0
@@ -154,7 +178,8 @@ class ChangeParams:
         t = config_section(sec["thresholds"], "change.thresholds", ("min_lod_m", "t_factor", "confidence", "coherence"))
         coh = config_section(t["coherence"], "change.thresholds.coherence", ("window_cells", "n_low", "n_high", "p_low", "p_high"))
         b = config_section(sec["budget"], "change.budget", ("variogram_max_lag_m", "variogram_bins", "variogram_samples"))
-        h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"))
+        h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"),
+                           optional=("window_m", "thalweg_halfwidth_m", "axis_length_m", "profile_step_m"))
         w = config_section(sec.get("widening") or {"margin_m": cls.widening_margin_m, "min_depth_m": cls.widening_min_depth_m,
                                                     "end_m": cls.widening_end_m}, "change.widening", ("margin_m", "min_depth_m", "end_m"))
         q = config_section(sec.get("quality") or {"min_correlation": cls.min_correlation, "void_margin_m": cls.void_margin_m},
@@ -175,6 +200,10 @@ class ChangeParams:
             headcut_search_radius_m=float(h["search_radius_m"]),
             headcut_incision_sigma_m=float(h["incision_sigma_m"]),
             headcut_min_incision_m=float(h["min_incision_m"]),
+            headcut_window_m=float(h.get("window_m", cls.headcut_window_m)),
+            headcut_thalweg_halfwidth_m=float(h.get("thalweg_halfwidth_m", cls.headcut_thalweg_halfwidth_m)),
+            headcut_axis_length_m=float(h.get("axis_length_m", cls.headcut_axis_length_m)),
+            headcut_profile_step_m=float(h.get("profile_step_m", cls.headcut_profile_step_m)),
             min_correlation=None if q["min_correlation"] is None else float(q["min_correlation"]),
             void_margin_m=float(q["void_margin_m"]), widening_margin_m=float(w["margin_m"]),
             widening_min_depth_m=float(w["min_depth_m"]), widening_end_m=float(w["end_m"]), seed=int(seed),
@@ -191,6 +220,10 @@ class ChangeParams:
             raise InputError(f"change.quality.min_correlation must be in [-1, 1) (an NCC) or null, got {self.min_correlation}")
         if not (self.widening_margin_m > 0 and self.widening_min_depth_m > 0 and self.widening_end_m > 0):
             raise InputError("change.widening: margin_m, min_depth_m and end_m must be > 0 m")
+        if not (self.headcut_window_m > 0 and self.headcut_thalweg_halfwidth_m > 0 and self.headcut_axis_length_m > 0
+                and 0 < self.headcut_profile_step_m <= self.headcut_window_m / 2):
+            raise InputError("change.headcuts: window_m, thalweg_halfwidth_m and axis_length_m must be > 0 m and "
+                             "profile_step_m in (0, window_m / 2]")
         if self.void_margin_m < 0:
             raise InputError(f"change.quality.void_margin_m must be >= 0 m, got {self.void_margin_m}")
         if not 0.0 < self.coherence_p_low < self.coherence_p_high < 1.0:

@@ -17,7 +17,7 @@ from kitegully.change import budget as bg
 from kitegully.change import plots, uncertainty as unc
 from kitegully.change.coregister import above_ground, coregister, nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
-from kitegully.change.headcuts import measure_headcut_retreat
+from kitegully.change.headcuts import COLUMNS as HEADCUT_COLUMNS, measure_headcut_retreat
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
 from kitegully.change.widening import COLUMNS as WIDENING_COLUMNS, measure_widening
 from kitegully.io.raster import Raster
@@ -137,8 +137,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         lowering = max(params.headcut_min_incision_m, unc.z_of_confidence(params.confidence) * float(np.nanmedian(sigma)))
         heads = measure_headcut_retreat(z1, z2, grid, read_heads(heads_path), params, lowering_m=lowering)
     else:
-        heads = pd.DataFrame(columns=["head_id", "x_digitised", "y_digitised", "x1", "y1", "incision1_m", "x2", "y2",
-                                      "incision2_m", "retreat_m", "retreat_heads_m", "retreat_heads_upslope_m"])
+        heads = pd.DataFrame(columns=HEADCUT_COLUMNS)
     write_table(heads, out["headcuts"])
     if sections_path:
         secs = read_vector(sections_path, crs=grid.crs)
