@@ -76,5 +76,17 @@ def test_weighted_control_bundle_absorbs_field_error():
     assert df_w < 0.06 and df_w < 0.3 * df_fixed
     # the adjusted targets moved towards the truth
     assert np.sqrt(np.mean((xyz - field.xyz) ** 2)) < np.sqrt(np.mean((known.xyz - field.xyz) ** 2))
+    # K1 comes with a standard error that covers its error; K1 and K2 are strongly anti-correlated, and the
+    # corner displacement they make together is known far better than K1 alone
+    from kitegully.stereo.calibration import distortion_precision
+
+    d = distortion_precision(res, cam)
+    assert res.covariance.shape == (5, 5)
+    assert abs(d["K1_err_in_se"]) < 3.5 and d["corr_K1_K2"] < -0.8
+    assert 0.02 < d["edge_dr_se_px"] < 0.3 and abs(d["edge_dr_err_px"]) < 4 * d["edge_dr_se_px"]
+    assert d["edge_dr_px"] == pytest.approx(3.3, abs=0.3)  # 7.6e-6·13.9³ + 2e-8·13.9⁵ mm = 3.3 px at the corner
+    with pytest.raises(InputError, match="the calibration has no covariance"):
+        distortion_precision(fixed)
     with pytest.raises(InputError, match="camera: sigma_px = 0.0 and sigma_field_m = 0.0002 must both be positive"):
         calibrate_camera_weighted(known, obs, cam.width, cam.height, D2H_PIXEL_MM, 0.0, 2e-4)
+

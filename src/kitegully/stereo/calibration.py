@@ -149,12 +149,17 @@ class CalibrationResult:
         Recovered pose of each image.
     n_observations : int
         Target measurements used.
+    covariance : ndarray or None
+        A-posteriori covariance (5 × 5) of ``(f, cx, cy, k1, k2)`` (px, px, px, normalised,
+        normalised) from the bundle's Jacobian, scaled by the variance factor; ``None`` for
+        :func:`calibrate_camera` (OpenCV gives no covariance).
     """
 
     camera: Camera
     rms_px: float
     poses: list
     n_observations: int
+    covariance: np.ndarray | None = None
 
 
 def _check(field: ControlField, observations: list[Observation], name: str) -> None:
@@ -368,9 +373,13 @@ def calibrate_camera_weighted(field: ControlField, observations: list[Observatio
     poses = [Pose(R=R[k], C=-R[k].T @ ext[k, 3:]) for k in range(n_img)]
     r = resid(p)[:2 * len(uv)] * sigma_px
     rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2) * 2))
+    # a-posteriori covariance of the intrinsics: (JᵀJ)⁻¹ (residuals already in units of their σ) × variance factor
+    J = sol.jac.toarray() if hasattr(sol.jac, "toarray") else np.asarray(sol.jac)
+    s0 = float(2 * sol.cost / max(1, m - len(x0)))
+    cov = np.linalg.pinv(J.T @ J)[:5, :5] * s0
     log.info("%s: weighted-control bundle on %d images: RMS %.3f px, targets moved %.3f mm RMS", name, n_img, rms,
              1e3 * float(np.sqrt(np.mean((p[5 + 6 * n_img:].reshape(n_pt, 3) - field.xyz) ** 2))))
-    return CalibrationResult(cam, rms, poses, len(uv)), p[5 + 6 * n_img:].reshape(n_pt, 3)
+    return CalibrationResult(cam, rms, poses, len(uv), cov), p[5 + 6 * n_img:].reshape(n_pt, 3)
 
 
 def cv2_rvec(R: np.ndarray) -> np.ndarray:
@@ -378,3 +387,55 @@ def cv2_rvec(R: np.ndarray) -> np.ndarray:
     import cv2
 
     return cv2.Rodrigues(np.asarray(R, float))[0].ravel()
+
+
+def distortion_precision(result: CalibrationResult, truth: Camera | None = None) -> dict[str, float]:
+    """Precision of the recovered radial distortion: K1 with its standard error, its correlations, the edge displacement.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        A calibration with a ``covariance`` (from :func:`calibrate_camera_weighted`).
+    truth : Camera, optional
+        The simulated true camera, for the errors (recovered − truth).
+
+    Returns
+    -------
+    dict
+        ``K1``, ``K1_se`` (mm⁻²), ``corr_K1_K2``, ``corr_K1_f``, the radial displacement
+        ``Δr = K1 r³ + K2 r⁵`` at the frame corner ``edge_dr_px`` and its standard error
+        ``edge_dr_se_px`` (px, from the K1–K2 covariance), and with ``truth``: ``K1_err_pct``,
+        ``K1_err_in_se`` and ``edge_dr_err_px`` (recovered − true displacement at the corner).
+
+    Notes
+    -----
+    The displacement at the corner is what a DEM sees of the distortion: K1 and K2 both
+    describe it and trade against each other, so K1 alone can be off by tens of percent while
+    Δr at the corner is right to a few hundredths of a pixel.
+    """
+    if result.covariance is None:
+        raise InputError("distortion_precision: the calibration has no covariance (use calibrate_camera_weighted)")
+    cam = result.camera
+    pitch = cam.pixel_pitch_mm
+    f_mm = cam.f * pitch
+    # K1 = k1/f_mm², K2 = k2/f_mm⁴: linearised transformation of (f, k1, k2)
+    k1, k2 = cam.k1, cam.k2
+    G = np.zeros((3, 5))  # rows: f_mm, K1, K2; columns: f, cx, cy, k1, k2
+    G[0, 0] = pitch
+    G[1, 0], G[1, 3] = -2 * k1 / f_mm**3 * pitch, 1 / f_mm**2
+    G[2, 0], G[2, 4] = -4 * k2 / f_mm**5 * pitch, 1 / f_mm**4
+    C = G @ result.covariance @ G.T
+    sd = np.sqrt(np.diag(C))
+    K1, K2 = k1 / f_mm**2, k2 / f_mm**4
+    r_mm = float(np.hypot(cam.width / 2, cam.height / 2) * pitch)
+    g = np.array([0.0, r_mm**3, r_mm**5])
+    out = {"K1": K1, "K1_se": float(sd[1]), "K2": K2, "K2_se": float(sd[2]), "f_mm_se": float(sd[0]),
+           "corr_K1_K2": float(C[1, 2] / (sd[1] * sd[2])), "corr_K1_f": float(C[0, 1] / (sd[0] * sd[1])),
+           "edge_r_mm": r_mm, "edge_dr_px": float((K1 * r_mm**3 + K2 * r_mm**5) / pitch),
+           "edge_dr_se_px": float(np.sqrt(g @ C @ g) / pitch)}
+    if truth is not None:
+        t1, t2 = truth.k1 / (truth.f * pitch) ** 2, truth.k2 / (truth.f * pitch) ** 4
+        out["K1_err_pct"] = float(100 * (K1 - t1) / t1)
+        out["K1_err_in_se"] = float((K1 - t1) / sd[1])
+        out["edge_dr_err_px"] = float(out["edge_dr_px"] - (t1 * r_mm**3 + t2 * r_mm**5) / pitch)
+    return out
