@@ -677,8 +677,10 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     ax.plot(Ls, a_pt * Ls, "-", color="tab:orange")
     ax.plot(tab["L_m"], tab["surface_mae_mm"], "o", color="tab:blue", label=f"surface (DEM): a = {a_s:.4f} mm/m")
     ax.plot(Ls, a_s * Ls, "-", color="tab:blue")
-    ax.plot(Ls, np.sqrt(2 / np.pi) * k * MATCHING_PRECISION_PX * Ls, "--", color="k",
-            label=f"δz model, MAE = √(2/π)·L·δ·σ_d/f, σ_d = {MATCHING_PRECISION_PX} px")
+    ax.plot(tab["L_m"], tab["surface_residual_mae_mm"], "d", color="tab:green", ms=4,
+            label=f"surface minus its error plane: a = {a_res:.4f} mm/m")
+    ax.plot(Ls, np.sqrt(2 / np.pi) * k * delta * Ls, "--", color="k",
+            label=f"δz model, MAE = √(2/π)·L·δ_CCD·δ/f, δ = {delta:.3f} px (measured)")
     ax.plot(Ls, PAPER["a_point"] * Ls, ":", color="tab:orange", label="paper point a = 0.049")
     ax.plot(Ls, PAPER["a_surface"] * Ls, ":", color="tab:blue", label="paper surface a = 0.030")
     ax.set_xlabel("L = H²/B (m)")
