@@ -90,3 +90,21 @@ def test_weighted_control_bundle_absorbs_field_error():
     with pytest.raises(InputError, match="camera: sigma_px = 0.0 and sigma_field_m = 0.0002 must both be positive"):
         calibrate_camera_weighted(known, obs, cam.width, cam.height, D2H_PIXEL_MM, 0.0, 2e-4)
 
+
+
+def test_convergent_poses_can_place_the_field_in_the_frame_corners():
+    from kitegully.stereo.calibration import convergent_poses
+
+    cam = paper_cameras()["left"]
+    centre = np.array([[0.0, 0.0, 0.1]])  # the aim point
+    plain = [cam.project(centre, p)[0] for p in convergent_poses()]
+    assert all(np.hypot(u - cam.cx, v - cam.cy) < 30 for u, v in plain)  # aimed at the field centre (< 30 px: distortion, pp)
+    f = camera_to_table(cam)["f_mm"] / D2H_PIXEL_MM
+    corners = [cam.project(centre, p)[0] for p in convergent_poses(corner_fraction=0.5, frame_px=(cam.width, cam.height, f))]
+    rel = np.array([((u - cam.cx) / (cam.width / 2), (v - cam.cy) / (cam.height / 2)) for u, v in corners])
+    np.testing.assert_allclose(np.abs(rel), 0.5, atol=0.03)  # half-way to a corner (radial distortion moves it by < 3 %)
+    assert len({(np.sign(x), np.sign(y)) for x, y in rel}) == 4  # all four corners
+    field = calibration_field()
+    obs = simulate_observations(cam, field, convergent_poses(corner_fraction=0.5))
+    rmax = np.hypot(cam.width / 2, cam.height / 2)
+    assert max(np.hypot(o.uv[:, 0] - cam.cx, o.uv[:, 1] - cam.cy).max() for o in obs) > 0.85 * rmax
