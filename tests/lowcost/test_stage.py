@@ -61,3 +61,40 @@ def test_tin_dsm_reproduces_a_plane():
     ok = np.isfinite(dsm)
     assert ok.mean() > 0.8
     np.testing.assert_allclose(dsm[ok], (0.1 * (xs - 290000.0) - 0.05 * (ys - 6115000.0) + 2.0)[ok], atol=1e-4)
+
+
+def _obia_cfg():
+    return {"features": {"slope_window_cells": 5}, "seeds": {"bandwidth_cells": 15},
+            "growing": {"position_weight": 0.0, "reference": "mean"}, "exg_blur": {"sigma_cells": 1.0, "radius_cells": 2},
+            "threshold": {"bins": 256, "min_class_fraction": 0.01, "max_valley_ratio": 0.9, "unimodal_class": "grass"},
+            "classification": {"segment_feature": "blurred", "min_area_m2": 0.0, "index": "ndvi", "water_ndvi_below": 0.0}}
+
+
+def test_bare_soil_params_check_the_tile_size():
+    from kitegully.lowcost.stage import BareSoilParams
+    p = BareSoilParams.from_config({"tile_cells": 1024, "obia": _obia_cfg()})
+    assert p.obia.index == "ndvi" and p.tile_cells == 1024
+    with pytest.raises(InputError, match=r"lowcost.bare_soil.tile_cells: must be at least 4 seed band widths \(60 cells\)"):
+        BareSoilParams.from_config({"tile_cells": 40, "obia": _obia_cfg()})
+
+
+def test_bare_soil_maps_are_scored_on_the_land_both_cover(tmp_path):
+    from kitegully.io.raster import GridSpec, write_raster
+    from kitegully.lowcost.stage import score_bare_soil_maps
+    from kitegully.lowcost.twin_site import CLASS_CODES as C
+    grid = GridSpec(0.0, 10.0, 1.0, 4, 2, "EPSG:32756")
+    cls = np.array([[C["rock"], C["rock"], C["plants"], C["water"]], [C["wet_rock"], C["algae"], C["plants"], C["water"]]], np.uint8)
+    ndvi_map = np.array([[1, 1, 0, 255], [1, 0, 0, 255]], np.uint8)       # perfect, sea masked
+    exg_map = np.array([[1, 255, 1, 1], [1, 1, 0, 1]], np.uint8)         # one land cell unmapped, 2 plants cells bare
+    write_raster(tmp_path / "bare_soil_ndvi.tif", ndvi_map, grid, nodata=255)
+    write_raster(tmp_path / "bare_soil_exg.tif", exg_map, grid, nodata=255)
+    t = score_bare_soil_maps(tmp_path, cls, grid, ["rock", "wet_rock"]).set_index("index")
+    assert t.loc["ndvi", "cells"] == t.loc["exg", "cells"] == 5             # land mapped by both
+    assert t.loc["ndvi", "overall_accuracy"] == 1.0
+    assert t.loc["exg", "overall_accuracy"] == pytest.approx(3 / 5)
+    assert t.loc["exg", "bare_producers_accuracy"] == 1.0
+    assert t.loc["exg", "bare_users_accuracy"] == pytest.approx(2 / 4)
+    assert t.loc["exg", "land_cells_unmapped"] == 1 and t.loc["ndvi", "land_cells_unmapped"] == 0
+    assert t.loc["exg", "water_mapped_bare_pct"] == 100.0 and np.isnan(t.loc["ndvi", "water_mapped_bare_pct"])
+    with pytest.raises(InputError, match=r"lowcost.evaluation.bare_classes: unknown cover classes \['sand'\]"):
+        score_bare_soil_maps(tmp_path, cls, grid, ["sand"])

@@ -76,14 +76,35 @@ if "lowcost" in config:
         script:
             "../scripts/lowcost_rtk_bundle.py"
 
+    rule lowcost_bare_soil:
+        input:
+            rgb=result("lowcost", "rgb_orthomosaic.tif"),
+            nir=result("lowcost", "nir_orthomosaic.tif"),
+            dsm=result("lowcost", "dsm.tif"),
+        output:
+            ndvi=result("lowcost", "bare_soil_ndvi.tif"),
+            exg=result("lowcost", "bare_soil_exg.tif"),
+            thresholds=result("lowcost", "bare_soil_thresholds.csv"),
+        params:
+            bare_soil=LOWCOST["bare_soil"],
+        log:
+            logfile("lowcost", "lowcost_bare_soil"),
+        benchmark:
+            benchfile("lowcost", "lowcost_bare_soil")
+        threads: 1
+        script:
+            "../scripts/lowcost_bare_soil.py"
+
     rule lowcost_evaluate:
         input:
             survey=[result("lowcost", n) for n in LOWCOST_SURVEY],
+            bare_soil=[rules.lowcost_bare_soil.output.ndvi, rules.lowcost_bare_soil.output.exg],
             truth=rules.lowcost_twin.output.truth,
         output:
             ndvi_table=report(result("lowcost", "ndvi_by_class.csv"), caption=caption("lowcost_ndvi_by_class"), category="Low-cost survey"),
             ndvi_figure=report(result("lowcost", "ndvi_by_class.png"), caption=caption("lowcost_ndvi_by_class"), category="Low-cost survey"),
             indicators=result("lowcost", "bare_ground_indicators.csv"),
+            bare_soil_obia=report(result("lowcost", "bare_soil_obia.csv"), caption=caption("lowcost_bare_soil_obia"), category="Low-cost survey"),
             georef_truth=result("lowcost", "georef_truth.csv"),
             summary=result("lowcost", "evaluation.json"),
         params:
@@ -95,4 +116,4 @@ if "lowcost" in config:
             "../scripts/lowcost_evaluate.py"
 
     add_targets(rules.lowcost_spectral.output, rules.lowcost_survey.output, rules.lowcost_rtk_bundle.output,
-                rules.lowcost_evaluate.output)
+                rules.lowcost_bare_soil.output, rules.lowcost_evaluate.output)

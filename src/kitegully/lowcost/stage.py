@@ -24,7 +24,7 @@ from scipy.interpolate import LinearNDInterpolator
 
 from kitegully import InputError
 from kitegully.config import config_section
-from kitegully.io.raster import GridSpec, Raster
+from kitegully.io.raster import GridSpec, Raster, read_raster
 from kitegully.io.tables import write_table
 from kitegully.lowcost import spectral as sp
 from kitegully.lowcost.georef import (georeference_rtk, georeference_tape_horn, read_points, read_tape,
@@ -327,6 +327,73 @@ def survey_lowcost(observed_dir: str | Path, sfm_cfg: Mapping[str, Any], survey_
     return info
 
 
+# --------------------------------------------------------------------------- bare soil (OBIA)
+
+
+@dataclass(frozen=True)
+class BareSoilParams:
+    """The ``lowcost.bare_soil`` section: the obia stage's kite-scale map on the mosaics.
+
+    Attributes
+    ----------
+    tile_cells : int
+        Tile side of the segmentation (cells) [I] 1024: the 2 cm mosaic of the strip is two tiles.
+    obia : ObiaParams
+        The obia stage's method keys (``features`` ... ``classification``, checked by
+        :meth:`kitegully.obia.scene.ObiaParams.from_config`); Mayr et al.'s 2 cm settings
+        [P 001] suit the 2 cm mosaics. ``classification.index: ndvi`` is this site's choice
+        (a NIR band exists); the ExG map of the RGB camera alone is made beside it with
+        the same keys.
+    """
+
+    tile_cells: int
+    obia: Any
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> "BareSoilParams":
+        from kitegully.obia.scene import ObiaParams
+        config_section(cfg, "lowcost.bare_soil", ["tile_cells", "obia"])
+        p = ObiaParams.from_config(cfg["obia"])
+        if int(cfg["tile_cells"]) < 4 * p.seed_bandwidth_cells:
+            raise InputError(f"lowcost.bare_soil.tile_cells: must be at least 4 seed band widths "
+                             f"({4 * p.seed_bandwidth_cells} cells), got {cfg['tile_cells']!r}")
+        return cls(int(cfg["tile_cells"]), p)
+
+
+def map_bare_soil(rgb_path: str | Path, nir_path: str | Path, dsm_path: str | Path, cfg: Mapping[str, Any],
+                  out_dir: str | Path) -> pd.DataFrame:
+    """Bare-soil maps of the mosaics by the obia stage's kite-scale OBIA, with each index.
+
+    ``bare_soil_ndvi.tif``: the configured parameters with ``index: ndvi`` (segmentation on
+    R, G, B, NIR and slope; NDVI of the NIR camera's and the RGB camera's red channels);
+    ``bare_soil_exg.tif``: the same parameters on the RGB mosaic alone with ``index: exg``
+    (what an RGB-only team maps; no water mask, ExG cannot see water). Thresholds come from
+    each index's own histogram (valley, Otsu alongside), never from the truth. Writes
+    ``bare_soil_thresholds.csv`` and returns it. Cost: two OBIA runs, O(N log N) in cells.
+    """
+    from kitegully.obia.kite import bare_soil_map
+
+    p = BareSoilParams.from_config(cfg)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    nd = p.obia if p.obia.index == "ndvi" else replace(p.obia, index="ndvi")
+    runs = {"ndvi": (nd, nir_path), "exg": (replace(p.obia, index="exg", water_ndvi_below=None), None)}
+    rows = []
+    for name, (params, nir) in runs.items():
+        t0 = time.perf_counter()
+        path = out / f"bare_soil_{name}.tif"
+        thr = bare_soil_map(rgb_path, dsm_path, path, params, p.tile_cells, nir_path=nir)
+        cls, _ = read_raster(path)
+        mapped = cls != 255
+        rows.append({"index": name, **thr.as_dict(), "water_cells": thr.water_cells or 0,
+                     "mapped_cells": int(mapped.sum()), "bare_share": float(np.mean(cls[mapped] == 1)) if mapped.any() else np.nan,
+                     "seconds": time.perf_counter() - t0})
+        log.info("bare soil by %s: valley %s, Otsu %s, bare share %.3f", name, thr.valley, thr.otsu, rows[-1]["bare_share"])
+    tab = pd.DataFrame(rows)
+    write_table(tab, out / "bare_soil_thresholds.csv")
+    return tab
+
+
 # --------------------------------------------------------------------------- evaluation (twin truth)
 
 
@@ -370,6 +437,41 @@ def _accuracy(pred: np.ndarray, true: np.ndarray) -> dict:
     pe = ((tp + fp) * (tp + fn) + (tn + fn) * (tn + fp)) / n**2
     return {"overall_accuracy": po, "kappa": (po - pe) / (1 - pe), "bare_producers_accuracy": tp / max(tp + fn, 1),
             "bare_users_accuracy": tp / max(tp + fp, 1)}
+
+
+def score_bare_soil_maps(survey_dir: str | Path, cls: np.ndarray, grid: GridSpec, bare_classes) -> pd.DataFrame:
+    """Accuracy of the OBIA bare-soil maps (``bare_soil_ndvi.tif``, ``bare_soil_exg.tif``)
+    against the land cover ``cls`` under the mosaic cells (truth class codes).
+
+    Scored cells: land (not water, as an analyst masks the sea) mapped by both maps, so the
+    two indices are compared on the same cells; reference "bare" = ``bare_classes``.
+    Per map: overall accuracy, kappa, bare producer's and user's accuracy, the land cells
+    the map left unmapped (NDVI: masked as water), and the share of each cover class
+    mapped bare. O(cells).
+    """
+    from kitegully.lowcost.twin_site import CLASS_CODES
+    sv = Path(survey_dir)
+    maps = {}
+    for name in ("ndvi", "exg"):
+        data, g = read_raster(sv / f"bare_soil_{name}.tif")
+        if data.shape != cls.shape or g.transform != grid.transform:
+            raise InputError(f"{sv / f'bare_soil_{name}.tif'}: not on the mosaic grid {grid}")
+        maps[name] = data
+    unknown = sorted(set(bare_classes) - set(CLASS_CODES))
+    if unknown:
+        raise InputError(f"lowcost.evaluation.bare_classes: unknown cover classes {unknown} (known: {list(CLASS_CODES)})")
+    land = (cls > 0) & (cls != CLASS_CODES["water"])
+    both = land & (maps["ndvi"] != 255) & (maps["exg"] != 255)
+    bare_true = np.isin(cls, [CLASS_CODES[c] for c in bare_classes])
+    rows = []
+    for name, m in maps.items():
+        row = {"index": name, **_accuracy(m[both] == 1, bare_true[both]), "cells": int(both.sum()),
+               "land_cells_unmapped": int(np.sum(land & (m == 255)))}
+        for cname, code in CLASS_CODES.items():
+            on = (cls == code) & (m != 255)
+            row[f"{cname}_mapped_bare_pct"] = 100.0 * float(np.mean(m[on] == 1)) if on.any() else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
 
 
 def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping[str, Any], seed: int,
@@ -434,6 +536,8 @@ def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping
         ind.append({"indicator": name, "otsu_threshold": t, **_accuracy(pred[scored], bare_true[scored]),
                     "cells": int(scored.sum())})
     write_table(pd.DataFrame(ind), out / "bare_ground_indicators.csv")
+    obia = score_bare_soil_maps(sv, cls, nd.grid, cfg["bare_classes"])
+    write_table(obia, out / "bare_soil_obia.csv")
     # georeferencing against the truth
     tt = read_points(tr / "targets.csv", "true targets")
     grow = []
@@ -456,7 +560,8 @@ def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping
                  "mean_vertical_error_m": med})
     write_table(pd.DataFrame(grow), out / "georef_truth.csv")
     res = {"max_abs_ndvi_error": float(tab["error"].abs().max()), "dsm_median_error_m": med,
-           "dsm_nmad_m": float(1.4826 * np.median(np.abs(diff - med)))}
+           "dsm_nmad_m": float(1.4826 * np.median(np.abs(diff - med))),
+           "bare_soil_obia_overall_accuracy": dict(zip(obia["index"], obia["overall_accuracy"].astype(float)))}
     (out / "evaluation.json").write_text(json.dumps(res, indent=1) + "\n")
     return res
 

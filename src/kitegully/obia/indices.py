@@ -11,6 +11,8 @@ import numpy as np
 from scipy import ndimage
 
 EXG_RANGE = (-1.0, 2.0)
+#: Range of NDVI, the fixed histogram range of an NDVI threshold.
+NDVI_RANGE = (-1.0, 1.0)
 
 
 def excess_green(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.ndarray:

@@ -1,7 +1,8 @@
 """Kite-scale application: bare-soil map of a site-wide orthophoto + DSM, in tiles.
 
-The histogram (and so the valley threshold) is global: blurred ExG is accumulated tile
-by tile into one fixed-range histogram.  Segmentation and classification then run per
+The histogram (and so the valley threshold) is global: the blurred index (ExG, or NDVI
+where a NIR orthophoto exists and ``obia.classification.index`` is ``ndvi``) is
+accumulated tile by tile into one fixed-range histogram.  Segmentation and classification then run per
 tile (segments do not cross tile borders [I]); the tile core is written to the output.
 Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T cells.
 """
@@ -9,6 +10,7 @@ Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T ce
 from __future__ import annotations
 
 import logging
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -19,8 +21,7 @@ from rasterio.warp import reproject
 from kitegully import InputError
 from kitegully.io.raster import _profile, grid_of, iter_tiles
 from kitegully.obia.classify import NODATA, classify_segments, remove_small_eroded, segment_means
-from kitegully.obia.indices import EXG_RANGE
-from kitegully.obia.scene import ObiaParams, blurred_exg, segment
+from kitegully.obia.scene import ObiaParams, blurred_index, segment
 from kitegully.obia.threshold import ThresholdResult, find_thresholds
 
 log = logging.getLogger("kitegully.obia.kite")
@@ -46,6 +47,31 @@ def _read_tile(ortho, dsm, window):
     return rgb, dem, valid
 
 
+def _read_nir(nir, window, valid) -> np.ndarray | None:
+    """The NIR band of ``window`` (band 1), or None without a NIR orthophoto; clears
+    ``valid`` where it is missing (NaN or its nodata)."""
+    if nir is None:
+        return None
+    band = nir.read(1, window=window).astype(np.float32)
+    if nir.nodata is not None and np.isfinite(nir.nodata):
+        valid &= band != nir.nodata
+    valid &= np.isfinite(band)
+    return band
+
+
+def _tile_index(rgb, nir_band, valid, params, source):
+    """Blurred index of a tile; with a water threshold, open water leaves ``valid`` first
+    (returns the raw index, its blur and the water mask)."""
+    raw, blur = blurred_index(*rgb, valid, params, nir_band, source)
+    wet = np.zeros(valid.shape, dtype=bool)
+    if params.water_ndvi_below is not None:
+        wet = valid & (blur < params.water_ndvi_below)
+        if wet.any():
+            valid &= ~wet
+            raw, blur = blurred_index(*rgb, valid, params, nir_band, source)
+    return raw, blur, wet
+
+
 def _check_grids(ortho, dsm, ortho_path, dsm_path) -> None:
     """Raise InputError unless the DSM can be resampled onto the orthophoto grid.
 
@@ -66,55 +92,99 @@ def _check_grids(ortho, dsm, ortho_path, dsm_path) -> None:
         )
 
 
-def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | Path, params: ObiaParams, tile_cells: int) -> ThresholdResult:
+def _check_nir(ortho, nir, ortho_path, nir_path) -> None:
+    """Raise InputError unless the NIR orthophoto lies on the RGB orthophoto's grid."""
+    if nir.crs != ortho.crs or nir.transform != ortho.transform or nir.shape != ortho.shape:
+        raise InputError(f"{nir_path}: NIR orthophoto grid ({nir.crs}, {nir.shape}, {tuple(nir.transform)[:6]}) is not the "
+                         f"RGB orthophoto's ({ortho.crs}, {ortho.shape}, {tuple(ortho.transform)[:6]}, {ortho_path})")
+
+
+def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | Path, params: ObiaParams, tile_cells: int,
+                  nir_path: str | Path | None = None) -> ThresholdResult:
     """Classify a site orthophoto into grass/vegetated (0) and bare (1); 255 = no data.
 
     Writes a uint8 GeoTIFF on the orthophoto grid and returns the global threshold.
     With a histogram that is not bimodal, every cell gets ``params.unimodal_class``.
+
+    Parameters
+    ----------
+    ortho_path, dsm_path : path
+        RGB orthophoto (bands 1-3) and the DSM (resampled onto the orthophoto's cells).
+    out_path : path
+        The bare-soil GeoTIFF.
+    params : ObiaParams
+        Method parameters; ``params.index`` picks ExG or NDVI.
+    tile_cells : int
+        Tile side (cells); segments do not cross tiles.
+    nir_path : path, optional
+        NIR orthophoto (band 1) on the RGB orthophoto's grid, where the survey has one: it
+        joins the segmentation features and is required by ``index: ndvi``. The returned
+        result's ``water_cells`` counts cells masked by ``water_ndvi_below``.
+
+    Raises
+    ------
+    InputError
+        Unreadable files, grids that do not fit, ``index: ndvi`` without ``nir_path``.
     """
+    if params.index == "ndvi" and nir_path is None:
+        raise InputError(f"{ortho_path}: obia.classification.index is ndvi but the survey has no NIR orthophoto")
     try:
         ortho = rasterio.open(ortho_path)
         dsm = rasterio.open(dsm_path)
+        nir = None if nir_path is None else rasterio.open(nir_path)
     except rasterio.errors.RasterioIOError as exc:
-        raise InputError(f"{ortho_path} / {dsm_path}: cannot open ({exc})") from None
-    with ortho, dsm:
+        raise InputError(f"{ortho_path} / {dsm_path} / {nir_path}: cannot open ({exc})") from None
+    with ExitStack() as stack:
+        for ds in (ortho, dsm, nir):
+            if ds is not None:
+                stack.enter_context(ds)
         if ortho.count < 3:
             raise InputError(f"{ortho_path}: orthophoto needs at least 3 bands (R, G, B), has {ortho.count}")
         _check_grids(ortho, dsm, ortho_path, dsm_path)
+        if nir is not None:
+            _check_nir(ortho, nir, ortho_path, nir_path)
+        src = str(ortho_path)
         if tile_cells < 4 * params.seed_bandwidth_cells:
             raise ValueError(f"tile_cells {tile_cells} must be at least 4 seed band widths ({4 * params.seed_bandwidth_cells} cells)")
         grid = grid_of(ortho, ortho_path)
         halo = params.blur_radius_cells + params.slope_window_cells
         counts = np.zeros(params.hist_bins, dtype=np.int64)
-        edges = np.linspace(EXG_RANGE[0], EXG_RANGE[1], params.hist_bins + 1)
+        edges = np.linspace(*params.index_range, params.hist_bins + 1)
         tiles = list(iter_tiles(grid, tile_cells, halo))
+        water_cells = 0
         for i, (read, core) in enumerate(tiles):
             rgb, dem, valid = _read_tile(ortho, dsm, read)
-            _, blur = blurred_exg(*rgb, valid, params)
+            nir_band = _read_nir(nir, read, valid)
+            _, blur, _ = _tile_index(rgb, nir_band, valid, params, src)
             r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
             inner = blur[r0:r0 + core.height, c0:c0 + core.width]
             counts += np.histogram(inner[np.isfinite(inner)], bins=edges)[0]
             log.info("histogram: tile %d/%d", i + 1, len(tiles))
         centres = 0.5 * (edges[:-1] + edges[1:])
         thr = find_thresholds(counts, centres, params.min_class_fraction, params.max_valley_ratio)
-        log.info("global threshold: valley %s, Otsu %s (%s)", thr.valley, thr.otsu, thr.reason)
+        log.info("global %s threshold: valley %s, Otsu %s (%s)", params.index, thr.valley, thr.otsu, thr.reason)
         unimodal = 0 if params.unimodal_class == "grass" else 1
         profile = _profile(grid, 1, "uint8", NODATA, cog=True)
         Path(out_path).parent.mkdir(parents=True, exist_ok=True)
         with rasterio.open(out_path, "w", **profile) as dst:
             for i, (read, core) in enumerate(tiles):
                 rgb, dem, valid = _read_tile(ortho, dsm, read)
+                nir_band = _read_nir(nir, read, valid)
+                raw, blur, wet = _tile_index(rgb, nir_band, valid, params, src)
                 out = np.full(valid.shape, NODATA, dtype=np.uint8)
                 if valid.any():
-                    seg = segment(rgb[0], rgb[1], rgb[2], dem, grid.cell, valid, params)
+                    seg = segment(rgb[0], rgb[1], rgb[2], dem, grid.cell, valid, params, nir=nir_band)
                     segments, nseg = seg.segments, seg.n_segments
-                    exg, exg_blur = blurred_exg(*rgb, valid, params)
-                    feature = exg_blur if params.segment_feature == "blurred" else exg
+                    feature = blur if params.segment_feature == "blurred" else raw
                     means = segment_means(feature, segments, nseg)
                     out = remove_small_eroded(classify_segments(means, segments, thr.valley, unimodal), grid.cell, params.min_area_m2)
                     out[~valid] = NODATA
                 r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
+                water_cells += int(wet[r0:r0 + core.height, c0:c0 + core.width].sum())
                 dst.write(out[r0:r0 + core.height, c0:c0 + core.width], 1, window=core)
                 log.info("classification: tile %d/%d", i + 1, len(tiles))
             dst.descriptions = ("bare_soil (0 vegetated, 1 bare, 255 no data)",)
+    if params.water_ndvi_below is not None:
+        thr.water_cells = water_cells
+        log.info("open water (blurred NDVI < %g): %d cells masked", params.water_ndvi_below, water_cells)
     return thr

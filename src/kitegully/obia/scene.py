@@ -17,7 +17,7 @@ from kitegully import InputError
 from kitegully.config import config_section
 from kitegully.obia.classify import ERODED, GRASS, NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.features import normalise_features
-from kitegully.obia.indices import EXG_RANGE, excess_green, gaussian_blur
+from kitegully.obia.indices import EXG_RANGE, NDVI_RANGE, excess_green, gaussian_blur, ndvi
 from kitegully.obia.seeds import generate_seeds
 from kitegully.obia.slope import wood_slope
 from kitegully.obia.srg import seeded_region_growing
@@ -26,9 +26,29 @@ from kitegully.obia.threshold import ThresholdResult, find_thresholds, histogram
 log = logging.getLogger("kitegully.obia")
 
 
+#: Bare-soil indices the classification can threshold (``obia.classification.index``).
+INDICES = ("exg", "ndvi")
+
+
 @dataclass(frozen=True)
 class ObiaParams:
-    """Method parameters (config section ``obia``, see the stage schema)."""
+    """Method parameters (config section ``obia``, see the stage schema).
+
+    Attributes (beyond Mayr et al.'s, which the schema documents)
+    ----------
+    index : str
+        ``obia.classification.index`` (optional, default ``exg``): the index whose segment
+        means are thresholded. ``exg`` (Mayr et al.) needs R, G, B only; ``ndvi``
+        (Bryson et al. 2013) needs a NIR band on the orthophoto's grid and is used where
+        one exists [I]: bare soil and rock have NDVI ≈ 0–0.2, green plants ≫ 0, so the
+        two classes lie far apart on NDVI whatever the plants' visible colour.
+    water_ndvi_below : float or None
+        ``obia.classification.water_ndvi_below`` (optional, default none): with
+        ``index: ndvi``, cells whose blurred NDVI is below this value are open water and
+        masked (no data) before segmentation and the histogram [I] 0: water absorbs the
+        NIR, so its NDVI is negative, while dry and wet soil or rock reflect more NIR than
+        red (NDVI > 0). Without it a sea or pond forms a third histogram mode.
+    """
 
     slope_window_cells: int = 5
     seed_bandwidth_cells: int = 15
@@ -42,6 +62,8 @@ class ObiaParams:
     unimodal_class: str = "grass"
     segment_feature: str = "blurred"
     min_area_m2: float = 0.0
+    index: str = "exg"
+    water_ndvi_below: float | None = None
 
     @classmethod
     def from_config(cls, obia: dict) -> "ObiaParams":
@@ -60,9 +82,16 @@ class ObiaParams:
             ("growing", ("position_weight", "reference"), ()),
             ("exg_blur", ("sigma_cells", "radius_cells"), ()),
             ("threshold", ("bins", "min_class_fraction", "max_valley_ratio", "unimodal_class"), ()),
-            ("classification", ("segment_feature", "min_area_m2"), ("marker_mask_factor",)),
+            ("classification", ("segment_feature", "min_area_m2"), ("marker_mask_factor", "index", "water_ndvi_below")),
         ):
             config_section(obia[where], f"obia.{where}", keys, optional=optional)
+        cl = obia["classification"]
+        index = str(cl.get("index", "exg"))
+        if index not in INDICES:
+            raise InputError(f"obia.classification.index: must be one of {list(INDICES)}, got {index!r}")
+        water = cl.get("water_ndvi_below")
+        if water is not None and index != "ndvi":
+            raise InputError("obia.classification.water_ndvi_below: needs index ndvi (the water mask is an NDVI value)")
         return cls(
             slope_window_cells=int(obia["features"]["slope_window_cells"]),
             seed_bandwidth_cells=int(obia["seeds"]["bandwidth_cells"]),
@@ -76,7 +105,14 @@ class ObiaParams:
             unimodal_class=str(obia["threshold"]["unimodal_class"]),
             segment_feature=str(obia["classification"]["segment_feature"]),
             min_area_m2=float(obia["classification"]["min_area_m2"]),
+            index=index,
+            water_ndvi_below=None if water is None else float(water),
         )
+
+    @property
+    def index_range(self) -> tuple[float, float]:
+        """Fixed histogram range of the thresholded index."""
+        return NDVI_RANGE if self.index == "ndvi" else EXG_RANGE
 
 
 @dataclass
@@ -134,17 +170,22 @@ def segment(
     valid: np.ndarray,
     params: ObiaParams,
     t_start: float | None = None,
+    nir: np.ndarray | None = None,
 ) -> Segmentation:
     """Segments of a scene or tile: Wood slope, normalised R, G, B, slope features, seeds, seeded region growing.
 
     The first phase of :func:`classify_scene` and of every tile of
     :func:`kitegully.obia.kite.bare_soil_map`. ``t_start`` (``time.perf_counter()``) lets
-    the ``features`` timing include the caller's band preparation. O(N log N) for N cells.
+    the ``features`` timing include the caller's band preparation. A ``nir`` band, where
+    the survey has one, joins the features (R, G, B, NIR, slope) [I]: plants and bare
+    ground differ most in the NIR, so segment edges follow them there too.
+    O(N log N) for N cells.
     """
     t = {}
     t0 = time.perf_counter() if t_start is None else t_start
     slope = wood_slope(dem, cell, params.slope_window_cells)
-    feats = normalise_features([red, green, blue, slope], valid)
+    layers = [red, green, blue] + ([] if nir is None else [nir]) + [slope]
+    feats = normalise_features(layers, valid)
     t["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     seeds = generate_seeds(feats, valid, params.seed_bandwidth_cells)
@@ -160,6 +201,25 @@ def blurred_exg(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.
     exg = excess_green(red, green, blue)
     exg[~valid] = np.nan
     return exg, gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells)
+
+
+def blurred_index(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.ndarray, params: ObiaParams,
+                  nir: np.ndarray | None = None, source: str = "orthophoto"):
+    """The thresholded index (``params.index``: ExG, or NDVI from ``nir`` and red; NaN off
+    ``valid``) and its Gaussian blur (``exg_blur`` parameters, used for either index). O(N).
+
+    Raises
+    ------
+    InputError
+        ``index: ndvi`` without a NIR band.
+    """
+    if params.index == "exg":
+        return blurred_exg(red, green, blue, valid, params)
+    if nir is None:
+        raise InputError(f"{source}: obia.classification.index is ndvi but no NIR band was given")
+    v = ndvi(nir, red)
+    v[~valid] = np.nan
+    return v, gaussian_blur(v, params.blur_sigma_cells, params.blur_radius_cells)
 
 
 def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaParams, valid: np.ndarray | None = None, source: str = "scene") -> SceneResult:
@@ -187,6 +247,9 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
         raise InputError(f"{source}: orthophoto needs 3 bands (R, G, B), got shape {rgb.shape}")
     if rgb.shape[1:] != dem.shape:
         raise InputError(f"{source}: orthophoto {rgb.shape[1:]} and DEM {dem.shape} are not on the same grid")
+    if params.index != "exg":
+        raise InputError(f"{source}: the close-range scenes have no NIR band; obia.classification.index must be exg "
+                         f"for them, got {params.index!r}")
     t = {}
     t0 = time.perf_counter()
     red, green, blue = (rgb[i].astype(np.float32) for i in range(3))
@@ -216,4 +279,5 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
     return SceneResult(exg, exg_blur, slope, seeds, segments, nseg, means, thr, classes, classes_otsu, t)
 
 
-__all__ = ["ObiaParams", "SceneResult", "Segmentation", "blurred_exg", "classify_scene", "marker_mask", "segment", "EXG_RANGE"]
+__all__ = ["INDICES", "ObiaParams", "SceneResult", "Segmentation", "blurred_exg", "blurred_index", "classify_scene", "marker_mask",
+           "segment", "EXG_RANGE", "NDVI_RANGE"]

@@ -50,6 +50,9 @@ class ThresholdResult:
         Share of cells at or below the valley.
     counts, centres : numpy.ndarray
         The (unsmoothed) histogram.
+    water_cells : int or None
+        Cells masked as open water before the histogram (NDVI maps with
+        ``water_ndvi_below``); None when no water mask was applied.
     """
 
     valley: float | None
@@ -62,10 +65,14 @@ class ThresholdResult:
     low_fraction: float | None = None
     counts: np.ndarray = field(default_factory=lambda: np.zeros(0))
     centres: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    water_cells: int | None = None
 
     def as_dict(self) -> dict:
         keys = ("valley", "otsu", "bimodal", "reason", "low_peak", "high_peak", "valley_ratio", "low_fraction")
-        return {k: getattr(self, k) for k in keys}
+        out = {k: getattr(self, k) for k in keys}
+        if self.water_cells is not None:
+            out["water_cells"] = self.water_cells
+        return out
 
 
 def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
