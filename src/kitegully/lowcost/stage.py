@@ -93,23 +93,29 @@ class SurveyParams:
 
 def measure_spectral_response(cfg: Mapping[str, Any], seed: int, csv_path: str | Path, peaks_path: str | Path,
                               png_path: str | Path) -> pd.DataFrame:
-    """Recover the RGB and NIR-converted cameras' responses from ``draws`` noisy chart shots.
+    """Recover the RGB and NIR-converted cameras' responses from ``draws`` noisy chart calibrations.
 
+    A calibration is one shot of the chart per illuminant (``illuminants``), each the mean
+    of ``frames_per_shot`` raw frames, solved together (:func:`spectral.stack_shots`).
     Writes the curves of the first draw with the truth (``csv_path``), the peak statistics
     over all draws (``peaks_path``) and a figure. Returns the peak table. O(draws x
     lambdas x n_wl^3), a few seconds.
     """
-    config_section(cfg, "lowcost.spectral", ["wl_min_nm", "wl_max_nm", "wl_step_nm", "illuminant", "relative_noise", "draws"])
+    config_section(cfg, "lowcost.spectral", ["wl_min_nm", "wl_max_nm", "wl_step_nm", "illuminants", "relative_noise",
+                                             "frames_per_shot", "draws"])
     p = sp.SpectralParams.from_config(cfg)
     w = p.wavelengths
     _, refl = sp.chart_reflectance(w)
-    A = sp.chart_design(refl, sp.illuminant(p.illuminant, w), p.wl_step_nm)
+    designs = [sp.chart_design(refl, sp.illuminant(i, w), p.wl_step_nm) for i in p.illuminants]
     true = np.column_stack([sp.rgb_response(w), sp.nir_converted_response(w)])
     names = ["red", "green", "blue", "nir"]
     peaks, errs, first = [], [], None
     for d in range(int(cfg["draws"])):
-        v = sp.simulate_chart_shot(A, true, p.relative_noise, rng_for(seed, "lowcost", "chart", d))
-        rec, _ = sp.recover_response(A, v, p.relative_noise, p.lambdas)
+        shots = [sp.simulate_averaged_shot(A, true, p.relative_noise, p.frames_per_shot,
+                                           rng_for(seed, "lowcost", "chart", d, i))
+                 for i, A in zip(p.illuminants, designs)]
+        A3, v = sp.stack_shots(designs, shots)
+        rec, _ = sp.recover_response(A3, v, p.shot_noise, p.lambdas)
         first = rec if first is None else first
         peaks.append(sp.peak_wavelength(w, rec))
         errs.append(sp.curve_error(true, rec))
@@ -132,7 +138,7 @@ def measure_spectral_response(cfg: Mapping[str, Any], seed: int, csv_path: str |
         ax.plot(w, curves[f"{n}_recovered"], color=col, lw=2, label=f"{n} recovered")
     ax.set_xlabel("wavelength (nm)")
     ax.set_ylabel("relative response (max = 1)")
-    ax.set_title("Camera spectral response from a ColorChecker shot (smooth NNLS)")
+    ax.set_title(f"Camera spectral response from ColorChecker shots under {', '.join(p.illuminants)} (smooth NNLS)")
     ax.legend(fontsize=7, ncol=2)
     save_figure(fig, png_path)
     return table
