@@ -37,7 +37,7 @@ if "lowcost" in config:
         script:
             "../scripts/lowcost_spectral.py"
 
-    LOWCOST_SURVEY = ["matches_by_pair_type.csv", "georef_residuals.csv", "georef.json", "survey.json", "dsm.tif",
+    LOWCOST_SURVEY = ["matches_by_pair_type.csv", "georef_residuals.csv", "georef.json", "survey.json", "dsm.tif", "dsm_tin.tif",
                       "rgb_orthomosaic.tif", "nir_orthomosaic.tif", "ndvi.tif", "exg.tif", "slope.tif", "aspect.tif"]
 
     rule lowcost_survey:
@@ -106,6 +106,7 @@ if "lowcost" in config:
             indicators=result("lowcost", "bare_ground_indicators.csv"),
             bare_soil_obia=report(result("lowcost", "bare_soil_obia.csv"), caption=caption("lowcost_bare_soil_obia"), category="Low-cost survey"),
             georef_truth=result("lowcost", "georef_truth.csv"),
+            dsm_truth=result("lowcost", "dsm_truth.csv"),
             summary=result("lowcost", "evaluation.json"),
         params:
             evaluation=LOWCOST["evaluation"],

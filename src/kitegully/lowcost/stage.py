@@ -65,6 +65,17 @@ class SurveyParams:
     waterline_min_spread_m : float
         [I] Across-waterline spread (SD, m) below which only the along-line tilt is fixed
         (1 m: a 2 m band of points resolves a tilt to a few cm/m with 1.5 px clicks).
+    dsm_method : str
+        ``tin`` (the Delaunay TIN of the tie points, paper 004's PMVS+TIN reduced to the
+        sparse cloud) or ``dense``: the dense stage's object-space matcher
+        (:func:`kitegully.dense.surface.dense_surface`) on the RGB photos of the
+        georeferenced block, on the same grid; cells it masks (textureless water,
+        occlusions) take the TIN's height, as the paper's TIN bridges PMVS's gaps. Both
+        DSMs are written (``dsm_tin.tif``, ``dsm_dense.tif``); ``dsm.tif`` is the chosen one.
+    dense : dict or None
+        With ``dsm_method: dense``: ``tile_cells``, ``overlap_cells``, ``max_cached_images``
+        and ``matching`` (the dense stage's ``dense.matching`` keys,
+        :class:`kitegully.dense.matching.MatchParams`).
     """
 
     gamma: float
@@ -74,10 +85,24 @@ class SurveyParams:
     occlusion_tolerance_m: float
     level_to_water: bool
     waterline_min_spread_m: float
+    dsm_method: str = "tin"
+    dense: Any = None
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "SurveyParams":
-        config_section(cfg, "lowcost.survey", cls.__dataclass_fields__)
+        config_section(cfg, "lowcost.survey", [k for k in cls.__dataclass_fields__ if k != "dense"], optional=("dense",))
+        if cfg["dsm_method"] not in ("tin", "dense"):
+            raise InputError(f"lowcost.survey.dsm_method: must be tin or dense, got {cfg['dsm_method']!r}")
+        dense = None
+        if cfg["dsm_method"] == "dense":
+            from kitegully.dense.matching import MatchParams
+            if cfg.get("dense") is None:
+                raise InputError("lowcost.survey.dense: dsm_method dense needs the dense section (tile_cells, overlap_cells, "
+                                 "max_cached_images, matching)")
+            d = config_section(cfg["dense"], "lowcost.survey.dense", ["tile_cells", "overlap_cells", "max_cached_images", "matching"])
+            config_section(d["matching"], "lowcost.survey.dense.matching", MatchParams.__dataclass_fields__)
+            dense = {"tile_cells": int(d["tile_cells"]), "overlap_cells": int(d["overlap_cells"]),
+                     "max_cached_images": int(d["max_cached_images"]), "matching": MatchParams.from_config(d["matching"])}
         for k in ("gamma", "dsm_cell_m", "ortho_upsample", "occlusion_tolerance_m"):
             if not float(cfg[k]) > 0:
                 raise InputError(f"lowcost.survey.{k}: must be positive, got {cfg[k]!r}")
@@ -85,7 +110,7 @@ class SurveyParams:
             raise InputError(f"lowcost.survey.level_to_water: must be true or false, got {cfg['level_to_water']!r}")
         return cls(float(cfg["gamma"]), float(cfg["dsm_cell_m"]), int(cfg["ortho_upsample"]),
                    int(cfg["min_track_length"]), float(cfg["occlusion_tolerance_m"]), cfg["level_to_water"],
-                   float(cfg["waterline_min_spread_m"]))
+                   float(cfg["waterline_min_spread_m"]), str(cfg["dsm_method"]), dense)
 
 
 # --------------------------------------------------------------------------- spectral
@@ -296,7 +321,23 @@ def survey_lowcost(observed_dir: str | Path, sfm_cfg: Mapping[str, Any], survey_
     wv = _transform_views(views, sim, offset)
     keep = [p for p in rec.points3D.values() if p.track.length() >= sp_.min_track_length]
     pts = sim.apply(np.array([p.xyz for p in keep]))
-    dsm, grid = tin_dsm(pts, sp_.dsm_cell_m, crs)
+    tin, grid = tin_dsm(pts, sp_.dsm_cell_m, crs)
+    Raster(tin, grid).write(out / "dsm_tin.tif")
+    dense_info: dict = {}
+    if sp_.dsm_method == "dense":
+        from kitegully.dense.surface import dense_surface
+        from kitegully.dense.views import ViewSet
+        rgb_views = ViewSet([im for im in wv.images if sfm_to_name[im.name].startswith("rgb")], wv.offset, wv.sparse_points)
+        d = sp_.dense
+        res_d = dense_surface(rgb_views, grid, d["matching"], d["tile_cells"], d["overlap_cells"], d["max_cached_images"])
+        Raster(res_d.dsm, grid).write(out / "dsm_dense.tif")
+        matched = np.isfinite(res_d.dsm)
+        dsm = np.where(matched, res_d.dsm, tin).astype(np.float32)
+        dense_info = {"dense_s": res_d.seconds, "dense_matched_share": float(matched[np.isfinite(tin)].mean()),
+                      "dense_coverage_seen": res_d.coverage(), "dense_views": len(rgb_views.images)}
+        log.info("dense DSM: %.1f %% of the TIN's cells matched in %.0f s", 100 * dense_info["dense_matched_share"], res_d.seconds)
+    else:
+        dsm = tin
     Raster(dsm, grid).write(out / "dsm.tif")
     slope, aspect = slope_aspect(dsm, grid.cell)
     Raster(slope, grid).write(out / "slope.tif")
@@ -327,7 +368,7 @@ def survey_lowcost(observed_dir: str | Path, sfm_cfg: Mapping[str, Any], survey_
             "n_cameras": n_cams, "n_points3d": summary["n_points3d"], "n_tin_points": int(len(pts)),
             "mean_reprojection_error_px": summary["mean_reprojection_error_px"],
             "targets_triangulated": len(model_t), "sfm_s": t_sfm, "total_s": time.perf_counter() - t0,
-            "mosaic_cell_m": og.cell, "dsm_cell_m": grid.cell}
+            "mosaic_cell_m": og.cell, "dsm_cell_m": grid.cell, "dsm_method": sp_.dsm_method, **dense_info}
     (out / "survey.json").write_text(json.dumps(info, indent=1) + "\n")
     log.info("low-cost survey: %s", info)
     return info
@@ -487,7 +528,9 @@ def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping
     Writes ``ndvi_by_class.csv`` (+ ``.png``: mean ± SD of 15 x 15 px patch means per class
     against the class NDVI the cameras see and the narrow-band NDVI), ``bare_ground_indicators.csv``
     (ExG and NDVI thresholded by Otsu, accuracy against the land cover; water left out by the
-    observed NDVI < 0) and ``georef_truth.csv`` (target and DSM errors). O(mosaic cells).
+    observed NDVI < 0), ``bare_soil_obia.csv`` (the OBIA maps by NDVI and ExG),
+    ``georef_truth.csv`` (target and DSM errors) and ``dsm_truth.csv`` (each DSM written:
+    products, TIN, dense). O(mosaic cells).
     """
     config_section(cfg, "lowcost.evaluation", ["patch_px", "patches_per_class", "bare_classes"])
     from kitegully.lowcost.twin_site import CLASS_CODES
@@ -554,19 +597,41 @@ def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping
         grow.append({"method": method, "targets": len(d), "mean_3d_error_m": float(np.linalg.norm(d, axis=1).mean()),
                      "mean_horizontal_error_m": float(np.linalg.norm(d[:, :2], axis=1).mean()),
                      "mean_vertical_error_m": float(d[:, 2].mean())})
-    dsm = Raster.read(sv / "dsm.tif")
     tdsm = Raster.read(tr / "dsm.tif")
-    xs, ys = np.meshgrid(*dsm.grid.cell_centres())
-    r, c = tdsm.grid.index(xs, ys)
-    ok = (r >= 0) & (c >= 0) & (r < tdsm.grid.height) & (c < tdsm.grid.width) & np.isfinite(dsm.data)
-    diff = dsm.data[ok] - tdsm.data[r[ok], c[ok]]
-    med = float(np.median(diff))
-    grow.append({"method": f"DSM ({gj['products']}) - true surface", "targets": int(ok.sum()),
-                 "mean_3d_error_m": float(np.sqrt(np.mean(diff**2))), "mean_horizontal_error_m": np.nan,
-                 "mean_vertical_error_m": med})
+    sim_est, sim_ref = _sim(gj[gj["products"]]), _sim(gj["similarity_rtk"])
+    drows = []
+    for label, name in (("products (dsm.tif)", "dsm.tif"), ("TIN of the tie points", "dsm_tin.tif"),
+                        ("dense matching, matched cells only", "dsm_dense.tif")):
+        if name != "dsm.tif" and not (sv / name).exists():
+            continue
+        dsm = Raster.read(sv / name)
+        xs, ys = np.meshgrid(*dsm.grid.cell_centres())
+        r, c = tdsm.grid.index(xs, ys)
+        inside = (r >= 0) & (c >= 0) & (r < tdsm.grid.height) & (c < tdsm.grid.width)
+        ok = inside & np.isfinite(dsm.data)
+        diff = dsm.data[ok] - tdsm.data[r[ok], c[ok]]
+        m = float(np.median(diff))
+        # the surface's shape alone: its points taken back to the model and out through the
+        # RTK-grade block, so the low-cost block's georeferencing error does not enter
+        P = np.column_stack([xs[ok], ys[ok], dsm.data[ok]])
+        W = sim_ref.apply((P - sim_est.t) @ sim_est.R / sim_est.scale)
+        rr, cc = tdsm.grid.index(W[:, 0], W[:, 1])
+        k = (rr >= 0) & (cc >= 0) & (rr < tdsm.grid.height) & (cc < tdsm.grid.width)
+        dr = W[k, 2] - tdsm.data[rr[k], cc[k]]
+        mr = float(np.median(dr))
+        drows.append({"dsm": label, "file": name, "cells": int(ok.sum()), "share_of_cells": float(ok.sum() / max(inside.sum(), 1)),
+                      "median_error_m": m, "nmad_m": float(1.4826 * np.median(np.abs(diff - m))),
+                      "rmse_m": float(np.sqrt(np.mean(diff**2))), "p95_abs_error_m": float(np.percentile(np.abs(diff), 95)),
+                      "rtk_frame_median_error_m": mr, "rtk_frame_nmad_m": float(1.4826 * np.median(np.abs(dr - mr))),
+                      "rtk_frame_p95_abs_error_m": float(np.percentile(np.abs(dr - mr), 95))})
+        if name == "dsm.tif":
+            grow.append({"method": f"DSM ({gj['products']}) - true surface", "targets": int(ok.sum()),
+                         "mean_3d_error_m": float(np.sqrt(np.mean(diff**2))), "mean_horizontal_error_m": np.nan,
+                         "mean_vertical_error_m": m})
+    write_table(pd.DataFrame(drows), out / "dsm_truth.csv")
+    med, nmad = drows[0]["median_error_m"], drows[0]["nmad_m"]
     write_table(pd.DataFrame(grow), out / "georef_truth.csv")
-    res = {"max_abs_ndvi_error": float(tab["error"].abs().max()), "dsm_median_error_m": med,
-           "dsm_nmad_m": float(1.4826 * np.median(np.abs(diff - med))),
+    res = {"max_abs_ndvi_error": float(tab["error"].abs().max()), "dsm_median_error_m": med, "dsm_nmad_m": nmad,
            "bare_soil_obia_overall_accuracy": dict(zip(obia["index"], obia["overall_accuracy"].astype(float)))}
     (out / "evaluation.json").write_text(json.dumps(res, indent=1) + "\n")
     return res
