@@ -385,6 +385,11 @@ class BareSoilParams:
     ----------
     tile_cells : int
         Tile side of the segmentation (cells) [I] 1024: the 2 cm mosaic of the strip is two tiles.
+    min_reflectance : float
+        Mosaic cells darker than this in every visible band are no data for both maps [I]
+        0.01: no lit natural ground (dark water included, 3-6 %) reflects under 1 % in all
+        visible bands, so such cells are unlit or beyond the imaged ground (the twin's
+        strip ends in black); their chromatic coordinates, and so ExG, are noise.
     obia : ObiaParams
         The obia stage's method keys (``features`` ... ``classification``, checked by
         :meth:`kitegully.obia.scene.ObiaParams.from_config`); Mayr et al.'s 2 cm settings
@@ -395,16 +400,19 @@ class BareSoilParams:
 
     tile_cells: int
     obia: Any
+    min_reflectance: float
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "BareSoilParams":
         from kitegully.obia.scene import ObiaParams
-        config_section(cfg, "lowcost.bare_soil", ["tile_cells", "obia"])
+        config_section(cfg, "lowcost.bare_soil", ["tile_cells", "min_reflectance", "obia"])
         p = ObiaParams.from_config(cfg["obia"])
         if int(cfg["tile_cells"]) < 4 * p.seed_bandwidth_cells:
             raise InputError(f"lowcost.bare_soil.tile_cells: must be at least 4 seed band widths "
                              f"({4 * p.seed_bandwidth_cells} cells), got {cfg['tile_cells']!r}")
-        return cls(int(cfg["tile_cells"]), p)
+        if not 0 <= float(cfg["min_reflectance"]) < 1:
+            raise InputError(f"lowcost.bare_soil.min_reflectance: must lie in [0, 1), got {cfg['min_reflectance']!r}")
+        return cls(int(cfg["tile_cells"]), p, float(cfg["min_reflectance"]))
 
 
 def map_bare_soil(rgb_path: str | Path, nir_path: str | Path, dsm_path: str | Path, cfg: Mapping[str, Any],
@@ -415,30 +423,47 @@ def map_bare_soil(rgb_path: str | Path, nir_path: str | Path, dsm_path: str | Pa
     R, G, B, NIR and slope; NDVI of the NIR camera's and the RGB camera's red channels);
     ``bare_soil_exg.tif``: the same parameters on the RGB mosaic alone with ``index: exg``
     (what an RGB-only team maps; no water mask, ExG cannot see water). Thresholds come from
-    each index's own histogram (valley, Otsu alongside), never from the truth. Writes
+    each index's own histogram (valley, Otsu alongside), never from the truth. Cells darker
+    than ``min_reflectance`` in R, G and B are no data in both. Writes
     ``bare_soil_thresholds.csv`` and returns it. Cost: two OBIA runs, O(N log N) in cells.
     """
-    from kitegully.obia.kite import bare_soil_map
+    import tempfile
 
     p = BareSoilParams.from_config(cfg)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     nd = p.obia if p.obia.index == "ndvi" else replace(p.obia, index="ndvi")
-    runs = {"ndvi": (nd, nir_path), "exg": (replace(p.obia, index="exg", water_ndvi_below=None), None)}
+    rgb = Raster.read(rgb_path, band=None)
+    if rgb.data.ndim != 3 or rgb.data.shape[0] < 3:
+        raise InputError(f"{rgb_path}: RGB mosaic needs 3 bands, has shape {rgb.data.shape}")
+    dark = np.all(rgb.data < p.min_reflectance, axis=0)
     rows = []
-    for name, (params, nir) in runs.items():
-        t0 = time.perf_counter()
-        path = out / f"bare_soil_{name}.tif"
-        thr = bare_soil_map(rgb_path, dsm_path, path, params, p.tile_cells, nir_path=nir)
-        cls, _ = read_raster(path)
-        mapped = cls != 255
-        rows.append({"index": name, **thr.as_dict(), "water_cells": thr.water_cells or 0,
-                     "mapped_cells": int(mapped.sum()), "bare_share": float(np.mean(cls[mapped] == 1)) if mapped.any() else np.nan,
-                     "seconds": time.perf_counter() - t0})
-        log.info("bare soil by %s: valley %s, Otsu %s, bare share %.3f", name, thr.valley, thr.otsu, rows[-1]["bare_share"])
+    with tempfile.TemporaryDirectory(dir=out) as tmp:
+        masked = Path(tmp) / "rgb_orthomosaic_lit.tif"
+        rgb.with_data(np.where(dark[None], np.nan, rgb.data[:3]).astype(np.float32)).write(masked, band_names=["red", "green", "blue"])
+        runs = {"ndvi": (nd, nir_path), "exg": (replace(p.obia, index="exg", water_ndvi_below=None), None)}
+        for name, (params, nir) in runs.items():
+            rows.append(_bare_soil_run(name, masked, dsm_path, out, params, p.tile_cells, nir, int(dark.sum())))
     tab = pd.DataFrame(rows)
     write_table(tab, out / "bare_soil_thresholds.csv")
     return tab
+
+
+def _bare_soil_run(name: str, rgb_path: Path, dsm_path: str | Path, out: Path, params, tile_cells: int,
+                   nir: str | Path | None, dark_cells: int) -> dict:
+    """One OBIA map (:func:`map_bare_soil`) and its row of ``bare_soil_thresholds.csv``."""
+    from kitegully.obia.kite import bare_soil_map
+
+    t0 = time.perf_counter()
+    path = out / f"bare_soil_{name}.tif"
+    thr = bare_soil_map(rgb_path, dsm_path, path, params, tile_cells, nir_path=nir)
+    cls, _ = read_raster(path)
+    mapped = cls != 255
+    row = {"index": name, **thr.as_dict(), "water_cells": thr.water_cells or 0, "dark_cells": dark_cells,
+           "mapped_cells": int(mapped.sum()), "bare_share": float(np.mean(cls[mapped] == 1)) if mapped.any() else np.nan,
+           "seconds": time.perf_counter() - t0}
+    log.info("bare soil by %s: valley %s, Otsu %s, bare share %.3f", name, thr.valley, thr.otsu, row["bare_share"])
+    return row
 
 
 # --------------------------------------------------------------------------- evaluation (twin truth)
