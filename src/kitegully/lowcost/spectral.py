@@ -26,9 +26,9 @@ Red and NIR peak bias of the paper's single sunlit shot (issue 18,
 Noise-free data with a small weight recover all four within 3 nm, so the chart holds the
 information in principle. The bias does not follow the penalty (first differences: red
 +11, NIR +11 nm), the discrepancy level (+13 / +13 nm) or the grid (2.5 nm: +12 /
-+16 nm); weight rules that smooth less (UPRE with the stated noise, GCV) move the mean
-peaks within ≈ 10 nm but scatter them (worst draws 15–40 nm) and roughen the curves:
-on one shot the 24 smooth broad-band reflectances cannot resolve the D5100 red curve's
++16 nm); weight rules that smooth less (UPRE with the stated noise, GCV) scatter the
+peaks (worst draws 40 nm) without removing the bias, the L-curve corner over-smooths the
+NIR: on one shot the 24 smooth broad-band reflectances cannot resolve the D5100 red curve's
 steep short-wave rise nor the NIR cut-on at realistic noise, and any smoothing moves the
 maximum towards the long shoulder. The cure is data, as a laboratory calibration
 collects it: ``illuminants`` adds shots under a tungsten-halogen lamp (A: its long-wave
