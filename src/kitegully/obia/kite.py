@@ -60,8 +60,8 @@ def _read_nir(nir, window, valid) -> np.ndarray | None:
 
 
 def _tile_index(rgb, nir_band, valid, params, source):
-    """Blurred index of a tile; with a water threshold, open water leaves ``valid`` first
-    (returns the raw index, its blur and the water mask)."""
+    """Blurred index of a tile for the histogram; with a water threshold, cells of open
+    water leave ``valid`` first (returns the raw index, its blur and the water mask)."""
     raw, blur = blurred_index(*rgb, valid, params, nir_band, source)
     wet = np.zeros(valid.shape, dtype=bool)
     if params.water_ndvi_below is not None:
@@ -170,14 +170,22 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
             for i, (read, core) in enumerate(tiles):
                 rgb, dem, valid = _read_tile(ortho, dsm, read)
                 nir_band = _read_nir(nir, read, valid)
-                raw, blur, wet = _tile_index(rgb, nir_band, valid, params, src)
+                # water is masked per segment here (segment mean of the blurred index below
+                # the water value), so that single cells of land whose NDVI dips below it
+                # (texture, NIR/RGB co-registration) stay land; the histogram above masks cells
+                raw, blur = blurred_index(*rgb, valid, params, nir_band, src)
                 out = np.full(valid.shape, NODATA, dtype=np.uint8)
+                wet = np.zeros(valid.shape, dtype=bool)
                 if valid.any():
                     seg = segment(rgb[0], rgb[1], rgb[2], dem, grid.cell, valid, params, nir=nir_band)
                     segments, nseg = seg.segments, seg.n_segments
                     feature = blur if params.segment_feature == "blurred" else raw
                     means = segment_means(feature, segments, nseg)
-                    out = remove_small_eroded(classify_segments(means, segments, thr.valley, unimodal), grid.cell, params.min_area_m2)
+                    out = classify_segments(means, segments, thr.valley, unimodal)
+                    if params.water_ndvi_below is not None:
+                        wet = (segment_means(blur, segments, nseg) < params.water_ndvi_below)[segments] & (segments > 0)
+                        out[wet] = NODATA
+                    out = remove_small_eroded(out, grid.cell, params.min_area_m2)
                     out[~valid] = NODATA
                 r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
                 water_cells += int(wet[r0:r0 + core.height, c0:c0 + core.width].sum())

@@ -44,8 +44,9 @@ class ObiaParams:
         two classes lie far apart on NDVI whatever the plants' visible colour.
     water_ndvi_below : float or None
         ``obia.classification.water_ndvi_below`` (optional, default none): with
-        ``index: ndvi``, cells whose blurred NDVI is below this value are open water and
-        masked (no data) before segmentation and the histogram [I] 0: water absorbs the
+        ``index: ndvi``, cells whose blurred NDVI is below this value are open water: left
+        out of the histogram, and segments whose mean blurred NDVI is below it are masked
+        (no data) in the map [I] 0: water absorbs the
         NIR, so its NDVI is negative, while dry and wet soil or rock reflect more NIR than
         red (NDVI > 0). Without it a sea or pond forms a third histogram mode.
     """
