@@ -79,7 +79,8 @@ def diagnose(member: str, root: Path) -> list[dict]:
     for name, z in surfaces.items():
         zf = np.where(np.isfinite(z), z, res.dem)
         _, sec, _ = measure_sections(lab, res.polygons[thr], zf, level, res.grid, p.section_spacing_m, p.reference, p.smooth_step_m,
-                                     p.snakes_alpha, p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes)
+                                     p.snakes_alpha, p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes,
+                                     p.ground_segment_m)
         ev = evaluate_against_truth(res.polygons[thr], sec, t_poly, t_cl, res.grid, evcfg, u_exp)
         e = ev["errors"].set_index("quantity")
         per = ev["sections"]

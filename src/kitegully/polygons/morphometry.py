@@ -19,7 +19,10 @@ end of the section, level across ([I] METHODS.md 3.2 step 9); ``line`` = straigh
 between the two ends; ``spill`` = the sink-fill level of the conditioned DEM (the spill
 surface of the pool the section lies in). With rim cells given, the ends are first
 prolonged outwards to the rim (:func:`extend_to_rims`), so the reference stands on the
-upper edges rather than on the pool's outline.
+upper edges rather than on the pool's outline. With a ground segment length ``g`` > 0 (a DSM
+with low vegetation on the rims), the profile is first replaced by its ground
+(:func:`ground_profile`: a 1-D grey opening with a segment of length ``g`` along the section,
+prolonged by ``g`` beyond both reference ends so that the field beside each rim is seen).
 """
 
 from __future__ import annotations
@@ -163,6 +166,40 @@ def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndar
     return float(d.max()), area
 
 
+def ground_profile(z: np.ndarray, step: float, segment_m: float) -> np.ndarray:
+    """Ground of a draped profile under plants narrower than ``segment_m``: 1-D grey opening.
+
+    The opening (minimum, then maximum, over ``segment_m``) removes every bump narrower than
+    the segment (a shrub clump on a rim stands on ground the segment reaches beside it) and
+    keeps every concave part (a gully floor) and every straight one (a field's cross slope)
+    unchanged (the progressive morphological filter of Zhang et al. 2003, one window, along
+    the section). Across a gully the profile's only convex corners are the rims: a rim whose
+    field rises outwards is kept; one whose field falls outwards at cross slope c is lowered
+    by at most c · ``segment_m``.
+
+    Parameters
+    ----------
+    z : ndarray (n,)
+        Elevations every ``step`` m along the section (m); NaN are left as they are.
+    step : float
+        Sample spacing (m).
+    segment_m : float
+        Segment length (m): the widest plant clump to be removed; 0 = ``z`` unchanged.
+
+    Returns
+    -------
+    ndarray (n,)
+        The ground profile (≤ ``z``). O(n · segment / step).
+    """
+    k = int(round(segment_m / step)) + 1
+    if segment_m <= 0 or k < 2 or z.size < k:
+        return z
+    ok = np.isfinite(z)
+    zz = np.where(ok, z, np.nanmax(z) if ok.any() else 0.0)
+    g = ndi.grey_opening(zz, size=k, mode="nearest")
+    return np.where(ok, g, z)
+
+
 def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid: GridSpec, search: float, step: float) -> float:
     """Distance (m) from a section end outwards to the rim within ``search``; 0 if none.
 
@@ -203,6 +240,22 @@ def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, 
     return shapely.LineString([a - oa * u, b + ob * u]), oa
 
 
+def _ground_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(s, ground z) along ``line``: drape the line prolonged by ``segment_m`` at both ends, open it, cut back."""
+    a, b = np.asarray(line.coords[0])[:2], np.asarray(line.coords[-1])[:2]
+    L = float(np.hypot(*(b - a)))
+    if L == 0:
+        s, _, _, z = drape(line, dem, grid, step)
+        return s, z
+    u = (b - a) / L
+    n_out = int(np.ceil(segment_m / step))
+    ext = shapely.LineString([a - n_out * step * u, b + n_out * step * u])
+    s_all, _, _, z_all = drape(ext, dem, grid, step)
+    g = ground_profile(z_all, float(s_all[1] - s_all[0]) if s_all.size > 1 else step, segment_m)
+    s = np.linspace(0.0, L, max(int(np.ceil(L / step)), 1) + 1)
+    return s, np.interp(s + n_out * step, s_all, g)
+
+
 def measure_sections(
     labels: np.ndarray,
     polygons: gpd.GeoDataFrame,
@@ -218,6 +271,7 @@ def measure_sections(
     rims: np.ndarray | None = None,
     rim_search_m: float = 0.0,
     prolong: bool = False,
+    ground_segment_m: float = 0.0,
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -251,6 +305,10 @@ def measure_sections(
     prolong : bool
         Prolong the axes' free ends to the outline (:func:`prolong_to_outline`), so that the
         slabs cover the polygon's ends too.
+    ground_segment_m : float
+        Depth and area are measured on the section's ground profile (:func:`ground_profile`
+        with this segment, m), draped over the reference line prolonged by the segment at both
+        ends; 0 = on the DEM as it is.
 
     Returns
     -------
@@ -323,15 +381,19 @@ def measure_sections(
                 line = piece
                 if rims is not None and rim_search_m > 0:
                     line, _ = extend_to_rims(piece, rims, grid, rim_search_m)
-                s, x, y, z = drape(line, dem64, grid, step)
+                if ground_segment_m > 0:
+                    s, z = _ground_drape(line, dem64, grid, step, ground_segment_m)
+                else:
+                    s, x, y, z = drape(line, dem64, grid, step)
                 lev = None
                 if reference == "spill":
                     _, _, _, lev = drape(line, lev64, grid, step)
+                    lev = np.interp(s, np.linspace(0.0, line.length, lev.size), lev)
                 depth, area = section_profile(s, z, reference, lev)
                 vol += area * slab
                 ws.append(piece.length)
                 ds.append(depth)
-                if line is not piece:  # the stored section is the clipped one (width = its length), draped
+                if line is not piece or ground_segment_m > 0:  # the stored section is the clipped one (width = its length), draped
                     _, x, y, z = drape(piece, dem64, grid, step)
                 sec_rec.append({"polygon_id": pid, "branch": bi, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
                                 "slab_m": slab, "reference_length_m": line.length, "geometry": shapely.LineString(np.column_stack([x, y, z]))})

@@ -152,6 +152,7 @@ class PolygonParams:
     branches: str = "longest"
     rim_search_m: float = 0.0
     prolong_axes: bool = False
+    ground_segment_m: float = 0.0
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "PolygonParams":
@@ -165,7 +166,8 @@ class PolygonParams:
         tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"])
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
                                                                           "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"])
-        m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"])
+        m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"],
+                           optional=["ground_segment_m"])
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
@@ -182,6 +184,7 @@ class PolygonParams:
             terrain_held=c["terrain_held"], below_rims=c["below_rims"],
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
             branches=m["branches"], rim_search_m=float(m["rim_search_m"]), prolong_axes=bool(m["prolong_axes"]),
+            ground_segment_m=float(m.get("ground_segment_m", 0.0)),
         )
 
     def __post_init__(self) -> None:
@@ -191,6 +194,8 @@ class PolygonParams:
             raise InputError(f"polygons.morphometry.reference: must be one of {REFERENCES}, got {self.reference!r}")
         if self.branches not in BRANCHES:
             raise InputError(f"polygons.morphometry.branches: must be one of {BRANCHES}, got {self.branches!r}")
+        if self.ground_segment_m < 0:
+            raise InputError(f"polygons.morphometry.ground_segment_m: must be 0 or more, got {self.ground_segment_m}")
         if self.rim_search_m < 0:
             raise InputError(f"polygons.morphometry.rim_search_m: must be 0 or more, got {self.rim_search_m}")
         if self.window_cells < 3 or self.window_cells % 2 == 0:
@@ -314,7 +319,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     axes, sections, morph = measure_sections(labels[p.morph_threshold_m], polys[p.morph_threshold_m], dem, level, grid,
                                              p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
                                              p.branches, barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells), p.rim_search_m,
-                                             p.prolong_axes)
+                                             p.prolong_axes, p.ground_segment_m)
     T["morphometry_s"] = time.perf_counter() - t
     T["total_s"] = time.perf_counter() - t0
 
@@ -341,7 +346,8 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     rows += [(f"polygons t = {thr} m (count / m2)", f"{len(polys[thr])} / {polys[thr]['area_m2'].sum():.1f}") for thr in p.thresholds_m]
     rows += [("medial axes", len(axes)), ("cross-sections", len(sections)), ("volume (m3)", round(float(morph["volume_m3"].sum()), 1)),
              ("depth reference", p.reference), ("section branches", p.branches),
-             ("rim search beyond the polygon (m)", p.rim_search_m), ("axes prolonged to the outline", p.prolong_axes)]
+             ("rim search beyond the polygon (m)", p.rim_search_m), ("axes prolonged to the outline", p.prolong_axes),
+             ("ground segment across sections (m)", p.ground_segment_m)]
     rows += [(f"time {k[:-2]} (s)", round(v, 2)) for k, v in T.items()]
     summary = pd.DataFrame(rows, columns=["quantity", "value"]).astype({"value": str})
     log.info("polygons done in %.1f s (%s)", T["total_s"], ", ".join(f"{k} {v:.1f}" for k, v in T.items()))
