@@ -55,7 +55,7 @@ def fill_depth(dem: np.ndarray, barriers: np.ndarray, raise_m: float) -> tuple[n
 def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2: float, cell: float,
                seeds: np.ndarray | None = None, bridgeable: np.ndarray | None = None,
                edge_band: np.ndarray | None = None, edge_cells: int = 0, held: np.ndarray | None = None,
-               rims: tuple | None = None) -> np.ndarray:
+               rims: tuple | None = None, held_cells: bool = False) -> np.ndarray:
     """Label raster of the gully polygons at one fill-depth threshold.
 
     ``FD ≥ threshold``, closed with a ``closing_cells`` square (bridges barriers narrower
@@ -65,7 +65,9 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     not also breaklines), so that pools on either side of a breakline stay apart.
     With ``held`` (fill depth of the DEM with the dams alone, no breakline walls), only
     pools (components before the closing) in which the terrain itself holds water at least
-    ``threshold`` deep are kept. With ``rims`` (breakline cells and their lower sides), only
+    ``threshold`` deep are kept; with ``held_cells`` only the cells where it does (water that
+    only the raised breakline walls hold, e.g. a field flooded beyond the rim where a gully's
+    dams end, is not in the incision). With ``rims`` (breakline cells and their lower sides), only
     pools on the lower side of the upper edges they touch are kept
     (:func:`_pools_below_rims`): a compartment beyond the rims of the gullies around it is
     not an incision. With ``edge_band`` (the grown breakline cells) the mask then grows by
@@ -75,7 +77,9 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     Returns int32 labels (0 = not gully), numbered 1..n.
     """
     m = np.nan_to_num(fd, nan=0.0) >= threshold
-    if held is not None:
+    if held is not None and held_cells:
+        m &= np.nan_to_num(held, nan=0.0) >= threshold
+    elif held is not None:
         pools, npool = ndi.label(m, structure=np.ones((3, 3), bool))
         ok = np.zeros(npool + 1, bool)
         ok[np.unique(pools[(np.nan_to_num(held, nan=0.0) >= threshold) & (pools > 0)])] = True

@@ -92,9 +92,11 @@ class PolygonParams:
         Smallest polygon (m²) [P 10].
     keep_on_thalweg : bool
         Keep only polygons touching the thalweg [I].
-    terrain_held : bool
-        Keep only pools where the DEM with the dams alone (no breakline walls) holds water
-        at least t deep [I] (:func:`kitegully.polygons.conditioning.gully_mask`).
+    terrain_held : bool or str
+        The DEM with the dams alone (no breakline walls) must hold water at least t deep [I]
+        (:func:`kitegully.polygons.conditioning.gully_mask`): ``True``/``"pools"`` = keep only
+        pools with such a cell; ``"cells"`` = keep only such cells (water that only the raised
+        breakline walls hold stands beyond the rims); ``False`` = no test.
     below_rims : bool
         Keep only pools on the lower side of the upper edges (breaklines) they touch [I].
     morph_threshold_m : float
@@ -144,7 +146,7 @@ class PolygonParams:
     bridge: str = "all"
     min_area_m2: float = 10.0
     keep_on_thalweg: bool = True
-    terrain_held: bool = False
+    terrain_held: bool | str = False
     below_rims: bool = False
     morph_threshold_m: float = 0.5
     section_spacing_m: float = 10.0
@@ -200,6 +202,8 @@ class PolygonParams:
             raise InputError(f"polygons.morphometry.rim_search_m: must be 0 or more, got {self.rim_search_m}")
         if self.window_cells < 3 or self.window_cells % 2 == 0:
             raise InputError(f"polygons.breaklines.window_cells: must be odd and at least 3, got {self.window_cells}")
+        if self.terrain_held not in (False, True, "pools", "cells"):
+            raise InputError(f"polygons.conditioning.terrain_held: must be false, true, 'pools' or 'cells', got {self.terrain_held!r}")
         if self.bridge not in ("all", "transects"):
             raise InputError(f"polygons.conditioning.bridge: must be 'all' or 'transects', got {self.bridge!r}")
         if self.morph_threshold_m not in self.thresholds_m:
@@ -309,7 +313,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     labels, polys = {}, {}
     for thr in p.thresholds_m:
         lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable, bl_band, p.grow_cells, held,
-                         rims)
+                         rims, held_cells=p.terrain_held == "cells")
         labels[thr] = lab
         polys[thr] = polygons_from_labels(lab, grid, thr, fd=fd)
         log.info("t = %.2f m: %d polygons, %.0f m2", thr, len(polys[thr]), polys[thr]["area_m2"].sum() if len(polys[thr]) else 0.0)
