@@ -189,7 +189,9 @@ def ground_profile(z: np.ndarray, step: float, segment_m: float) -> np.ndarray:
     Returns
     -------
     ndarray (n,)
-        The ground profile (≤ ``z``). O(n · segment / step).
+        The ground profile (≤ ``z``); within one segment of either end it may lie low (the
+        opening sees past the end), so callers drape the section prolonged by one segment at
+        both ends (:func:`_ground_drape`). O(n · segment / step).
     """
     k = int(round(segment_m / step)) + 1
     if segment_m <= 0 or k < 2 or z.size < k:
