@@ -84,6 +84,8 @@ closerange: $(STAMP)
 polygons-benchmarks: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_paper_settings.py
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_ensemble.py $(POLYGONS_ENSEMBLE_ARGS)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_dsm_diagnosis.py $(POLYGONS_ENSEMBLE_ARGS)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_rules_off.py $(POLYGONS_ENSEMBLE_ARGS)
 
 clean-venv:
 	rm -rf $(VENV)
