@@ -91,12 +91,11 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     dem = np.asarray(dem, dtype=np.float32)
     twin = site / "twin"
     hx, hy = read_heads(str(twin / "observed/gully_heads.gpkg"), crs) if heads != "automatic" else (np.zeros(0), np.zeros(0))
-    auto = None
-    if heads != "digitised":
-        sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
-        auto = HeadDetectionParams.from_config(g["automatic_heads"], sz)
+    sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
+    ip = HeadDetectionParams.from_config(g["automatic_heads"], sz)
+    auto = ip if heads != "digitised" else None
     params = GullyParams.from_config(g)
-    res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto)
+    res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto, incision=ip)
     # cells raised by the fill of the tracing surface (filled depressions and flats) and nodata
     _zh, zt, _n = tracing_surface(dem, grid, params, 1)
     filled, _r = priority_flood_fill(zt, 0.0 if params.flat_routing == "resolve" else params.fill_epsilon_m)
