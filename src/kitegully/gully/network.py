@@ -107,6 +107,8 @@ def snap_heads(
         raise ValueError(f"head snapping must be one of {HEAD_SNAPS}, got {method!r}")
     needs = {"deepest": ("depth map", depth), "patch": ("patch labels", patches), "plane": ("smoothed DEM", smoothed),
              "incision": ("incision map", incised), "relief": ("head-scale relief map", relief)}
+    if np.size(x) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
     if method in needs and needs[method][1] is None:
         raise ValueError(f"head snapping {method!r} needs the {needs[method][0]}")
     x = np.asarray(x, dtype=np.float64)

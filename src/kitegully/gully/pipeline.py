@@ -236,7 +236,7 @@ def map_gullies(
     if auto_heads is not None:
         t0 = time.perf_counter()
         auto_idx, _ = detect_heads(z_heads, filled, dirs if dirs is not None else d8_directions(filled), grid, auto_heads,
-                                   workers)
+                                   workers, observed=np.isfinite(dem))
         auto_idx = new_heads(auto_idx, grid, heads_x, heads_y, params.head_snap_radius_m)
         inside_idx = np.concatenate([inside_idx, auto_idx])
         t["auto_heads_s"] = time.perf_counter() - t0
