@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -47,6 +47,13 @@ test: $(STAMP)
 # results/ensemble/summary.csv and summary.md (about 6 x 10 min on 2 idle cores).
 ensemble: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) $(ENSEMBLE_ARGS)
+
+# Where the gully network misses reference length and which automatic heads are false, on every
+# ensemble member's DSM that `make ensemble` has written (evaluation only, reads the twins' truth;
+# ~1 min per member and script): results/ensemble_misses/, results/ensemble_auto_fp/.
+gully-ensemble-analysis: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/gully_ensemble_misses.py --results results
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/gully_auto_fp_analysis.py --results results
 
 # Plot-scale stereo lab (issue 19, Moritani et al. 2010): its own site, not part of `make run`;
 # results/stereo_lab/stereo/ (README "Plot-scale stereo (Moritani et al. 2010)").

@@ -12,7 +12,16 @@ protocol) that no mapped network line matches within the tolerance, says why:
 * ``head downstream``: the gully has a head, the miss lies upstream of it along the
   true centreline (the operator placed the head where the incision became visible);
 * ``traced beside``: the gully has a head upstream of the miss, but the path runs farther
-  than the tolerance from the reference.
+  than the tolerance from the reference; split into ``beside: head snapped off the gully``
+  (every head of that gully was snapped farther than ``--on-gully`` m from its true
+  centreline: a snapping miss) and ``beside: path leaves the gully`` (a head sits on the
+  gully, the path leaves it further down: a tracing miss).
+
+Every missed sample is also flagged ``near_flat`` (within the tolerance of a cell raised by
+the depression fill of the tracing surface: a filled depression or flat the path crosses by
+flat resolution) and ``near_nodata`` (within the tolerance of a DSM hole, open water or the
+DSM edge). A per-head table gives the distance of each used head, as digitised and as
+snapped, to the nearest true centreline (``--heads-out``).
 
 Reads the twin's truth (centrelines, heads): never part of the pipeline. Usage:
     python benchmarks/gully_miss_analysis.py --config config/sites/kamech_twin.yaml \
@@ -36,10 +45,11 @@ from kitegully.evaluate.gully_run import score_gully_run
 from kitegully.evaluate.network import footprint, scored_reference
 from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints
 from kitegully.gully.inputs import read_heads
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.pipeline import GullyParams, map_gullies, tracing_surface
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
+from kitegully.terrain.fill import priority_flood_fill
 
 log = logging.getLogger("gully_miss_analysis")
 
@@ -64,8 +74,16 @@ def dist_to_lines(pts: np.ndarray, lines) -> np.ndarray:
     return shapely.distance(shapely.points(pts), u)
 
 
-def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: float | None = None):
-    """Per-gully table of reference, matched and missed length by reason; and the run's scores."""
+def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: float | None = None,
+            on_gully_m: float = 2.0, samples_out: bool = False):
+    """Per-gully table of reference, matched and missed length by reason; and the run's scores.
+
+    Returns ``(per_gully, totals, scores, result)``, with ``samples_out`` also the per-sample
+    table (``gully_no, reason, length_m, near_flat, near_nodata, kind``) and the per-head
+    table (distances of each used head, digitised and snapped, to the true centrelines).
+    A head is ``snapped_on_gully`` within ``on_gully_m`` of its gully's true centreline
+    (default 2 m: the 1 m matching window plus the widest head's half width, 0.75 m, rounded up).
+    """
     g = cfg["gully"]
     crs = cfg["site"]["crs"]
     tol = float(g["validation"]["tolerance_m"])
@@ -73,12 +91,17 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     dem = np.asarray(dem, dtype=np.float32)
     twin = site / "twin"
     hx, hy = read_heads(str(twin / "observed/gully_heads.gpkg"), crs) if heads != "automatic" else (np.zeros(0), np.zeros(0))
-    auto = None
-    if heads != "digitised":
-        sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
-        auto = HeadDetectionParams.from_config(g["automatic_heads"], sz)
+    sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
+    ip = HeadDetectionParams.from_config(g["automatic_heads"], sz)
+    auto = ip if heads != "digitised" else None
     params = GullyParams.from_config(g)
-    res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto)
+    res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto, incision=ip)
+    # cells raised by the fill of the tracing surface (filled depressions and flats) and nodata
+    _zh, zt, _n = tracing_surface(dem, grid, params, 1)
+    filled, _r = priority_flood_fill(zt, 0.0 if params.flat_routing == "resolve" else params.fill_epsilon_m)
+    raised = np.isfinite(zt) & (filled > zt + 1e-6)
+    nodata = ~np.isfinite(zt)
+    del _zh, zt, filled
     xs, ys = grid.cell_centres()
     r, c = np.divmod(res.auto_heads, grid.width)
     used = np.concatenate([np.column_stack([hx, hy]), np.column_stack([xs[c], ys[r]])])
@@ -119,6 +142,28 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     _, vi = tree.query(pts, k=1)
     s_pts = s_of_vertex[vi]
     same = gid_of_vertex[vi] == gno
+    # each used head as snapped (cell centre): distance to the nearest true centreline, and to its own gully's
+    snapped = np.full((len(used), 2), np.nan)
+    hc = res.network.head_cells
+    ok = hc >= 0
+    snapped[ok] = grid.flat_xy(hc[ok])
+    d_dig, i_dig = tree.query(used, k=1) if len(used) else (np.zeros(0), np.zeros(0, int))
+    d_snap = np.full(len(used), np.nan)
+    if ok.any():
+        d_snap[ok] = tree.query(snapped[ok], k=1)[0]
+    head_gully = np.where(d_dig <= reach, gid_of_vertex[i_dig] if len(used) else 0, -1)
+    # distance of the snapped head to its own gully's centreline (the gully the digitised head belongs to)
+    own = np.full(len(used), np.nan)
+    for gid in np.unique(head_gully[head_gully >= 0]):
+        sel = (head_gully == gid) & ok
+        if sel.any():
+            own[sel] = cKDTree(verts[gid_of_vertex == gid]).query(snapped[sel], k=1)[0]
+    on_gully = own <= on_gully_m
+    heads_tab = pd.DataFrame({"source": ["digitised"] * len(hx) + ["automatic"] * (len(used) - len(hx)),
+                              "x": used[:, 0], "y": used[:, 1], "gully_id": head_gully,
+                              "digitised_to_centreline_m": d_dig, "snapped_to_centreline_m": d_snap,
+                              "snapped_to_own_gully_m": own, "snapped_on_gully": on_gully})
+    snapped_on = {int(gid): bool(on_gully[head_gully == gid].any()) for gid in np.unique(head_gully[head_gully >= 0])}
     reason = np.full(len(pts), "matched", dtype=object)
     miss = d_map > tol
     reason[miss & (d_trace <= tol)] = "traced, not mapped"
@@ -129,9 +174,17 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
             reason[k] = "no head on this gully"
         elif same[k] and s_pts[k] < min(hs):
             reason[k] = "head downstream"
+        elif not snapped_on.get(int(gno[k]), False):
+            reason[k] = "beside: head snapped off the gully"
         else:
-            reason[k] = "traced beside"
-    df = pd.DataFrame({"gully_no": gno, "reason": reason, "length_m": step})
+            reason[k] = "beside: path leaves the gully"
+    tol_cells = int(np.ceil(tol / grid.cell))
+    near_flat = _near(raised, tol_cells, pts, grid)
+    near_nodata = _near(nodata, tol_cells, pts, grid, outside=True)
+    kind_of_gully = cl.groupby("gully_id")["kind"].first() if "kind" in cl.columns else pd.Series(dtype=object)
+    df = pd.DataFrame({"gully_no": gno, "reason": reason, "length_m": step, "near_flat": near_flat & miss,
+                       "near_nodata": near_nodata & miss,
+                       "kind": [kind_of_gully.get(int(i), "?") for i in gno]})
     tab = df.pivot_table(index="gully_no", columns="reason", values="length_m", aggfunc="sum", fill_value=0.0)
     heads_t = th.set_index("gully_id")
     first = cl.sort_values(["gully_id"]).groupby("gully_id").first()
@@ -140,7 +193,25 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     tab["head_width_m"] = [first["width_m"].get(i, np.nan) for i in tab.index]
     tab["heads_used"] = [len(head_s.get(int(i), [])) for i in tab.index]
     totals = df.groupby("reason")["length_m"].sum()
+    if samples_out:
+        return tab.reset_index(), totals, scores, res, df, heads_tab
     return tab.reset_index(), totals, scores, res
+
+
+def _near(mask: np.ndarray, radius_cells: int, pts: np.ndarray, grid, outside: bool = False) -> np.ndarray:
+    """True for points within ``radius_cells`` of a True cell of ``mask`` (off the grid counts when ``outside``)."""
+    import cv2
+
+    src = np.where(mask, 0, 1).astype(np.uint8)
+    if outside:
+        src = np.pad(src, 1, constant_values=0)
+    dist = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    if outside:
+        dist = dist[1:-1, 1:-1]
+    r, c = grid.rowcol(pts[:, 0], pts[:, 1])
+    r = np.clip(np.rint(r).astype(int), 0, mask.shape[0] - 1)
+    c = np.clip(np.rint(c).astype(int), 0, mask.shape[1] - 1)
+    return dist[r, c] <= radius_cells
 
 
 def main() -> None:

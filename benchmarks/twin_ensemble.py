@@ -221,9 +221,10 @@ def regully_member(g: dict, twin: Path, dem: np.ndarray, grid, ref, polys, true_
     xs, ys = grid.cell_centres()
     for src, key in (("digitised", "dig"), ("automatic", "auto"), ("both", "both")):
         t0 = time.perf_counter()
-        auto = HeadDetectionParams.from_config(g["automatic_heads"], sz) if src != "digitised" else None
+        ip = HeadDetectionParams.from_config(g["automatic_heads"], sz)
+        auto = ip if src != "digitised" else None
         x, y = (hx, hy) if src != "automatic" else (np.zeros(0), np.zeros(0))
-        res = map_gullies(dem, grid, x, y, params, workers=1, auto_heads=auto)
+        res = map_gullies(dem, grid, x, y, params, workers=1, auto_heads=auto, incision=ip)
         r, c = np.divmod(res.auto_heads, grid.width)
         used = np.concatenate([np.column_stack([x, y]), np.column_stack([xs[c], ys[r]])])
         s = score_gully_run(res.gully, res.extracted_lines, valid, grid, ref, polys, TOLERANCES,

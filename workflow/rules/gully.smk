@@ -27,8 +27,9 @@ if "gully" in config:
     GULLY_HEADS = GULLY["heads_file"] or result("twin", "observed/gully_heads.gpkg")
     # gully.heads: automatic needs no head file
     GULLY_HEADS_INPUT = {} if GULLY["heads"] == "automatic" else {"heads": GULLY_HEADS}
-    # automatic heads with dsm_sigma_z_m: null measure the DSM noise at the (observed) checkpoints
-    if GULLY["heads"] != "digitised" and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
+    # automatic heads (and head_snap: incision, which uses their incision map) with dsm_sigma_z_m: null
+    # measure the DSM noise at the (observed) checkpoints
+    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief")) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
         _cps = result("twin", "observed/checkpoints.csv") if IS_TWIN else config.get("inputs", {}).get("checkpoints")
         if not _cps:
             raise WorkflowError("Invalid configuration: gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints (inputs.checkpoints)")

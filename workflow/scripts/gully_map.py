@@ -18,10 +18,10 @@ check_dem(dem, inp.dem, grid.crs, crs)
 if source == "truth_plus_noise":
     log.warning("mapping on the truth-plus-noise stand-in DEM: NOT the photogrammetric DSM (gully.dem)")
 hx, hy = read_heads(inp.heads, crs) if heads != "automatic" else (np.zeros(0), np.zeros(0))
-auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"))
+auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"), params.head_snap)
 tiled = {k: read_raster(inp[k])[0] for k in ("filled", "smoothed", "depth") if k in inp.keys()}  # tiled sites: merged tiles
-res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads, auto_heads=auto,
-                  **tiled)
+res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads,
+                  auto_heads=auto if heads != "digitised" else None, incision=auto, **tiled)
 if heads != "automatic":
     check_heads_on_dem(res.heads_inside, inp.heads)
 write_raster(out.depth, res.depth, grid)

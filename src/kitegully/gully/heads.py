@@ -19,6 +19,7 @@ of the concave, channelised reach). Here:
 2. Flow: D8 directions on the filled DEM, contributing area A (m²), slope S along the
    flow measured over the DSM's resolution.
 3. Channel cells: incised cells with ``S ≥ a·A_ha^-b``.
+   No channel cell within one matching window of a DSM gap (:func:`matched_cells`).
 4. Heads: channel cells with no channel cell upstream whose path downstream stays in
    channel cells over most of ``min_channel_length_m`` (a channel, not a pit). Traced
    highest first; a candidate whose path joins one traced before within
@@ -192,6 +193,7 @@ def detect_heads(
     grid: GridSpec,
     params: HeadDetectionParams,
     workers: int = 1,
+    observed: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict[str, float]]:
     """Gully-head cells from the DEM alone (see the module docstring).
 
@@ -208,6 +210,10 @@ def detect_heads(
     params : HeadDetectionParams
     workers : int
         FFT threads.
+    observed : ndarray bool (H, W), optional
+        Cells the DSM matched (before its holes were interpolated); default: the finite
+        cells of ``z``. No head is detected within one matching window of an unmatched cell
+        (:func:`matched_cells`).
 
     Returns
     -------
@@ -223,19 +229,10 @@ def detect_heads(
     """
     cell = grid.cell
     valid = np.isfinite(z)
-    # roughness: the DSM's own head-scale micro-relief (furrows, crop rows), as the operator sees it
-    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell, workers=workers) - z)[valid])
-    ground = ground_surface(z, cell, params.scale_m, params.slope_window_m, workers)
-    zs = gaussian_smooth_fft(ground, params.scale_m / cell, workers=workers)
-    del ground
-    relief = np.where(valid, zs - z, np.nan)
-    del zs
-    threshold = params.relief_k * max(params.dsm_sigma_z_m, rough)
-    incised = np.zeros(z.shape, bool)
-    incised[valid] = relief[valid] >= threshold
-    del relief
-    log.info("automatic heads: incised where the head-scale depth >= %.3g m = %.3g x max(DSM noise %.3g m, "
-             "surface roughness %.3g m)", threshold, params.relief_k, params.dsm_sigma_z_m, rough)
+    incised, threshold, rough = incision_map(z, cell, params, workers)
+    # no head where the DSM was not matched: within one matching window of a gap, open water or the edge
+    matched = matched_cells(valid if observed is None else observed, cell, params.slope_window_m)
+    incised &= matched
     zsl = gaussian_smooth_fft(z, params.slope_window_m / cell, workers=workers)
     gy, gx = np.gradient(zsl, cell)
     slope = np.hypot(gx, gy)
@@ -261,6 +258,148 @@ def detect_heads(
     log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
              stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
     return heads, stats
+
+
+def incision_map(z: np.ndarray, cell_m: float, params: HeadDetectionParams, workers: int = 1,
+                 roughness: bool = True) -> tuple[np.ndarray, float, float]:
+    """Incised cells: head-scale depth below the ground surface ≥ ``relief_k``·max(σ_z, ρ) (step 1 above).
+
+    With ``roughness=False`` the threshold is ``relief_k``·σ_z alone: the operator's
+    visibility rule, for snapping digitised heads (:func:`kitegully.gully.network.snap_heads`,
+    ``incision``). [I] The detector must reject tillage furrows anywhere on the site, hence
+    ρ; a digitised head marks a place where a person saw an incision, which by the
+    visibility rule is relief ≥ 3σ_z, and the operator places the head where the incision
+    becomes visible, i.e. near that threshold, so a threshold raised to 3ρ would leave the
+    upstream end of the incision (the head itself) out of the map.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell_m : float
+        Cell size (m).
+    params : HeadDetectionParams
+        ``scale_m``, ``relief_k``, ``dsm_sigma_z_m`` and ``slope_window_m`` are used.
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    incised : ndarray bool (H, W)
+    threshold : float
+        The depth threshold (m).
+    roughness : float
+        ρ, the surface's own head-scale roughness (m, :func:`surface_roughness`).
+
+    Notes
+    -----
+    O(n log n): three FFT smoothings and the opening of :func:`ground_surface`.
+    """
+    valid = np.isfinite(z)
+    relief, rough = head_scale_relief(z, cell_m, params, workers)
+    threshold = params.relief_k * (max(params.dsm_sigma_z_m, rough) if roughness else params.dsm_sigma_z_m)
+    incised = np.zeros(z.shape, bool)
+    incised[valid] = relief[valid] >= threshold
+    log.info("incised where the head-scale depth >= %.3g m = %.3g x %s(DSM noise %.3g m, surface roughness %.3g m): "
+             "%d cells", threshold, params.relief_k, "max" if roughness else "(roughness not used)",
+             params.dsm_sigma_z_m, rough, int(incised.sum()))
+    return incised, float(threshold), float(rough)
+
+
+def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
+                      workers: int = 1) -> tuple[np.ndarray, float]:
+    """Head-scale depth below the ground surface, ``G_σh ∗ Z₀ − Z`` (m, NaN nodata), and the roughness ρ.
+
+    ``Z₀`` is :func:`ground_surface` (objects standing on the ground removed), σh =
+    ``scale_m``. A plane is kept exactly by the Gaussian (relief 0 on any slope), a field's
+    curvature κ adds only about κσh² (0.04 m at κ 0.01 m⁻¹ and σh 2 m), vegetation stands
+    above the ground (negative relief), and an incision narrower than ~2σh shows at nearly
+    its full depth. ρ is :func:`surface_roughness` of the plain head-scale depth map.
+    O(n log n).
+    """
+    valid = np.isfinite(z)
+    # roughness: the DSM's own head-scale micro-relief (furrows, crop rows), as the operator sees it
+    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell_m, workers=workers) - z)[valid])
+    ground = ground_surface(z, cell_m, params.scale_m, params.slope_window_m, workers)
+    zs = gaussian_smooth_fft(ground, params.scale_m / cell_m, workers=workers)
+    del ground
+    relief = np.where(valid, zs - z, np.nan).astype(np.float32)
+    return relief, rough
+
+
+def matched_cells(observed: np.ndarray, cell_m: float, window_m: float) -> np.ndarray:
+    """Observed cells farther than one matching window from any unobserved cell or the grid edge.
+
+    [I] A photogrammetric DSM has gaps where dense matching failed (low texture, shadow,
+    occlusion, open water); the cells at a gap's rim were matched with part of their
+    correlation window on the failing surface, and the surface across an interpolated gap
+    is a guess whose edges bend the head-scale relief. Automatic heads there are not
+    evidence of a channel: on the six ensemble DSMs half of the false automatic heads lay
+    within 1 m of nodata, against 5 % of the true ones (``benchmarks/gully_auto_fp_analysis.py``).
+    The margin is the matching window (``slope_window_m``, 1 m: 5 × 5 cells at 0.2 m), the
+    DSM's own resolution. O(n) (exact Euclidean distance transform).
+    """
+    import cv2
+
+    src = np.pad(np.asarray(observed, bool).astype(np.uint8), 1)
+    dist = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1] * cell_m
+    return dist > window_m
+
+
+def visible_incisions(incised: np.ndarray, cell_m: float, window_m: float) -> np.ndarray:
+    """Incised cells in 8-connected patches of at least ``3·window_m × window_m`` (a line, not a dot).
+
+    [I] What an operator digitises as a head on the hillshade is an incision that runs as a
+    line over at least three resolution cells of the DSM (the twin's visibility rule,
+    ``survey.heads_visibility.min_run_cells`` 3); the DSM's resolution is its dense-matching
+    window (``slope_window_m``, 1 m). A patch smaller than three windows is a dot: matching
+    noise or a single plant gap, not the incision a head was digitised on. O(n).
+    """
+    lab, n = ndi.label(incised, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return np.zeros(incised.shape, bool)
+    size = np.bincount(lab.ravel(), minlength=n + 1)
+    keep = size * cell_m**2 >= 3.0 * window_m**2
+    keep[0] = False
+    return keep[lab]
+
+
+@njit(cache=True)
+def _sustained(incised, dirs, offs, n_steps, min_hits):
+    h, w = incised.shape
+    out = np.zeros((h, w), np.bool_)
+    for r in range(h):
+        for c in range(w):
+            if not incised[r, c]:
+                continue
+            rr, cc, hits = r, c, 0
+            for _k in range(n_steps):
+                if incised[rr, cc]:
+                    hits += 1
+                d = dirs[rr, cc]
+                if d == 255:
+                    break
+                rr += offs[d, 0]
+                cc += offs[d, 1]
+                if rr < 0 or cc < 0 or rr >= h or cc >= w:
+                    break
+            out[r, c] = hits >= min_hits
+    return out
+
+
+def channel_entries(incised: np.ndarray, dirs: np.ndarray, cell_m: float, length_m: float) -> np.ndarray:
+    """Incised cells whose D8 path stays in incised cells over at least half of ``length_m`` below them.
+
+    [I] The snapping candidates of ``head_snap: incision``: a digitised head marks the
+    upstream end of a channel, so the cell it is moved to must lead into one. A tillage
+    furrow, the foot of a plant or a patch of matching noise is incised at head scale too,
+    but flow from it leaves the incision within a few metres; the test is the automatic
+    detector's (step 4 above: ``min_channel_length_m``, 2 × the 5 m matching tolerance).
+    O(m·L/cell) for m incised cells.
+    """
+    n_steps = max(1, int(round(length_m / cell_m)))
+    return _sustained(np.ascontiguousarray(incised, np.bool_), np.ascontiguousarray(dirs, np.uint8), D8_OFFSETS,
+                      n_steps, int(np.ceil(0.5 * n_steps)))
 
 
 def ground_surface(z: np.ndarray, cell_m: float, scale_m: float, noise_window_m: float, workers: int = 1) -> np.ndarray:
@@ -327,13 +466,18 @@ def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points) -> float:
 
 
 def automatic_head_params(heads: str, cfg: Mapping[str, Any], dem: np.ndarray, grid: GridSpec,
-                          checkpoints_csv: str | None = None) -> "HeadDetectionParams | None":
-    """Parameters of the automatic head detection for ``gully.heads`` (None for ``digitised``).
+                          checkpoints_csv: str | None = None, head_snap: str = "") -> "HeadDetectionParams | None":
+    """Parameters of the automatic head detection (None for ``digitised`` heads not snapped by ``incision``).
+
+    ``head_snap: incision`` uses the detector's incision map (:func:`incision_map`) for the
+    digitised heads too, so it needs these parameters whatever ``gully.heads`` is.
 
     Parameters
     ----------
     heads : str
         ``gully.heads``: ``digitised``, ``automatic`` or ``both``.
+    head_snap : str
+        ``gully.head_snap``.
     cfg : mapping
         The ``gully.automatic_heads`` section.
     dem, grid : array and GridSpec
@@ -345,7 +489,7 @@ def automatic_head_params(heads: str, cfg: Mapping[str, Any], dem: np.ndarray, g
     -------
     HeadDetectionParams or None
     """
-    if heads == "digitised":
+    if heads == "digitised" and head_snap not in ("incision", "relief"):
         return None
     sz = None
     if checkpoints_csv:

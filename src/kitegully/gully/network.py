@@ -22,7 +22,7 @@ from kitegully.terrain.flow import END_OUTLET, END_PIT, trace_paths
 
 
 #: How a digitised head is moved onto the gully (``gully.head_snap``).
-HEAD_SNAPS = ("lowest", "deepest", "patch", "plane")
+HEAD_SNAPS = ("lowest", "deepest", "patch", "plane", "incision", "relief")
 
 
 def snap_heads(
@@ -35,6 +35,8 @@ def snap_heads(
     depth: np.ndarray | None = None,
     patches: np.ndarray | None = None,
     smoothed: np.ndarray | None = None,
+    incised: np.ndarray | None = None,
+    relief: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Snap digitised heads onto a valid cell whose centre lies within ``radius_m``.
 
@@ -58,12 +60,37 @@ def snap_heads(
         S the plain lowest cell within r lies up to r·S below the head (0.6 m at r 6 m and
         S 10 %), more than the relief of a shallow head (0.15–0.5 m), so a head digitised a
         few metres beside its incision lands downslope beside it; below the local plane only
-        an incision is low, and vegetation (above the plane) never is, unlike ``deepest``.
+        an incision is low, and vegetation (above the plane) never is, unlike ``deepest``;
+        but in a concave hollow every cell at the radius lies about κr²/2 below the tangent
+        plane, so ``plane`` is pulled to the radius there. ``incision``: the *nearest* cell
+        of a visible incision (``incised``, :func:`kitegully.gully.heads.incision_map` and
+        :func:`~kitegully.gully.heads.visible_incisions`), or the digitised cell itself when
+        no incision lies within reach. [I] The operator digitised a head on an incision seen
+        on the hillshade, with an isotropic Gaussian error of SD radius/3; of the cells where
+        the DSM shows an incision, the nearest one is the most likely true position (the
+        Gaussian likelihood falls with distance alone). Elevation does not enter, so neither
+        the slope (r·S of ``lowest``) nor the curvature (κr²/2 of ``plane``) biases it; the
+        incision map is made against the ground surface at head scale (σ 2 m), where a
+        field's curvature adds only κσ² ≈ 0.04 m at κ 0.01 m⁻¹. Without an incision in
+        reach nothing in the data says where to move the head, and its error is
+        zero-mean: it stays where it was digitised.
+        ``relief``: the cell of greatest head-scale depth below the ground surface
+        (``relief``, :func:`kitegully.gully.heads.head_scale_relief`, σ 2 m). [I] Within the
+        99 % error circle of a digitised head, the cell where the DSM is most incised at the
+        scale of a head is in the channel: the Gaussian keeps a plane exactly (no r·S slope
+        bias), a field's curvature adds only κσh² ≈ 0.04 m (not κr²/2 ≈ 0.2 m at r 6 m), and
+        vegetation stands above the ground surface (never deep, unlike ``deepest`` on the
+        σ 6 m depth map of the DSM). Like ``lowest`` it may move the head down its own
+        channel (by less than r).
     depth, patches : ndarray (H, W), optional
         Depth map (m) for ``deepest``, patch labels for ``patch``.
     smoothed : ndarray (H, W), optional
         The Gaussian-smoothed DEM of the depth map (Fig. 3 a-b), for ``plane``: its
         gradient at the head is the local slope plane (field-scale, without the incision).
+    incised : ndarray bool (H, W), optional
+        Visible incision cells leading into a channel, for ``incision``.
+    relief : ndarray (H, W), optional
+        Head-scale depth below the ground surface (m), for ``relief``.
 
     Returns
     -------
@@ -78,7 +105,10 @@ def snap_heads(
     """
     if method not in HEAD_SNAPS:
         raise ValueError(f"head snapping must be one of {HEAD_SNAPS}, got {method!r}")
-    needs = {"deepest": ("depth map", depth), "patch": ("patch labels", patches), "plane": ("smoothed DEM", smoothed)}
+    needs = {"deepest": ("depth map", depth), "patch": ("patch labels", patches), "plane": ("smoothed DEM", smoothed),
+             "incision": ("incision map", incised), "relief": ("head-scale relief map", relief)}
+    if np.size(x) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
     if method in needs and needs[method][1] is None:
         raise ValueError(f"head snapping {method!r} needs the {needs[method][0]}")
     x = np.asarray(x, dtype=np.float64)
@@ -113,6 +143,17 @@ def snap_heads(
     elif method == "plane":
         gr, gc = _plane_gradient(np.asarray(smoothed), r0, c0)
         cost = zz - gr[:, None] * dr[None, :] - gc[:, None] * dc[None, :]
+    elif method == "incision":
+        on = np.zeros(rr.shape, dtype=bool)
+        on[ok] = np.asarray(incised)[rr[ok], cc[ok]]
+        on &= valid
+        # nearest incised cell; none in reach: the valid cell nearest the digitised point (the point itself)
+        cost = np.where(on.any(axis=1)[:, None], np.where(on, dist, np.inf), np.where(valid, dist, np.inf))
+    elif method == "relief":
+        cost = np.full(rr.shape, np.inf)
+        cost[ok] = -np.asarray(relief)[rr[ok], cc[ok]]
+        cost[~valid | ~np.isfinite(cost)] = np.inf
+        cost = np.where(np.isfinite(cost).any(axis=1)[:, None], cost, np.where(valid, dist, np.inf))
     else:
         cost = zz
     best = np.argmin(cost, axis=1)

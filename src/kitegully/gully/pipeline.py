@@ -13,7 +13,8 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from kitegully.gully.depth import depth_map
-from kitegully.gully.heads import HeadDetectionParams, detect_heads
+from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, head_scale_relief,
+                                   incision_map, visible_incisions)
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
 from kitegully.gully.patches import depth_patches
@@ -61,8 +62,11 @@ class GullyParams:
     head_snap : str
         Where a digitised head is moved to (:data:`kitegully.gully.network.HEAD_SNAPS`):
         ``lowest`` cell, ``deepest`` cell of the depth map, nearest cell of a kept
-        depth ``patch``, or lowest cell below the local slope ``plane`` (of the smoothed
-        DEM), within ``head_snap_radius_m`` (see :func:`kitegully.gully.network.snap_heads`).
+        depth ``patch``, lowest cell below the local slope ``plane`` (of the smoothed
+        DEM), or nearest cell of a visible ``incision`` (the automatic detector's incision
+        map, so it needs the ``automatic_heads`` parameters), within ``head_snap_radius_m``
+        (see :func:`kitegully.gully.network.snap_heads`), or deepest cell of the head-scale
+        ``relief`` below the ground surface (the same map, before its threshold).
     head_snap_radius_m : float
         Search radius of the head snapping (m), e.g. 3× the digitising SD of the heads (P(r ≤ 3σ) = 1 − e^(−4.5) ≈ 99 % for a 2-D Gaussian error).
     trace_smoothing_m : float
@@ -132,6 +136,7 @@ def map_gullies(
     filled: np.ndarray | None = None,
     smoothed: np.ndarray | None = None,
     depth: np.ndarray | None = None,
+    incision: HeadDetectionParams | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -157,6 +162,8 @@ def map_gullies(
     smoothed, depth : ndarray (H, W) float32, optional
         The depth map (steps a-d) made elsewhere, both or neither: the merged depth
         tiles of a large site (:func:`kitegully.gully.depth.depth_map_tile`).
+    incision : HeadDetectionParams, optional
+        Parameters of the incision map for ``head_snap: incision`` (default: ``auto_heads``).
 
     Returns
     -------
@@ -186,10 +193,6 @@ def map_gullies(
 
     t0 = time.perf_counter()
     z_heads, zi, n_holes = tracing_surface(dem, grid, params, workers)
-    inside_idx, inside = snap_heads(
-        z_heads, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels,
-        smoothed=smoothed,
-    )
     resolve = params.flat_routing == "resolve"
     if filled is None:
         filled, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
@@ -205,6 +208,23 @@ def map_gullies(
     dirs, n_flat, n_left = (None, 0, 0)
     if resolve:
         dirs, n_flat, n_left = flow_directions(filled)
+    incised = relief = None
+    ip = incision if incision is not None else auto_heads
+    if params.head_snap in ("incision", "relief") and np.size(heads_x) and ip is None:
+        raise ValueError(f"head_snap {params.head_snap!r} needs the incision-map parameters (gully.automatic_heads)")
+    if params.head_snap == "relief" and np.size(heads_x):
+        relief = head_scale_relief(z_heads, grid.cell, ip, workers)[0]
+    if params.head_snap == "incision" and np.size(heads_x):
+        incised = visible_incisions(incision_map(z_heads, grid.cell, ip, workers, roughness=False)[0], grid.cell,
+                                    ip.slope_window_m)
+        incised = channel_entries(incised, dirs if dirs is not None else d8_directions(filled), grid.cell,
+                                  ip.min_channel_length_m)
+        log.info("head snapping: %d incised cells lead into a channel (candidates)", int(incised.sum()))
+    inside_idx, inside = snap_heads(
+        z_heads, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels,
+        smoothed=smoothed, incised=incised, relief=relief,
+    )
+    del incised, relief
     t["fill_s"] = time.perf_counter() - t0
     log.info(
         "filled DEM (%s): %d hole cells interpolated (holes >= %s m2 kept as open water), %d cells raised, %d flat cells routed by the flat mask, "
@@ -216,7 +236,7 @@ def map_gullies(
     if auto_heads is not None:
         t0 = time.perf_counter()
         auto_idx, _ = detect_heads(z_heads, filled, dirs if dirs is not None else d8_directions(filled), grid, auto_heads,
-                                   workers)
+                                   workers, observed=np.isfinite(dem))
         auto_idx = new_heads(auto_idx, grid, heads_x, heads_y, params.head_snap_radius_m)
         inside_idx = np.concatenate([inside_idx, auto_idx])
         t["auto_heads_s"] = time.perf_counter() - t0
