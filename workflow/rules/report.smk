@@ -15,8 +15,10 @@ def _qgis_products():
         if rule in _DEFINED_RULES:
             out[key] = expand(getattr(getattr(rules, rule).output, name), epoch=epoch_dir(n))[0]
 
-    add("dsm", "dense_match", "dsm")
-    add("orthophoto", "dense_match", "orthophoto")
+    dsm_rule = globals().get("DENSE_DSM_RULE", "dense_match")  # tiled sites (issue 21): dense_merge / dense_finish
+    ortho_rule = globals().get("DENSE_ORTHO_RULE", "dense_match")
+    add("dsm", dsm_rule, "dsm")
+    add("orthophoto", ortho_rule, "orthophoto")
     add("gully_network", "gully_map", "network")
     add("gully_polygons", "gully_map", "polygons")
     if "obia" in config and config["obia"]["kite_scale"]["enabled"]:
@@ -28,8 +30,8 @@ def _qgis_products():
     for n in SURVEY_EPOCHS:
         sfx = "" if n == 1 else f"_epoch{n}"
         if n != 1:
-            add(f"dsm{sfx}", "dense_match", "dsm", n)
-            add(f"orthophoto{sfx}", "dense_match", "orthophoto", n)
+            add(f"dsm{sfx}", dsm_rule, "dsm", n)
+            add(f"orthophoto{sfx}", ortho_rule, "orthophoto", n)
         add(f"camera_positions{sfx}", "georef_adjust", "cameras", n)
         add(f"sparse_cloud{sfx}", "georef_adjust", "cloud", n)
     if "polygons_map" in _DEFINED_RULES:

@@ -7,7 +7,7 @@ stays light.
 Modules: ``stage`` (the stage: parameters, files in and out), ``views`` (oriented images,
 pycolmap reader, image pyramids), ``kernels`` (compiled resampling, multi-image
 correlation, SGM, occlusion, openness), ``matching`` (one tile, coarse to fine),
-``surface`` (tiled site DSM), ``datum`` (vertical datum check at the GCP targets), ``ortho`` (true
+``surface`` (tiled site DSM), ``tiles`` (the DSM as Snakemake tile jobs of a large site, issue 21), ``datum`` (vertical datum check at the GCP targets), ``ortho`` (true
 orthophoto), ``shading`` (hillshade, openness).
 """
 
