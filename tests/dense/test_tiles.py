@@ -95,3 +95,39 @@ def test_merge_refuses_an_incomplete_set(slope_block, tmp_path):
     out = {"dsm": tmp_path / "dsm.tif", "correlation": tmp_path / "c.tif", "stats": tmp_path / "s.json"}
     with pytest.raises(InputError, match="the 1 dense tiles cover 1024 cells, the grid 8448"):
         merge_dense_tiles([tmp_path / "a.npz"], p, out)
+
+
+def test_merge_applies_the_datum_check_as_the_untiled_stage(slope_block, tmp_path):
+    """The datum check reads the disk-backed mosaic at the targets and shifts every window alike."""
+    import pandas as pd
+
+    from kitegully.dense.datum import DatumParams, check_datum
+
+    views, imgs, _ = slope_block
+    dp = DatumParams.from_config({"enabled": True, "window_m": 0.3, "confidence": 0.95, "min_gcps": 4,
+                                  "outlier_nmad": 3.0, "min_sd_m": 0.01})
+    p = _params(tile_cells=32, overlap_cells=16, datum=dp)
+    tiles = dense_tiles(GRID.shape, p, TilingParams(tile_m=5.0, width_m=9.6, height_m=8.8))
+    files, parts = [], []
+    for t in tiles:
+        res = match_tile_window(views, GRID, t, p, arrays=imgs)
+        save_dense_tile(tmp_path / f"{t.name}.npz", res, t, GRID, p)
+        files.append(tmp_path / f"{t.name}.npz")
+        parts.append((t, res.dsm))
+    whole = np.full(GRID.shape, np.nan, np.float32)
+    for t, d in parts:
+        whole[t.r0:t.r0 + t.h, t.c0:t.c0 + t.w] = d
+    # targets surveyed 0.2 m below the slope (a datum error the check must find), spread over all tiles
+    xy = np.array([[-3.0, -3.0], [3.0, -3.0], [-3.0, 3.0], [3.0, 3.0], [0.0, 0.0], [1.5, -1.0]])
+    surf = ds.slope()
+    gcps = pd.DataFrame({"gcp_id": [f"g{i}" for i in range(len(xy))], "x": xy[:, 0], "y": xy[:, 1],
+                         "z": surf(xy[:, 0], xy[:, 1]) - 0.2})
+    ref = check_datum(whole, GRID, gcps, dp)
+    assert ref.applied
+    out = {"dsm": tmp_path / "dsm.tif", "correlation": tmp_path / "c.tif", "stats": tmp_path / "s.json",
+           "datum": tmp_path / "datum_check.csv"}
+    stats = merge_dense_tiles(files, p, out, gcps=gcps)
+    assert stats["applied_offset_m"] == pytest.approx(ref.offset_m) and stats["datum"] == ref.summary()
+    with rasterio.open(out["dsm"]) as src:
+        np.testing.assert_array_equal(src.read(1), whole - np.float32(ref.offset_m))
+    assert pd.read_csv(out["datum"])["dz_m"].to_numpy() == pytest.approx(ref.table["dz_m"].to_numpy())

@@ -18,13 +18,20 @@ import rasterio
 from snakemake_utils import REPO, run_snakemake
 
 
-@pytest.mark.slow
-def test_tiny_twin_dense_and_validation(tmp_path):
-    results = tmp_path / "results"
+@pytest.fixture(scope="module")
+def tiny_dense(tmp_path_factory):
+    """Results folder of the untiled tiny twin up to the checkpoint validation (run once)."""
+    results = tmp_path_factory.mktemp("tiny_dense") / "results"
     site = results / "tiny_twin"
     run_snakemake(REPO / "config" / "sites" / "tiny_twin.yaml", results,
                   [str(site / "validate" / "checkpoint_summary.csv"), str(site / "validate" / "profile_stats.csv")],
                   cores=2)
+    return results
+
+
+@pytest.mark.slow
+def test_tiny_twin_dense_and_validation(tiny_dense):
+    site = tiny_dense / "tiny_twin"
     with rasterio.open(site / "dense" / "dsm.tif") as src:
         assert src.dtypes[0] == "float32" and np.isnan(src.nodata) and src.crs.to_string() == "EPSG:32632"
         assert src.block_shapes[0] == (256, 256) or min(src.width, src.height) < 256
@@ -56,3 +63,36 @@ def test_tiny_twin_dense_and_validation(tmp_path):
     assert list(prof["profile"]) == ["whole", "no_vegetation"]
     errs = pd.read_csv(site / "validate" / "checkpoint_errors.csv")
     assert {"id", "x_m", "y_m", "z_ref_m", "z_model_m", "error_m"} <= set(errs.columns)
+
+
+@pytest.mark.slow
+def test_tiny_twin_tiled_dense_equals_untiled(tiny_dense, tmp_path):
+    """Issue 21: the tiny twin as a tiled site (2 x 2 dense tile jobs + merge) gives the untiled DSM and checkpoints."""
+    import shutil
+
+    results = tmp_path / "results"
+    shutil.copytree(tiny_dense, results, symlinks=True)  # keeps mtimes: only dense and validate rerun
+    site = results / "tiny_twin"
+    for stage in ("dense", "validate"):
+        shutil.rmtree(site / stage)
+    proc = run_snakemake(REPO / "config" / "sites" / "tiny_twin.yaml", results,
+                         [str(site / "validate" / "checkpoint_summary.csv"), str(site / "dense" / "dense_summary.csv")],
+                         extra=["--configfile", str(REPO / "config" / "sites" / "tiny_twin.yaml"),
+                                str(REPO / "tests" / "workflow" / "tiny_twin_tiled.yaml"), "--rerun-triggers=mtime"],
+                         cores=2)
+    assert proc.stdout.count("rule dense_tile:") + proc.stderr.count("rule dense_tile:") == 4
+    assert "rule dense_match:" not in proc.stdout + proc.stderr
+    ref = tiny_dense / "tiny_twin"
+    for name in ("dsm.tif", "correlation.tif"):
+        with rasterio.open(ref / "dense" / name) as a, rasterio.open(site / "dense" / name) as b:
+            x, y = a.read(1), b.read(1)
+            assert a.transform == b.transform
+        assert np.array_equal(np.isfinite(x), np.isfinite(y)), name
+        assert np.nanmax(np.abs(x - y)) <= 1e-4, name  # measured: 0 (bit for bit)
+    a = pd.read_csv(ref / "validate" / "checkpoint_summary.csv").set_index("statistic")["value_m"]
+    b = pd.read_csv(site / "validate" / "checkpoint_summary.csv").set_index("statistic")["value_m"]
+    assert np.allclose(a, b, atol=1e-3, rtol=0), pd.concat([a, b], axis=1)
+    summ = pd.read_csv(site / "dense" / "dense_summary.csv").set_index("quantity")["value"]
+    assert summ["tile_jobs"] == 4
+    with rasterio.open(site / "dense" / "orthophoto.tif") as src:
+        assert src.count >= 3 and src.dataset_mask().any()
