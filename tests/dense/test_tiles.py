@@ -55,16 +55,22 @@ def slope_block():
     return ds.block(ds.slope(), rng_for(11, "test_dense_tiles", "slope"))
 
 
-def test_tiled_dsm_equals_untiled_and_merges(slope_block, tmp_path):
+@pytest.fixture(scope="module")
+def tiled(slope_block):
+    """The synthetic slope matched whole and as 2 x 2 tile windows (3 x 3 blocks of 32 cells)."""
     views, imgs, _ = slope_block
     p = _params(tile_cells=32, overlap_cells=16)
     whole = dense_surface(views, GRID, MATCH, p.tile_cells, p.overlap_cells, arrays=imgs)
-    # 3 x 3 blocks of 32 cells split 2 x 2: windows of 1 and 2 blocks (the last clipped to the grid)
     tiles = dense_tiles(GRID.shape, p, TilingParams(tile_m=5.0, width_m=9.6, height_m=8.8))
-    assert [(t.h, t.w) for t in tiles] == [(32, 32), (32, 64), (56, 32), (56, 64)]
+    return p, whole, [(t, match_tile_window(views, GRID, t, p, arrays=imgs)) for t in tiles]
+
+
+def test_tiled_dsm_equals_untiled_and_merges(tiled, tmp_path):
+    p, whole, parts = tiled
+    # 3 x 3 blocks of 32 cells split 2 x 2: windows of 1 and 2 blocks (the last clipped to the grid)
+    assert [(t.h, t.w) for t, _ in parts] == [(32, 32), (32, 64), (56, 32), (56, 64)]
     files = []
-    for t in tiles:
-        res = match_tile_window(views, GRID, t, p, arrays=imgs)
+    for t, res in parts:
         sl = (slice(t.r0, t.r0 + t.h), slice(t.c0, t.c0 + t.w))
         assert np.array_equal(np.isfinite(res.dsm), np.isfinite(whole.dsm[sl])), t.name
         assert np.nanmax(np.abs(res.dsm - whole.dsm[sl])) <= 1e-4, t.name
@@ -86,37 +92,30 @@ def test_tiled_dsm_equals_untiled_and_merges(slope_block, tmp_path):
     assert not list(tmp_path.glob("*.raw.npy"))  # the disk-backed mosaic is removed
 
 
-def test_merge_refuses_an_incomplete_set(slope_block, tmp_path):
-    views, imgs, _ = slope_block
-    p = _params(tile_cells=32, overlap_cells=16)
-    t = dense_tiles(GRID.shape, p, TilingParams(tile_m=5.0, width_m=9.6, height_m=8.8))[0]
-    res = match_tile_window(views, GRID, t, p, arrays=imgs)
+def test_merge_refuses_an_incomplete_set(tiled, tmp_path):
+    p, _, parts = tiled
+    t, res = parts[0]
     save_dense_tile(tmp_path / "a.npz", res, t, GRID, p)
     out = {"dsm": tmp_path / "dsm.tif", "correlation": tmp_path / "c.tif", "stats": tmp_path / "s.json"}
     with pytest.raises(InputError, match="the 1 dense tiles cover 1024 cells, the grid 8448"):
         merge_dense_tiles([tmp_path / "a.npz"], p, out)
 
 
-def test_merge_applies_the_datum_check_as_the_untiled_stage(slope_block, tmp_path):
+def test_merge_applies_the_datum_check_as_the_untiled_stage(tiled, tmp_path):
     """The datum check reads the disk-backed mosaic at the targets and shifts every window alike."""
     import pandas as pd
 
     from kitegully.dense.datum import DatumParams, check_datum
 
-    views, imgs, _ = slope_block
+    p0, untiled, parts = tiled
     dp = DatumParams.from_config({"enabled": True, "window_m": 0.3, "confidence": 0.95, "min_gcps": 4,
                                   "outlier_nmad": 3.0, "min_sd_m": 0.01})
-    p = _params(tile_cells=32, overlap_cells=16, datum=dp)
-    tiles = dense_tiles(GRID.shape, p, TilingParams(tile_m=5.0, width_m=9.6, height_m=8.8))
-    files, parts = [], []
-    for t in tiles:
-        res = match_tile_window(views, GRID, t, p, arrays=imgs)
+    p = replace(p0, datum=dp)
+    files = []
+    for t, res in parts:
         save_dense_tile(tmp_path / f"{t.name}.npz", res, t, GRID, p)
         files.append(tmp_path / f"{t.name}.npz")
-        parts.append((t, res.dsm))
-    whole = np.full(GRID.shape, np.nan, np.float32)
-    for t, d in parts:
-        whole[t.r0:t.r0 + t.h, t.c0:t.c0 + t.w] = d
+    whole = untiled.dsm
     # targets surveyed 0.2 m below the slope (a datum error the check must find), spread over all tiles
     xy = np.array([[-3.0, -3.0], [3.0, -3.0], [-3.0, 3.0], [3.0, 3.0], [0.0, 0.0], [1.5, -1.0]])
     surf = ds.slope()
