@@ -54,3 +54,43 @@ def test_model_spheres_are_paired_with_a_shuffled_survey_and_the_similarity_reco
 def test_fewer_than_three_spheres_is_one_sentence():
     with pytest.raises(InputError, match=r"^only 2 sphere\(s\) triangulated in the model and 4 surveyed: at least 3 \(of S1, S2, S3, S4\)"):
         match_markers(S_TRUE[:2], S_TRUE, ["S1", "S2", "S3", "S4"])
+
+
+def _world(model, scale=1.7, angle=0.6):
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    return scale * model @ R.T + np.array([545000.0, 4090000.0, 2300.0])
+
+
+def test_false_candidates_that_fit_better_in_rms_are_not_paired():
+    """Scene 03's failure: extra triangulated candidates; the true four spheres win by inlier count, not by smallest RMS."""
+    rng = np.random.default_rng(3)
+    model = S_TRUE / 1.7
+    survey = _world(model) + rng.normal(0, 0.015, (4, 3))
+    # four false candidates (white stones) and a duplicate of sphere 0 offset by 30 cm in the model
+    false = rng.uniform(-2.0, 2.0, (4, 3)) / 1.7
+    cands = np.vstack([false[:2], model[[2, 0]], false[2:], model[[3, 1]], model[0] + 0.3 / 1.7])
+    sim, rows, perm, res = match_markers(cands, survey, ["S1", "S2", "S3", "S4"])
+    truth = {2: 2, 3: 0, 6: 3, 7: 1}  # candidate row -> survey row
+    assert len(rows) == 4
+    assert all(truth[r] == p for r, p in zip(rows, perm))
+    assert np.linalg.norm(res, axis=1).max() < 0.06
+
+
+def test_three_true_spheres_and_one_misplaced_still_georeference():
+    rng = np.random.default_rng(4)
+    model = S_TRUE / 1.7
+    survey = _world(model) + rng.normal(0, 0.01, (4, 3))
+    cands = model.copy()
+    cands[1] += np.array([0.5, 0.0, 0.0]) / 1.7  # sphere 1 measured 50 cm off
+    sim, rows, perm, res = match_markers(cands, survey, ["S1", "S2", "S3", "S4"])
+    assert sorted(rows) == [0, 2, 3] and rows == perm
+    assert abs(sim.scale - 1.7) < 0.02
+
+
+def test_no_assignment_within_the_survey_budget_is_one_sentence():
+    model = S_TRUE / 1.7
+    cands = model * np.array([1.3, 0.7, 1.0])  # a sheared model: no triple keeps its distances within the budget
+    with pytest.raises(InputError, match=r"^no assignment of the 4 triangulated sphere\(s\) to the 4 surveyed \(S1, S2, S3, S4\) "
+                                         r"fits the similarity within the survey budget of 0\.10 m"):
+        match_markers(cands, _world(model), ["S1", "S2", "S3", "S4"])

@@ -16,7 +16,7 @@ if "closerange" in config and "obia" in config and IS_TWIN:
     if _cr_unknown:
         raise WorkflowError(f"Invalid configuration: closerange.scenes names {', '.join(_cr_unknown)}, not among the obia scenes ({OBIA_SCENES[0]} .. {OBIA_SCENES[-1]})")
     # what closerange_sfm reads (CloseRangeParams); the walk belongs to the photos rule
-    CR_SFM_KEYS = ("spheres", "sfm_max_num_features", "sphere_tolerance_m", "dense", "trim", "periphery",
+    CR_SFM_KEYS = ("spheres", "sfm_max_num_features", "sphere_tolerance_m", "marker_budget_m", "dense", "trim", "periphery",
                    "fill_holes_cells", "outlier_cell_m", "outlier_tolerance_m", "min_dense_points",
                    "rule_min_saturation", "rule_min_value")
 

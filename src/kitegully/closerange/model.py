@@ -176,14 +176,32 @@ def triangulate_spheres(
     return found
 
 
-def match_markers(
-    model_xyz: np.ndarray, survey_xyz: np.ndarray, survey_ids: list[str]
-) -> tuple[Similarity, list[int], list[int], np.ndarray]:
-    """Pair model sphere centres with surveyed ones and fit the similarity model → survey.
+def _pairwise(X: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(X[:, None] - X[None], axis=2)
 
-    Every injective assignment of ``min(k, m)`` model points to survey points is tried (at
-    most 4! · C(k, 4) for the paper's 4 spheres); the one with the smallest RMS residual of
-    its Umeyama similarity wins.
+
+def match_markers(
+    model_xyz: np.ndarray, survey_xyz: np.ndarray, survey_ids: list[str], budget_m: float = 0.10, max_candidates: int = 12,
+) -> tuple[Similarity, list[int], list[int], np.ndarray]:
+    """Pair model sphere centres with surveyed ones and fit the similarity model → survey (robust, with a plausibility check).
+
+    The triangulated candidates may hold false spheres (a white stone seen in 3 photos, a
+    sphere split in two by a biased detection), so the best-RMS assignment of all
+    candidates can pair the wrong ones (scene 03: 0.51 m).  Hypothesise and verify instead:
+
+    1. every ordered triple of candidates × every triple of surveyed spheres; the triple is
+       kept only if its three distances agree with the surveyed ones up to one scale within
+       ``2 · budget_m`` (rotation-free check: two points each within the budget);
+    2. its Umeyama similarity maps all candidates into the survey frame; surveyed spheres
+       with a mapped candidate within ``budget_m`` (one-to-one, Hungarian) are the inliers;
+    3. the hypothesis with the most inliers wins (ties: the smaller RMS of the similarity
+       refitted on its inliers); it is accepted only if it has >= 3 inliers and every
+       refitted residual is within ``budget_m``.
+
+    ``budget_m`` is the survey's accuracy ([P] RTK ±10 cm effective in 001).  The first
+    ``max_candidates`` candidates (in the order given: most rays first) are used.
+    Cost: O(C(k,3) · m!/(m−3)! · k·m) for k candidates and m surveyed spheres
+    (8 candidates, 4 spheres: ~1 300 hypotheses, milliseconds).
 
     Returns
     -------
@@ -193,28 +211,53 @@ def match_markers(
     Raises
     ------
     InputError
-        Fewer than 3 spheres measured in the model or surveyed.
+        Fewer than 3 spheres measured in the model or surveyed, or no assignment within the budget.
     """
+    from scipy.optimize import linear_sum_assignment
+
+    model_xyz = np.asarray(model_xyz, float).reshape(-1, 3)[:max_candidates]
+    survey_xyz = np.asarray(survey_xyz, float).reshape(-1, 3)
     k, m = len(model_xyz), len(survey_xyz)
-    n = min(k, m)
-    if n < 3:
+    if min(k, m) < 3:
         raise InputError(
             f"only {k} sphere(s) triangulated in the model and {m} surveyed: at least 3 (of {', '.join(survey_ids)}) "
             "must be seen in 3 photos each to georeference the scene"
         )
-    best = None
-    for rows in itertools.combinations(range(k), n):
-        for perm in itertools.permutations(range(m), n):
-            a, b = model_xyz[list(rows)], survey_xyz[list(perm)]
+    dm, ds = _pairwise(model_xyz), _pairwise(survey_xyz)
+    best, best_key, worst_seen = None, None, np.inf
+    for rows in itertools.combinations(range(k), 3):
+        r = list(rows)
+        d = dm[np.ix_(r, r)][np.triu_indices(3, 1)]
+        for perm in itertools.permutations(range(m), 3):
+            p = list(perm)
+            D = ds[np.ix_(p, p)][np.triu_indices(3, 1)]
+            scale = float(d @ D / max(d @ d, 1e-300))
+            if np.abs(scale * d - D).max() > 2 * budget_m:
+                continue
             try:
-                sim = umeyama(a, b)
+                sim = umeyama(model_xyz[r], survey_xyz[p])
             except InputError:
                 continue
-            res = b - sim.apply(a)
+            cost = np.linalg.norm(survey_xyz[:, None] - sim.apply(model_xyz)[None], axis=2)  # (m, k)
+            si, mi = linear_sum_assignment(cost)
+            ok = cost[si, mi] <= budget_m
+            si, mi = si[ok], mi[ok]
+            if len(si) < 3:
+                continue
+            try:
+                sim2 = umeyama(model_xyz[mi], survey_xyz[si])
+            except InputError:
+                continue
+            res = survey_xyz[si] - sim2.apply(model_xyz[mi])
             rms = float(np.sqrt(np.mean(np.sum(res ** 2, axis=1))))
-            if best is None or rms < best[0]:
-                best = (rms, sim, list(rows), list(perm), res)
+            worst_seen = min(worst_seen, float(np.linalg.norm(res, axis=1).max()))
+            key = (-len(si), rms)
+            if np.linalg.norm(res, axis=1).max() <= budget_m and (best_key is None or key < best_key):
+                best_key, best = key, (sim2, [int(x) for x in mi], [int(x) for x in si], res)
     if best is None:
-        raise InputError("the triangulated sphere centres are collinear: the similarity to the survey is undetermined")
-    _, sim, rows, perm, res = best
-    return sim, rows, perm, res
+        extra = "" if not np.isfinite(worst_seen) else f" (best assignment: largest residual {worst_seen:.3f} m)"
+        raise InputError(
+            f"no assignment of the {k} triangulated sphere(s) to the {m} surveyed ({', '.join(survey_ids)}) fits the "
+            f"similarity within the survey budget of {budget_m:.2f} m{extra}: the spheres are mis-measured or the survey is wrong"
+        )
+    return best

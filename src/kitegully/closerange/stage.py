@@ -74,6 +74,10 @@ class CloseRangeParams:
         Ray–point distance that still counts as one sphere, in the model's scale expressed
         at the walk's size (scaled by the camera ring radius / 5 m). [I] a tenth of the 0.1 m
         sphere radius: 0.3 px at 5 m is 2 mm, so 1 cm is lenient yet spheres are metres apart.
+    marker_budget_m : float
+        Largest residual of a sphere after the similarity; an assignment of triangulated
+        spheres to the survey is accepted only within it (and the inter-sphere distances must
+        agree up to scale within twice it). [P] the RTK survey's ±10 cm effective accuracy (001).
     dense : PairMatching
         Pairwise semi-global matching.
     trim : float
@@ -105,6 +109,7 @@ class CloseRangeParams:
     spheres: SphereDetection = SphereDetection()
     sfm_max_num_features: int = 4096
     sphere_tolerance_m: float = 0.01
+    marker_budget_m: float = 0.10
     dense: PairMatching = PairMatching()
     trim: float = 0.25
     periphery: str = "circle"
@@ -171,10 +176,13 @@ def photograph_scene(
     ps = prepare_pole_scene(sc, sphere_radius_m, folding_rule, rng_for(seed, "closerange", scene, "rule"))
     # the photographer walks around the patch *and* the spheres (001: GCPs around the eroded
     # area, all in the photos): the ring encloses the farthest sphere too
+    # (where that ring would leave the rendered ground it follows the ground's edge, but stays
+    # outside the patch: spheres beyond it are photographed from the far side of the ring)
     sphere_reach = float(np.hypot(*(ps.spheres[:, :2] - ps.patch_centre).T).max()) if len(ps.spheres) else 0.0
-    ps = dataclasses.replace(ps, patch_reach_m=max(ps.patch_reach_m, sphere_reach))
     walk = PoleWalk.from_config(walk_cfg)
-    poses = walk_poses(ps, walk, rng_for(seed, "closerange", scene, "walk"))
+    min_radius = ps.patch_reach_m + walk.standoff_m
+    ps = dataclasses.replace(ps, patch_reach_m=max(ps.patch_reach_m, sphere_reach))
+    poses = walk_poses(ps, walk, rng_for(seed, "closerange", scene, "walk"), min_radius_m=min_radius)
     cam = walk.camera()
     out = Path(photo_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -296,7 +304,7 @@ def photogrammetric_orthophoto(
     model_xyz = np.array([f[0] for f in found]).reshape(-1, 3)
     sxyz = survey[["x", "y", "z"]].to_numpy(float)
     ids = survey["gcp_id"].astype(str).tolist()
-    sim, rows, perm, res = match_markers(model_xyz, sxyz, ids)
+    sim, rows, perm, res = match_markers(model_xyz, sxyz, ids, params.marker_budget_m)
     err = np.linalg.norm(res, axis=1)
     sph = pd.DataFrame({
         "gcp_id": [ids[p] for p in perm], "n_photos": [len(found[r][1]) for r in rows],

@@ -277,10 +277,32 @@ def _ground_plane(render: Scene):
     return lambda x, y: a * (np.asarray(x) - render.x0) + b * (np.asarray(y) - render.y0) + z0
 
 
-def walk_poses(pscene: PoleScene, walk: PoleWalk, rng: np.random.Generator, max_radius_m: float | None = None) -> list[Pose]:
-    """Camera poses on a rough circle around the patch, aimed at it (oblique views).
+def ground_reach(render: Scene, centre: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Distance (m) from ``centre`` to the edge of the rendered DEM along each direction ``angles`` (rad from +x)."""
+    h, w = render.dsm.shape
+    x0, x1 = render.x0, render.x0 + w * render.cell
+    y1, y0 = render.y0, render.y0 - h * render.cell
+    c, s = np.cos(angles), np.sin(angles)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tx = np.where(c > 0, (x1 - centre[0]) / c, np.where(c < 0, (x0 - centre[0]) / c, np.inf))
+        ty = np.where(s > 0, (y1 - centre[1]) / s, np.where(s < 0, (y0 - centre[1]) / s, np.inf))
+    return np.maximum(np.minimum(tx, ty), 0.0)
 
-    The radius is ``patch_reach_m + standoff_m``, optionally capped at ``max_radius_m``.
+
+def walk_poses(
+    pscene: PoleScene, walk: PoleWalk, rng: np.random.Generator, max_radius_m: float | None = None,
+    min_radius_m: float | None = None,
+) -> list[Pose]:
+    """Camera poses on a rough ring around the patch, aimed at it (oblique views).
+
+    The nominal radius is ``patch_reach_m + standoff_m`` (optionally capped at
+    ``max_radius_m``).  The photographer stands on the ground that exists: along each
+    direction the radius is pulled in to the rendered DEM's edge less ``2 × radius_jitter_m``
+    (the foot stays on the ground for 95 % of the hand-walked scatter), but never below
+    ``min_radius_m`` (the patch's reach + standoff: the photographer does not walk on the
+    patch).  Beyond the rendered DEM there is no ground to photograph (the renderer shows a
+    uniform background), so a camera standing off it sees its near field empty and the
+    ring loses overlap (scenes 04/05 did not connect with a ring 2.5–3 m off the DEM).
     Ground heights come from the DEM (bilinear; off the DEM from the plane fitted to it),
     the camera is ``pole_height_m`` above them.
     """
@@ -289,7 +311,11 @@ def walk_poses(pscene: PoleScene, walk: PoleWalk, rng: np.random.Generator, max_
         radius = min(radius, max_radius_m)
     k = np.arange(walk.n_images)
     ang = 2 * np.pi * k / walk.n_images + np.radians(walk.angle_jitter_deg) * rng.standard_normal(walk.n_images)
-    rad = radius + walk.radius_jitter_m * rng.standard_normal(walk.n_images)
+    rad = np.full(walk.n_images, radius)
+    if min_radius_m is not None:
+        on_ground = ground_reach(pscene.render, pscene.patch_centre, ang) - 2.0 * walk.radius_jitter_m
+        rad = np.minimum(rad, np.maximum(on_ground, min(min_radius_m, radius)))
+    rad = rad + walk.radius_jitter_m * rng.standard_normal(walk.n_images)
     x = pscene.patch_centre[0] + rad * np.cos(ang)
     y = pscene.patch_centre[1] + rad * np.sin(ang)
     plane = _ground_plane(pscene.render)
