@@ -55,3 +55,28 @@ def test_two_streaks_at_a_shallow_angle_are_not_the_rule():
     ortho, dem, grid = _scene(slope_deg=0.0)
     r = measure_folding_rule(ortho, dem, grid, np.random.default_rng(0), max_plan_angle_deg=95.0)
     assert r is None
+
+
+def test_paint_fraction_unmixes_a_half_covered_cell():
+    from kitegully.closerange.foldrule import paint_fraction
+
+    grass, paint = np.array([0.24, 0.43, 0.16]), np.array([0.93, 0.80, 0.20])
+    enc = lambda lin: np.rint(255 * lin ** (1 / 2.2)).astype(np.uint8)  # noqa: E731
+    lin_g, lin_p = grass ** 2.2, paint ** 2.2
+    ortho = np.zeros((3, 21, 21), np.uint8)
+    ortho[:] = enc(lin_g)[:, None, None]
+    ortho[:, 10, 5:15] = enc(0.5 * lin_g + 0.5 * lin_p)[:, None]  # a strip straddling two cell rows
+    ortho[:, 11, 5:15] = enc(0.5 * lin_g + 0.5 * lin_p)[:, None]
+    f = paint_fraction(ortho, tuple(paint))
+    assert np.allclose(f[10:12, 5:15], 0.5, atol=0.03)
+    assert np.abs(f[:8]).max() < 0.01
+
+
+def test_brighter_grass_is_not_paint():
+    from kitegully.closerange.foldrule import paint_fraction
+
+    ortho = np.zeros((3, 21, 21), np.uint8)
+    ortho[:] = np.array([70, 110, 45], np.uint8)[:, None, None]
+    ortho[:, 10, 5:15] = np.array([95, 148, 61], np.uint8)[:, None]  # a sunlit blade: the same colour, brighter
+    f = paint_fraction(ortho, (0.93, 0.80, 0.20))
+    assert np.abs(f[10, 5:15]).max() < 0.05

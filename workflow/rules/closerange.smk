@@ -18,7 +18,7 @@ if "closerange" in config and "obia" in config and IS_TWIN:
     # what closerange_sfm reads (CloseRangeParams); the walk belongs to the photos rule
     CR_SFM_KEYS = ("spheres", "sfm_max_num_features", "sphere_tolerance_m", "marker_budget_m", "dense", "trim", "periphery",
                    "fill_holes_cells", "outlier_cell_m", "outlier_tolerance_m", "min_dense_points",
-                   "rule_min_saturation", "rule_min_value")
+                   "rule_paint_rgb", "rule_min_paint_fraction")
 
 
     def _cr(name):

@@ -1,12 +1,19 @@
 """The folding rule's two 1 m legs measured in the photogrammetric model (001 sect. 2.2, scale check).
 
 The rule (yellow, 2 cm wide, black decimetre marks) is found in the orthophoto by its
-colour: yellow (hue 35–75°, value >= ``min_value``) and more saturated than its
-surroundings by ``min_saturation`` (a 2 cm rule in 2 cm cells is mixed with the grass
-beside it), which neither green grass (hue > 75°) nor pale soil and dry grass reach.
+known colour.  A 2 cm strip on 2 cm cells is mixed with the grass beside it, so each cell
+is unmixed in linear light as ``c = f · paint + (1 − f) · background``, the background
+(the 9-cell median around it, which the 1-cell strip does not reach) allowed to be
+brighter or darker; ``f`` is the paint's share of the cell (:func:`paint_fraction`).  A cell belongs to the rule when it is yellow
+(hue 35–75°) and ``f >= min_paint_fraction``.  The threshold follows from the geometry, not
+from a scene: a strip one cell wide covers at least half of one cell in every row across
+it, wherever it lies, so a cell on the rule has ``f >= 0.5``; ``0.25`` is the midpoint
+between no paint (0) and that guaranteed half.  Green grass (hue > 75°), pale soil and dry
+grass (little of the paint's saturated yellow in them) stay below it.
 The two legs are two straight lines through those cells (RANSAC, then least squares on the
-inliers); the corner is their intersection and each leg ends at its farthest inlier
-(+ half a cell: the cell centre lies half a cell inside the painted end).  The 3-D length
+inliers); the corner is their intersection and each leg ends where the paint integrated
+across the strip falls to half its level along the leg (:func:`_leg_end`: the 50 % point
+of a blurred edge, sub-cell, so the faint last cells of a diagonal strip do not shorten it).  The 3-D length
 adds the DEM height difference between corner and end (a leg running down a 35° slope
 covers only 0.82 m in plan).  Scale error (001 Table 1): ``max over legs |l − 1 m| / 1 m``.
 
@@ -32,6 +39,39 @@ def _hsv(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.nan_to_num(h), s, mx
 
 
+def paint_fraction(ortho: np.ndarray, paint_rgb: tuple[float, float, float], gamma: float = 2.2, background_cells: int = 9) -> np.ndarray:
+    """Share of each cell covered by a paint of known colour (linear unmixing against the local background).
+
+    In linear light a cell is modelled as ``c − b = f · (p − b) + k · b``: the paint ``p``
+    covering a share ``f`` of the cell, and the background ``b`` (the 9-cell median, which a
+    1-cell strip does not reach) brighter or darker by ``k`` (a lit grass blade, a shadow:
+    brightness changes keep the background's colour).  ``f`` and ``k`` are solved per cell
+    by least squares (2 unknowns, 3 bands); without the ``k`` term every bright blade would
+    count as a little paint.
+
+    Parameters
+    ----------
+    ortho : (3, rows, cols) uint8 orthophoto (tone-encoded with ``gamma``).
+    paint_rgb : the paint's encoded colour (0–1) in full light.
+    gamma : tone curve of the photos (linear light = encoded ** gamma).
+    background_cells : window of the median background (cells); wider than twice the strip.
+
+    Returns
+    -------
+    (rows, cols) float ``f`` (0 = background, 1 = paint).  Cost: O(cells · window²) for the median.
+    """
+    lin = (ortho[:3].astype(np.float64) / 255.0) ** gamma
+    bg = np.stack([ndimage.median_filter(ch, size=background_cells) for ch in lin])
+    a1 = (np.asarray(paint_rgb, float) ** gamma)[:, None, None] - bg
+    y = lin - bg
+    a11, a12, a22 = (a1 * a1).sum(0), (a1 * bg).sum(0), (bg * bg).sum(0)
+    b1, b2 = (a1 * y).sum(0), (bg * y).sum(0)
+    det = a11 * a22 - a12 * a12
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.where(det > 1e-12, (a22 * b1 - a12 * b2) / np.where(det > 1e-12, det, 1.0), 0.0)
+    return f
+
+
 def _line_ransac(P: np.ndarray, tol: float, rng: np.random.Generator, iterations: int = 300):
     best = None
     for _ in range(iterations):
@@ -55,9 +95,41 @@ def _line_ransac(P: np.ndarray, tol: float, rng: np.random.Generator, iterations
     return c, d, dist < tol
 
 
+def _leg_end(f: np.ndarray, corner: np.ndarray, d: np.ndarray, far: float) -> float:
+    """Distance (cells) from the corner to a leg's end: where the paint across the strip falls to half its level.
+
+    The paint share ``f`` is integrated across the strip (±2 cells) at 0.25-cell steps
+    along the leg; the level is its median over the leg's middle (20–80 % of the farthest
+    rule cell ``far``), and the end is the first outward crossing of half that level after
+    ``far − 3`` cells, interpolated linearly (the 50 % point of a blurred step is its edge,
+    independent of the blur).  Falls back to ``far + 0.5`` (the farthest cell's outer edge)
+    when no crossing is found.
+    """
+    nrm = np.array([-d[1], d[0]])
+    t = np.arange(0.0, far + 8.0, 0.25)
+    a = np.arange(-2.0, 2.01, 0.5)
+    X = corner[0] + t[:, None] * d[0] + a[None] * nrm[0]
+    Y = corner[1] + t[:, None] * d[1] + a[None] * nrm[1]
+    vals = ndimage.map_coordinates(np.nan_to_num(f), [Y.ravel() - 0.5, X.ravel() - 0.5], order=1, mode="constant", cval=0.0)
+    prof = np.clip(vals.reshape(X.shape), 0.0, None).sum(axis=1) * 0.5
+    prof = np.convolve(prof, np.ones(5) / 5, mode="same")  # ±0.5 cell: a decimetre mark is a dip, not an end
+    mid = (t >= 0.2 * far) & (t <= 0.8 * far)
+    if not mid.any():
+        return far + 0.5
+    half = 0.5 * float(np.median(prof[mid]))
+    start = int(np.searchsorted(t, max(far - 3.0, 0.0)))
+    below = np.nonzero(prof[start:] < half)[0]
+    if half <= 0 or len(below) == 0 or below[0] == 0:
+        return far + 0.5
+    j = start + below[0]
+    p0, p1 = prof[j - 1], prof[j]
+    return float(t[j - 1] + (p0 - half) / max(p0 - p1, 1e-12) * (t[j] - t[j - 1]))
+
+
 def measure_folding_rule(
-    ortho: np.ndarray, dem: np.ndarray, grid: GridSpec, rng: np.random.Generator, min_saturation: float = 0.07,
-    min_value: float = 0.45, leg_length_m: float = 1.0, max_plan_angle_deg: float = 60.0,
+    ortho: np.ndarray, dem: np.ndarray, grid: GridSpec, rng: np.random.Generator,
+    paint_rgb: tuple[float, float, float] = (0.93, 0.80, 0.20), min_paint_fraction: float = 0.25,
+    leg_length_m: float = 1.0, max_plan_angle_deg: float = 60.0, gamma: float = 2.2,
 ) -> dict | None:
     """Lengths of the two legs of the folding rule in an orthophoto + DEM; None if not found.
 
@@ -65,8 +137,9 @@ def measure_folding_rule(
     ----------
     ortho : (3, rows, cols) uint8; dem : (rows, cols) float (NaN = no data); grid : their grid.
     rng : random stream for RANSAC.
-    min_saturation : saturation above the 9-cell median of the surroundings.
-    min_value : HSV value of the rule's yellow.
+    paint_rgb : the rule's yellow (encoded 0–1, full light).
+    min_paint_fraction : least share of a cell covered by the paint (see the module doc: 0.25).
+    gamma : tone curve of the orthophoto.
     leg_length_m : nominal leg length ([P] 1 m).
     max_plan_angle_deg : two lines meeting at less than this angle in plan are not the rule.
 
@@ -76,14 +149,13 @@ def measure_folding_rule(
     (angle between the legs in plan), or None when fewer than 2 legs of at least half the
     nominal length are found or they meet at less than ``max_plan_angle_deg``.
     """
-    h, s, v = _hsv(ortho[:3])
-    # saturated relative to the surroundings: a 2 cm rule in 2 cm cells is mixed with grass
-    # (saturation ~0.45 where the pure paint has 0.78), dry grass is yellowish but pale
-    s_bg = ndimage.median_filter(s, size=9)
-    yellow = (h >= 35) & (h <= 75) & (s - s_bg >= min_saturation) & (v >= min_value) & np.isfinite(dem)
-    # the black decimetre marks split the strip: close them, keep the largest piece
-    closed = ndimage.binary_closing(yellow, structure=np.ones((3, 3)), iterations=2) & ndimage.binary_dilation(yellow, iterations=2)
-    lab, n = ndimage.label(closed, structure=np.ones((3, 3)))
+    h, _, _ = _hsv(ortho[:3])
+    f = paint_fraction(ortho, paint_rgb, gamma)
+    yellow = (h >= 35) & (h <= 75) & (f >= min_paint_fraction) & np.isfinite(dem)
+    # the black decimetre marks and cells where a diagonal 1-cell strip covers less than the
+    # threshold split it: group cells less than 2 cells (4 cm) apart, keep the largest group
+    grouped = ndimage.binary_dilation(yellow, structure=np.ones((3, 3)), iterations=2)
+    lab, n = ndimage.label(grouped, structure=np.ones((3, 3)))
     if n == 0:
         return None
     sizes = np.bincount(lab.ravel())[1:]
@@ -116,7 +188,7 @@ def measure_folding_rule(
         if len(proj) == 0:
             return None
         far = proj[np.argmax(np.abs(proj))]
-        ends.append(corner + (far + 0.5 * np.sign(far)) * d)
+        ends.append(corner + _leg_end(f, corner, d * np.sign(far), abs(far)) * d * np.sign(far))
     x0, y0 = grid.x0, grid.y0
 
     def xy(p):  # (col, row) in cells → map x, y

@@ -95,12 +95,15 @@ class CloseRangeParams:
         cell on a 35° slope is below it, a mismatch metres off is not.
     min_dense_points : int
         Fewer dense points than this stops the scene with one sentence.
-    rule_min_saturation, rule_min_value : float
-        Colour test of the folding rule in the orthophoto: HSV saturation above the 9-cell
-        median of the surroundings, and HSV value. [I] the paint (saturation 0.78) on grass
-        (0.3-0.6) mixed into 2 cm cells and blurred by the trimmed mean keeps a contrast of
-        about 0.1-0.25; 0.07 is above the grass's cell-to-cell scatter. Set after the first
-        scene (scene_10) lost the faint end of a leg at 0.1: a value seen on the data, not derived.
+    rule_paint_rgb : tuple of float
+        The folding rule's yellow (tone-encoded 0–1, full light). [I] the rule's known
+        paint (a yellow folding rule), as a GCP sphere's radius is known.
+    rule_min_paint_fraction : float
+        Least share of a 2 cm cell covered by the paint for the cell to count as rule
+        (linear unmixing against the 9-cell median background). [I] a strip one cell wide
+        covers at least half of one cell in every row across it, so 0.25 is the midpoint
+        between no paint and that guaranteed half (replaces a saturation threshold that had
+        been set on scene 10).
     """
 
     scenes: tuple[str, ...] | str = ("scene_10",)
@@ -117,8 +120,8 @@ class CloseRangeParams:
     outlier_cell_m: float = 0.1
     outlier_tolerance_m: float = 0.15
     min_dense_points: int = 10000
-    rule_min_saturation: float = 0.07
-    rule_min_value: float = 0.45
+    rule_paint_rgb: tuple[float, float, float] = (0.93, 0.80, 0.20)
+    rule_min_paint_fraction: float = 0.25
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "CloseRangeParams":
@@ -130,6 +133,10 @@ class CloseRangeParams:
                 v[k] = "all" if x == "all" else tuple(str(s) for s in x)
             elif k == "scenes_without_rule":
                 v[k] = tuple(str(s) for s in x)
+            elif k == "rule_paint_rgb":
+                v[k] = tuple(float(c) for c in x)
+                if len(v[k]) != 3 or not all(0 < c <= 1 for c in v[k]):
+                    raise InputError(f"closerange.rule_paint_rgb: {list(x)} is not three values in (0, 1]")
             elif k == "walk":
                 v[k] = dict(x)
             elif k == "spheres":
@@ -333,7 +340,7 @@ def photogrammetric_orthophoto(
     from kitegully.seeds import rng_for
 
     rule = measure_folding_rule(ortho, dem, grid, rng_for(seed, "closerange", scene, "rule_ransac"),
-                                params.rule_min_saturation, params.rule_min_value)
+                                params.rule_paint_rgb, params.rule_min_paint_fraction)
     write_raster(out["orthophoto"], ortho, grid, nodata=None, band_names=["red", "green", "blue"])
     write_raster(out["dem"], dem.astype(np.float32), grid)
     t3 = time.perf_counter()
