@@ -34,3 +34,22 @@ def test_obia_params_name_a_missing_or_unknown_key():
         ObiaParams.from_config(bad)
     with pytest.raises(InputError, match="obia: missing key 'threshold'"):
         ObiaParams.from_config({k: v for k, v in obia.items() if k != "threshold"})
+
+
+def test_scene_rasters_are_read_on_one_grid(tmp_path):
+    import numpy as np
+
+    from kitegully.io.raster import GridSpec, write_raster
+    from kitegully.obia.scene import read_scene_rasters
+
+    g = GridSpec(545000.0, 4090000.0, 0.02, 30, 20, "EPSG:32632")
+    rgb = np.random.default_rng(0).integers(0, 255, (3, 20, 30)).astype(np.uint8)
+    write_raster(tmp_path / "o.tif", rgb, g, nodata=None)
+    write_raster(tmp_path / "d.tif", np.full((20, 30), 100.0, np.float32), g)
+    write_raster(tmp_path / "m.tif", np.ones((20, 30), np.uint8), g, nodata=None)
+    o, d, grid, (m,) = read_scene_rasters(tmp_path / "o.tif", tmp_path / "d.tif", tmp_path / "m.tif")
+    assert o.dtype == np.uint8 and np.array_equal(o, rgb) and d.dtype == np.float32 and m.sum() == 600
+    g2 = GridSpec(545000.0, 4090000.0, 0.02, 31, 20, "EPSG:32632")
+    write_raster(tmp_path / "m2.tif", np.ones((20, 31), np.uint8), g2, nodata=None)
+    with pytest.raises(InputError, match=r"m2\.tif: its grid differs from the scene orthophoto"):
+        read_scene_rasters(tmp_path / "o.tif", tmp_path / "d.tif", tmp_path / "m2.tif")

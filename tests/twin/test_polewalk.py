@@ -83,3 +83,22 @@ def test_pole_walk_config_is_validated():
         PoleWalk.from_config({"n_photos": 48})
     with pytest.raises(InputError, match="at least 3"):
         PoleWalk.from_config({"n_images": 2})
+
+
+def test_a_ring_wider_than_the_scene_follows_the_ground_edge_but_stays_off_the_patch(pole_scene):
+    import dataclasses
+
+    from kitegully.twin.polewalk import ground_reach
+
+    _, ps = pole_scene
+    walk = PoleWalk(n_images=36, radius_jitter_m=0.0)
+    wide = dataclasses.replace(ps, patch_reach_m=ps.patch_reach_m + 10.0)  # spheres far out: nominal ring off the scene
+    floor = ps.patch_reach_m + walk.standoff_m
+    poses = walk_poses(wide, walk, rng_for(1, "test", "walk_ground"), min_radius_m=floor)
+    C = np.array([p.C for p in poses])
+    ang = np.arctan2(C[:, 1] - ps.patch_centre[1], C[:, 0] - ps.patch_centre[0])
+    r = np.hypot(C[:, 0] - ps.patch_centre[0], C[:, 1] - ps.patch_centre[1])
+    edge = ground_reach(ps.render, ps.patch_centre, ang)
+    assert np.all(r <= np.maximum(edge, floor) + 1e-6)  # on the ground, or at the floor where the ground is nearer
+    assert np.all(r >= floor - 1e-6)  # never on the patch
+    assert np.isfinite(surface_height(ps.render, C[r < edge - 1e-6, 0], C[r < edge - 1e-6, 1])).all()

@@ -167,19 +167,15 @@ def photograph_scene(
     Returns ``{"n_images", "camera_centres", "spheres", "rule", "render_s"}`` (truth, for
     the evaluation only).
     """
-    from kitegully.io.raster import read_raster
+    from kitegully.obia.scene import read_scene_rasters
     from kitegully.seeds import rng_for
     from kitegully.twin.closerange import CloseRangeScene
     from kitegully.twin.exif import exif_bytes, write_jpeg
     from kitegully.twin.polewalk import PoleWalk, photograph_walk, prepare_pole_scene, walk_poses
 
     t0 = time.perf_counter()
-    rgb, grid = read_raster(ortho_path, band=None)
-    dem, _ = read_raster(dem_path)
-    tm, _ = read_raster(truth_markers_path)
-    te, _ = read_raster(truth_eroded_path)
-    sc = CloseRangeScene(scene, grid, rgb[:3].astype(np.uint8), dem.astype(np.float32), te.astype(np.uint8),
-                         tm.astype(np.uint8), markers, meta)
+    rgb, dem, grid, (tm, te) = read_scene_rasters(ortho_path, dem_path, truth_markers_path, truth_eroded_path)
+    sc = CloseRangeScene(scene, grid, rgb, dem, te, tm, markers, meta)
     ps = prepare_pole_scene(sc, sphere_radius_m, folding_rule, rng_for(seed, "closerange", scene, "rule"))
     # the photographer walks around the patch *and* the spheres (001: GCPs around the eroded
     # area, all in the photos): the ring encloses the farthest sphere too

@@ -15,6 +15,7 @@ import numpy as np
 
 from kitegully import InputError
 from kitegully.config import config_section
+from kitegully.io.raster import GridSpec
 from kitegully.obia.classify import ERODED, GRASS, NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.features import normalise_features
 from kitegully.obia.indices import EXG_RANGE, NDVI_RANGE, excess_green, gaussian_blur, ndvi
@@ -281,4 +282,39 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
 
 
 __all__ = ["INDICES", "ObiaParams", "SceneResult", "Segmentation", "blurred_exg", "blurred_index", "classify_scene", "marker_mask",
-           "segment", "EXG_RANGE", "NDVI_RANGE"]
+           "segment", "read_scene_rasters", "EXG_RANGE", "NDVI_RANGE"]
+
+
+def read_scene_rasters(
+    orthophoto_path: str, dem_path: str, *masks: str
+) -> tuple[np.ndarray, np.ndarray, GridSpec, list[np.ndarray]]:
+    """Read one scene's files: orthophoto (3 bands, uint8), DEM (float32) and optional masks (uint8) on one grid.
+
+    The one reader of the scene files (the obia and closerange stages).
+
+    Parameters
+    ----------
+    orthophoto_path, dem_path : the scene's orthophoto and DEM.
+    masks : further single-band rasters of the scene (truth masks), read as uint8.
+
+    Returns
+    -------
+    rgb (3, rows, cols) uint8, dem (rows, cols) float32 (NaN nodata), grid, list of masks.
+
+    Raises
+    ------
+    InputError
+        A file has fewer than 3 bands (orthophoto) or another grid than the orthophoto.
+    """
+    from kitegully.io.raster import read_raster
+
+    rgb, grid = read_raster(orthophoto_path, band=None)
+    if rgb.ndim != 3 or rgb.shape[0] < 3:
+        raise InputError(f"{orthophoto_path}: the scene orthophoto needs 3 bands (R, G, B)")
+    dem, dgrid = read_raster(dem_path)
+    out = []
+    for path, (arr, g) in [(dem_path, (dem, dgrid))] + [(m, read_raster(m)) for m in masks]:
+        if arr.shape != (grid.height, grid.width) or not np.allclose((g.x0, g.y0, g.cell), (grid.x0, grid.y0, grid.cell)):
+            raise InputError(f"{path}: its grid differs from the scene orthophoto {orthophoto_path}")
+        out.append(arr)
+    return rgb[:3].astype(np.uint8), dem.astype(np.float32), grid, [m.astype(np.uint8) for m in out[1:]]
