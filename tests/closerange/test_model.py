@@ -77,20 +77,41 @@ def test_false_candidates_that_fit_better_in_rms_are_not_paired():
     assert np.linalg.norm(res, axis=1).max() < 0.06
 
 
-def test_three_true_spheres_and_one_misplaced_still_georeference():
+def test_three_spheres_georeference_but_a_misplaced_fourth_is_rejected():
     rng = np.random.default_rng(4)
     model = S_TRUE / 1.7
     survey = _world(model) + rng.normal(0, 0.01, (4, 3))
+    # only 3 triangulated: a 3-sphere fit needs the stage's plausibility check (here: the scale) to be unique
+    sim, rows, perm, res = match_markers(model[[0, 2, 3]], survey, ["S1", "S2", "S3", "S4"], plausible=lambda s: abs(s.scale - 1.7) < 0.1)
+    assert [[0, 2, 3][r] for r in rows] == perm and abs(sim.scale - 1.7) < 0.02
     cands = model.copy()
-    cands[1] += np.array([0.5, 0.0, 0.0]) / 1.7  # sphere 1 measured 50 cm off
-    sim, rows, perm, res = match_markers(cands, survey, ["S1", "S2", "S3", "S4"])
-    assert sorted(rows) == [0, 2, 3] and rows == perm
-    assert abs(sim.scale - 1.7) < 0.02
+    cands[1] += np.array([0.5, 0.0, 0.0]) / 1.7  # 4 candidates, sphere 1 measured 50 cm off: 4 must fit, none does
+    with pytest.raises(InputError, match=r"^no assignment of 4 of the 4 triangulated sphere\(s\)"):
+        match_markers(cands, survey, ["S1", "S2", "S3", "S4"])
 
 
 def test_no_assignment_within_the_survey_budget_is_one_sentence():
     model = S_TRUE / 1.7
     cands = model * np.array([1.3, 0.7, 1.0])  # a sheared model: no triple keeps its distances within the budget
-    with pytest.raises(InputError, match=r"^no assignment of the 4 triangulated sphere\(s\) to the 4 surveyed \(S1, S2, S3, S4\) "
+    with pytest.raises(InputError, match=r"^no assignment of 4 of the 4 triangulated sphere\(s\) to the 4 surveyed \(S1, S2, S3, S4\) "
                                          r"fits the similarity within the survey budget of 0\.10 m"):
         match_markers(cands, _world(model), ["S1", "S2", "S3", "S4"])
+
+
+def test_an_implausible_fit_is_skipped_for_the_next_and_rejected_when_none_is_left():
+    rng = np.random.default_rng(6)
+    model = S_TRUE / 1.7
+    survey = _world(model) + rng.normal(0, 0.01, (4, 3))
+    sim, rows, perm, res = match_markers(model, survey, ["S1", "S2", "S3", "S4"], plausible=lambda s: abs(s.scale - 1.7) < 0.1)
+    assert len(rows) == 4
+    with pytest.raises(InputError, match=r"^the \d+ assignment\(s\) of the 4 triangulated sphere\(s\) to the 4 surveyed .* put the cameras where they cannot have been"):
+        match_markers(model, survey, ["S1", "S2", "S3", "S4"], plausible=lambda s: False)
+
+
+def test_two_equally_good_assignments_are_ambiguous():
+    model = S_TRUE[:3] / 1.7
+    survey = _world(model)
+    mirror = model.copy()
+    mirror[:, 2] = -mirror[:, 2] + 5.0  # a second triple with the same distances, far from the first
+    with pytest.raises(InputError, match=r"^\d+ different assignments of the 6 triangulated sphere\(s\) to the 3 surveyed .* the pairing is ambiguous"):
+        match_markers(np.vstack([model, mirror]), survey, ["S1", "S2", "S3"])

@@ -68,7 +68,8 @@ if "closerange" in config and "obia" in config and IS_TWIN:
             spheres=_cr("sphere_residuals.csv"),
             record=_cr("closerange.json"),
         params:
-            closerange={k: CR[k] for k in CR_SFM_KEYS},
+            closerange=dict({k: CR[k] for k in CR_SFM_KEYS}, pole_height_m=CR["walk"].get("pole_height_m", 3.0),
+                            sphere_radius_m=OBIA["scenes"]["marker_radius_m"]),
             sfm=config["sfm"],
             seed=config["seed"],
         log:

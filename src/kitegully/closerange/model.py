@@ -25,6 +25,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -182,6 +183,7 @@ def _pairwise(X: np.ndarray) -> np.ndarray:
 
 def match_markers(
     model_xyz: np.ndarray, survey_xyz: np.ndarray, survey_ids: list[str], budget_m: float = 0.10, max_candidates: int = 12,
+    plausible: Callable[[Similarity], bool] | None = None,
 ) -> tuple[Similarity, list[int], list[int], np.ndarray]:
     """Pair model sphere centres with surveyed ones and fit the similarity model → survey (robust, with a plausibility check).
 
@@ -195,8 +197,16 @@ def match_markers(
     2. its Umeyama similarity maps all candidates into the survey frame; surveyed spheres
        with a mapped candidate within ``budget_m`` (one-to-one, Hungarian) are the inliers;
     3. the hypothesis with the most inliers wins (ties: the smaller RMS of the similarity
-       refitted on its inliers); it is accepted only if it has >= 3 inliers and every
-       refitted residual is within ``budget_m``.
+       refitted on its inliers); it is accepted only if it pairs ``min(k, m)`` spheres
+       (all surveyed ones when there are as many candidates: a 3-sphere fit has only 2
+       redundant coordinates, and among k false candidates some of the ~k³ triples fit
+       3 spheres within 10 cm by chance, as in scene 05 with 22 candidates), every
+       refitted residual is within ``budget_m`` and ``plausible(similarity)`` holds (the
+       stage checks that the cameras come out at the pole's height above the ground);
+       otherwise the next hypothesis is tried;
+    4. it must be unique: a second plausible assignment with as many inliers (false white
+       blobs among many candidates fit 3 spheres by chance: 2 redundant coordinates only)
+       makes the pairing ambiguous and the scene is rejected.
 
     ``budget_m`` is the survey's accuracy ([P] RTK ±10 cm effective in 001).  The first
     ``max_candidates`` candidates (in the order given: most rays first) are used.
@@ -224,7 +234,8 @@ def match_markers(
             "must be seen in 3 photos each to georeference the scene"
         )
     dm, ds = _pairwise(model_xyz), _pairwise(survey_xyz)
-    best, best_key, worst_seen = None, None, np.inf
+    need = min(k, m)  # every surveyed sphere when there are enough candidates (see 3.)
+    hyps, worst_seen = {}, np.inf
     for rows in itertools.combinations(range(k), 3):
         r = list(rows)
         d = dm[np.ix_(r, r)][np.triu_indices(3, 1)]
@@ -242,7 +253,7 @@ def match_markers(
             si, mi = linear_sum_assignment(cost)
             ok = cost[si, mi] <= budget_m
             si, mi = si[ok], mi[ok]
-            if len(si) < 3:
+            if len(si) < need:
                 continue
             try:
                 sim2 = umeyama(model_xyz[mi], survey_xyz[si])
@@ -251,13 +262,36 @@ def match_markers(
             res = survey_xyz[si] - sim2.apply(model_xyz[mi])
             rms = float(np.sqrt(np.mean(np.sum(res ** 2, axis=1))))
             worst_seen = min(worst_seen, float(np.linalg.norm(res, axis=1).max()))
-            key = (-len(si), rms)
-            if np.linalg.norm(res, axis=1).max() <= budget_m and (best_key is None or key < best_key):
-                best_key, best = key, (sim2, [int(x) for x in mi], [int(x) for x in si], res)
+            pairs = tuple(sorted(zip(mi.tolist(), si.tolist())))
+            if np.linalg.norm(res, axis=1).max() <= budget_m and pairs not in hyps:
+                hyps[pairs] = ((-len(si), rms), (sim2, [int(x) for x in mi], [int(x) for x in si], res))
+    best, n_implausible, rivals = None, 0, 0
+    for key, h in sorted(hyps.values(), key=lambda kv: kv[0]):
+        if best is not None and key[0] > best_key[0]:
+            break
+        if plausible is None or plausible(h[0]):
+            if best is None:
+                best, best_key = h, key
+            else:
+                rivals += 1  # another assignment with as many spheres fits as well
+        elif best is None:
+            n_implausible += 1
+    if best is not None and rivals:
+        raise InputError(
+            f"{rivals + 1} different assignments of the {k} triangulated sphere(s) to the {m} surveyed ({', '.join(survey_ids)}) "
+            f"fit {-best_key[0]} spheres each within the survey budget of {budget_m:.2f} m: the pairing is ambiguous "
+            "(false white blobs among the candidates), the scene is not georeferenced"
+        )
+    if best is None and n_implausible:
+        raise InputError(
+            f"the {n_implausible} assignment(s) of the {k} triangulated sphere(s) to the {m} surveyed ({', '.join(survey_ids)}) "
+            f"within the survey budget of {budget_m:.2f} m put the cameras where they cannot have been: the spheres were not "
+            "measured (false white blobs fit by chance)"
+        )
     if best is None:
         extra = "" if not np.isfinite(worst_seen) else f" (best assignment: largest residual {worst_seen:.3f} m)"
         raise InputError(
-            f"no assignment of the {k} triangulated sphere(s) to the {m} surveyed ({', '.join(survey_ids)}) fits the "
-            f"similarity within the survey budget of {budget_m:.2f} m{extra}: the spheres are mis-measured or the survey is wrong"
+            f"no assignment of {need} of the {k} triangulated sphere(s) to the {m} surveyed ({', '.join(survey_ids)}) fits the "
+            f"similarity within the survey budget of {budget_m:.2f} m{extra}: the spheres are mis-measured or not all were found"
         )
     return best

@@ -78,6 +78,13 @@ class CloseRangeParams:
         Largest residual of a sphere after the similarity; an assignment of triangulated
         spheres to the survey is accepted only within it (and the inter-sphere distances must
         agree up to scale within twice it). [P] the RTK survey's ±10 cm effective accuracy (001).
+    pole_height_m, sphere_radius_m : float
+        Height of the camera above the ground and the spheres' radius (acquisition record;
+        the rule passes ``walk.pole_height_m`` and ``obia.scenes.marker_radius_m``). A sphere
+        assignment is plausible only if it puts the cameras' median height above the plane
+        of the surveyed sphere feet within a factor 2 of the pole. [I] the ground around the
+        ring departs from that plane by the scene's undulation (decimetres), far less than
+        a factor 2 of 3 m; a false fit changes the scale by much more (scene 05: ×8).
     dense : PairMatching
         Pairwise semi-global matching.
     trim : float
@@ -113,6 +120,8 @@ class CloseRangeParams:
     sfm_max_num_features: int = 4096
     sphere_tolerance_m: float = 0.01
     marker_budget_m: float = 0.10
+    pole_height_m: float = 3.0
+    sphere_radius_m: float = 0.10
     dense: PairMatching = PairMatching()
     trim: float = 0.25
     periphery: str = "circle"
@@ -307,7 +316,19 @@ def photogrammetric_orthophoto(
     model_xyz = np.array([f[0] for f in found]).reshape(-1, 3)
     sxyz = survey[["x", "y", "z"]].to_numpy(float)
     ids = survey["gcp_id"].astype(str).tolist()
-    sim, rows, perm, res = match_markers(model_xyz, sxyz, ids, params.marker_budget_m)
+    # plausibility: with the similarity the cameras stand at the pole's height above the
+    # ground, here the plane through the surveyed spheres lowered by their radius (a scale or
+    # an orientation from false candidates puts them metres too high, or under the ground)
+    A = np.column_stack([sxyz[:, 0] - sxyz[:, 0].mean(), sxyz[:, 1] - sxyz[:, 1].mean(), np.ones(len(sxyz))])
+    plane = np.linalg.lstsq(A, sxyz[:, 2], rcond=None)[0]
+
+    def cameras_on_poles(sim_) -> bool:
+        c = sim_.apply(centres)
+        ground = plane[0] * (c[:, 0] - sxyz[:, 0].mean()) + plane[1] * (c[:, 1] - sxyz[:, 1].mean()) + plane[2] - params.sphere_radius_m
+        h = float(np.median(c[:, 2] - ground))
+        return 0.5 * params.pole_height_m <= h <= 2.0 * params.pole_height_m
+
+    sim, rows, perm, res = match_markers(model_xyz, sxyz, ids, params.marker_budget_m, plausible=cameras_on_poles)
     err = np.linalg.norm(res, axis=1)
     sph = pd.DataFrame({
         "gcp_id": [ids[p] for p in perm], "n_photos": [len(found[r][1]) for r in rows],
