@@ -197,16 +197,17 @@ def match_markers(
     2. its Umeyama similarity maps all candidates into the survey frame; surveyed spheres
        with a mapped candidate within ``budget_m`` (one-to-one, Hungarian) are the inliers;
     3. the hypothesis with the most inliers wins (ties: the smaller RMS of the similarity
-       refitted on its inliers); it is accepted only if it pairs ``min(k, m)`` spheres
-       (all surveyed ones when there are as many candidates: a 3-sphere fit has only 2
-       redundant coordinates, and among k false candidates some of the ~k³ triples fit
-       3 spheres within 10 cm by chance, as in scene 05 with 22 candidates), every
+       refitted on its inliers); it is accepted only if it pairs >= 3 spheres, every
        refitted residual is within ``budget_m`` and ``plausible(similarity)`` holds (the
        stage checks that the cameras come out at the pole's height above the ground);
        otherwise the next hypothesis is tried;
     4. it must be unique: a second plausible assignment with as many inliers (false white
        blobs among many candidates fit 3 spheres by chance: 2 redundant coordinates only)
        makes the pairing ambiguous and the scene is rejected.
+
+    The budget must be the survey's real accuracy: with 10 cm instead of the twin's 5 cm
+    (3.4 σ of its 1.5 cm survey), scene 05's 22 false candidates gave a unique, plausible
+    3-sphere chance fit 6 m off (residuals 2–9.5 cm).
 
     ``budget_m`` is the survey's accuracy ([P] RTK ±10 cm effective in 001).  The first
     ``max_candidates`` candidates (in the order given: most rays first) are used.
@@ -234,7 +235,7 @@ def match_markers(
             "must be seen in 3 photos each to georeference the scene"
         )
     dm, ds = _pairwise(model_xyz), _pairwise(survey_xyz)
-    need = min(k, m)  # every surveyed sphere when there are enough candidates (see 3.)
+    need = 3
     hyps, worst_seen = {}, np.inf
     for rows in itertools.combinations(range(k), 3):
         r = list(rows)
