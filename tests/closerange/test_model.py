@@ -112,3 +112,12 @@ def test_two_equally_good_assignments_are_ambiguous():
     mirror[:, 2] = -mirror[:, 2] + 5.0  # a second triple with the same distances, far from the first
     with pytest.raises(InputError, match=r"^\d+ different assignments of the 6 triangulated sphere\(s\) to the 3 surveyed .* the pairing is ambiguous"):
         match_markers(np.vstack([model, mirror]), survey, ["S1", "S2", "S3"])
+
+
+def test_a_sphere_triangulated_twice_is_not_an_ambiguity():
+    rng = np.random.default_rng(7)
+    model = S_TRUE / 1.7
+    survey = _world(model) + rng.normal(0, 0.005, (4, 3))
+    cands = np.vstack([model, model[2] + np.array([0.02, 0.0, 0.0]) / 1.7])  # sphere 2 split into two copies 2 cm apart
+    sim, rows, perm, res = match_markers(cands, survey, ["S1", "S2", "S3", "S4"], 0.05)
+    assert len(rows) == 4 and sorted(perm) == [0, 1, 2, 3]

@@ -203,7 +203,8 @@ def match_markers(
        otherwise the next hypothesis is tried;
     4. it must be unique: a second plausible assignment with as many inliers (false white
        blobs among many candidates fit 3 spheres by chance: 2 redundant coordinates only)
-       makes the pairing ambiguous and the scene is rejected.
+       makes the pairing ambiguous and the scene is rejected, unless it places the paired
+       spheres within the budget of the first (a sphere triangulated twice: the same datum).
 
     The budget must be the survey's real accuracy: with 10 cm instead of the twin's 5 cm
     (3.4 σ of its 1.5 cm survey), scene 05's 22 false candidates gave a unique, plausible
@@ -273,8 +274,9 @@ def match_markers(
         if plausible is None or plausible(h[0]):
             if best is None:
                 best, best_key = h, key
-            else:
-                rivals += 1  # another assignment with as many spheres fits as well
+            elif np.abs(h[0].apply(model_xyz[best[1]]) - best[0].apply(model_xyz[best[1]])).max() > budget_m:
+                rivals += 1  # another assignment with as many spheres fits as well and moves the model
+            # (a sphere triangulated twice, its two copies within the budget, is no rival)
         elif best is None:
             n_implausible += 1
     if best is not None and rivals:
