@@ -6,11 +6,12 @@ if "dense" in config and "georef" in config and "sfm" in config:
     DENSE_DATUM = bool((config["dense"].get("datum") or {}).get("enabled", False))
 
     # issue 21: sites with a tiling section match the DSM as one job per tile (dense_tile), merge
-    # it window by window (dense_merge) and render the orthophoto and shading from the mosaic
-    # (dense_finish); other sites keep the single dense_match job.
+    # it window by window (dense_merge), render the orthophoto as tile jobs too (ortho_plan,
+    # ortho_tile per tile, ortho_merge) and the shading and summary from the mosaic (dense_finish);
+    # other sites keep the single dense_match job.
     DENSE_TILED = "tiling" in config
     DENSE_DSM_RULE = "dense_merge" if DENSE_TILED else "dense_match"
-    DENSE_ORTHO_RULE = "dense_finish" if DENSE_TILED else "dense_match"
+    DENSE_ORTHO_RULE = "ortho_merge" if DENSE_TILED else "dense_match"
     DENSE_MODEL_INPUTS = {
         "model": eresult("georef", "model"),
         "transform": eresult("georef", "transform.json"),
@@ -99,13 +100,64 @@ if "dense" in config and "georef" in config and "sfm" in config and DENSE_TILED:
         script:
             "../scripts/dense_merge.py"
 
-    rule dense_finish:
+    # the orthophoto's two global steps (hole filling at any distance, the finest pyramid level
+    # from the whole DSM's median) run once in ortho_plan; each ortho_tile job renders whole
+    # blocks of dense.orthophoto.tile_cells / upsample cells as the untiled orthophoto does
+    # (kitegully.dense.ortho_tiles): the mosaic equals the untiled orthophoto bit for bit
+    rule ortho_plan:
         input:
             **DENSE_MODEL_INPUTS,
             dsm=eresult("dense", "dsm.tif"),
-            stats=eresult("dense", "tiles/merge_stats.json"),
+        output:
+            filled=temp(eresult("dense", "ortho/dsm_filled.tif")),
+            plan=eresult("dense", "ortho/plan.json"),
+        params:
+            dense=config["dense"],
+        log:
+            elogfile("dense", "ortho_plan"),
+        benchmark:
+            ebenchfile("dense", "ortho_plan")
+        script:
+            "../scripts/dense_ortho_plan.py"
+
+    rule ortho_tile:
+        input:
+            **DENSE_MODEL_INPUTS,
+            filled=eresult("dense", "ortho/dsm_filled.tif"),
+            plan=eresult("dense", "ortho/plan.json"),
+        output:
+            tile=temp(eresult("dense", "ortho/{tile}.npz")),
+        params:
+            dense=config["dense"],
+            tiling=DENSE_TILING_PARAMS,
+        threads: config["dense"]["threads"]
+        log:
+            elogfile("dense", "ortho_tile_{tile}"),
+        benchmark:
+            ebenchfile("dense", "ortho_tile_{tile}")
+        script:
+            "../scripts/dense_ortho_tile.py"
+
+    rule ortho_merge:
+        input:
+            tiles=expand(eresult("dense", "ortho/{tile}.npz"), tile=DENSE_TILE_NAMES, allow_missing=True),
+            dsm=eresult("dense", "dsm.tif"),
         output:
             orthophoto=eresult("dense", "orthophoto.tif"),
+            stats=eresult("dense", "ortho/merge_stats.json"),
+        log:
+            elogfile("dense", "ortho_merge"),
+        benchmark:
+            ebenchfile("dense", "ortho_merge")
+        script:
+            "../scripts/dense_ortho_merge.py"
+
+    rule dense_finish:
+        input:
+            dsm=eresult("dense", "dsm.tif"),
+            stats=eresult("dense", "tiles/merge_stats.json"),
+            ortho_stats=eresult("dense", "ortho/merge_stats.json"),
+        output:
             hillshade=report(eresult("dense", "hillshade.png"), caption=caption("dense_hillshade"), category="Dense matching"),
             openness=report(eresult("dense", "openness.png"), caption=caption("dense_openness"), category="Dense matching"),
             summary=report(eresult("dense", "dense_summary.csv"), caption=caption("dense_summary"), category="Dense matching"),

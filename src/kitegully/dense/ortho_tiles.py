@@ -71,7 +71,8 @@ def ortho_tiles(shape: tuple[int, int], params: DenseParams, tiling: TilingParam
     return out
 
 
-def _views(model_dir, transform_json, image_dir) -> ViewSet:
+def load_views(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path) -> ViewSet:
+    """The georeferenced model's views (as the dense stage reads them; images are read lazily)."""
     import pycolmap
 
     rec = pycolmap.Reconstruction(str(model_dir))

@@ -4,7 +4,8 @@ A site that sets ``tiling:`` runs :func:`match_dense_tile` once per tile of
 :class:`kitegully.terrain.tiling.TilingParams` (one Snakemake job each), then
 :func:`merge_dense_tiles` writes ``dsm.tif`` and ``correlation.tif`` window by window
 (memory O(tile)) and checks the vertical datum, and :func:`finish_dense_surface` renders the
-orthophoto and the relief shading from the merged DSM and writes the stage summary. Untiled
+relief shading from the merged DSM and writes the stage summary (the orthophoto is tiled
+too: :mod:`kitegully.dense.ortho_tiles`). Untiled
 sites keep the single job of :func:`kitegully.dense.stage.match_dense_surface`.
 
 Why the tiled DSM equals the untiled one
@@ -30,7 +31,6 @@ from __future__ import annotations
 
 import json
 import logging
-import time
 from dataclasses import replace
 from math import ceil
 from pathlib import Path
@@ -42,11 +42,10 @@ import pandas as pd
 from kitegully import InputError
 from kitegully.dense.cell import choose_cell
 from kitegully.dense.datum import check_datum
-from kitegully.dense.ortho import orthophoto
 from kitegully.dense.stage import DenseParams, peak_memory_mb, shading_figures, site_grid
 from kitegully.dense.surface import DenseResult, dense_surface
 from kitegully.dense.views import ViewSet, read_offset, views_from_reconstruction
-from kitegully.io.raster import GridSpec, _profile, read_raster, write_raster
+from kitegully.io.raster import GridSpec, _profile, read_raster
 from kitegully.io.tables import write_table
 from kitegully.terrain.tiled_fill import Tile
 from kitegully.terrain.tiling import TilingParams, split_grid
@@ -302,39 +301,29 @@ def merge_dense_tiles(tile_files: Sequence[str | Path], params: DenseParams, out
     return stats
 
 
-def finish_dense_surface(dsm_tif: str | Path, stats_json: str | Path, model_dir: str | Path,
-                         transform_json: str | Path | None, image_dir: str | Path, params: DenseParams,
-                         threads: int, out: Mapping[str, str | Path]) -> dict:
-    """Orthophoto, shading figures and stage summary of a tiled site from the merged DSM.
+def finish_dense_surface(dsm_tif: str | Path, stats_json: str | Path, ortho_stats_json: str | Path,
+                         params: DenseParams, threads: int, out: Mapping[str, str | Path]) -> dict:
+    """Shading figures and stage summary of a tiled site from the merged DSM and the tile jobs' stats.
 
-    ``out`` keys: orthophoto, hillshade, openness, summary (as the untiled stage). The
-    summary has the untiled stage's rows; ``matching_s`` sums the tile jobs' matching
-    time (the CPU-bound part, whatever ran in parallel) and ``median_ncc`` is read from a
-    histogram (±5e-5). Memory O(grid): the orthophoto and the shading read the whole DSM
-    (one job, as in the untiled stage). Cost as :func:`kitegully.dense.ortho.orthophoto`.
+    ``out`` keys: hillshade, openness, summary (the untiled stage's, less the orthophoto,
+    which the ``ortho_tile`` jobs render and ``ortho_merge`` writes:
+    :mod:`kitegully.dense.ortho_tiles`). The summary has the untiled stage's rows;
+    ``matching_s`` and ``orthophoto_s`` sum the tile jobs' times (the CPU-bound parts,
+    whatever ran in parallel) and ``median_ncc`` is read from a histogram (±5e-5). Memory
+    O(grid): the shading reads the whole DSM. Cost O(cells).
     """
-    import numba
-    import pycolmap
-
-    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     stats = json.loads(Path(stats_json).read_text(encoding="utf-8"))
+    ortho = json.loads(Path(ortho_stats_json).read_text(encoding="utf-8"))
     dsm, grid = read_raster(dsm_tif)
-    rec = pycolmap.Reconstruction(str(model_dir))
-    views: ViewSet = views_from_reconstruction(rec, image_dir, read_offset(transform_json), where=str(model_dir))
-    oc = params.orthophoto
-    t1 = time.perf_counter()
-    img, og, source = orthophoto(views, dsm, grid, oc.upsample, oc.tile_cells, oc.overlap_m,
-                                 oc.occlusion_tolerance_m, params.max_cached_images)
-    t_ortho = time.perf_counter() - t1
-    names = ["R", "G", "B", "NIR"][: img.shape[0]] if img.shape[0] >= 3 else ["grey"] * img.shape[0]
-    write_raster(out["orthophoto"], img, og, band_names=names, mask=source >= 0, overview_resampling="average")
+    t_ortho = ortho["orthophoto_s"]
     shading_figures(dsm, grid, params.shading, params.figure_max_px, out["hillshade"], out["openness"])
     keys = ("images", "cell_m", "gsd_measured_m", "width_cells", "height_cells", "area_km2", "tiles",
             "seen_by_2_or_more_pct", "valid_pct", "coverage_of_seen_pct", "median_ncc", "matching_s")
     summary = {k: stats[k] for k in keys}
     cells = stats["width_cells"] * stats["height_cells"]
     summary.update({"orthophoto_s": t_ortho, "cells_per_s": cells / stats["matching_s"],
-                    "peak_memory_mb": max(peak_memory_mb(), stats["tile_peak_memory_mb"]), "threads": int(threads),
+                    "peak_memory_mb": max(peak_memory_mb(), stats["tile_peak_memory_mb"], ortho["tile_peak_memory_mb"]),
+                    "threads": int(threads),
                     "tile_jobs": stats["tile_jobs"]})
     summary.update(stats.get("datum", {}))
     summary["extrapolated_3_18_km2_at_0_2_m_h"] = 3.18e6 / 0.2 ** 2 / summary["cells_per_s"] / 3600.0
