@@ -39,6 +39,23 @@ def excess_green(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.nda
     return exg.astype(np.float32)
 
 
+def blue_dominant(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.ndarray:
+    """Cells whose blue band is brighter than both red and green (bool).
+
+    Neither soil nor plants look like this [I]: iron oxides and organic matter make soil
+    reflectance rise from blue to red, and plant material, green (chlorophyll) or
+    senescent (carotenoids, lignin), absorbs blue more than green or red.  Blue is the
+    brightest band over open water (red absorbed by water), in shade lit by the blue sky
+    and on some painted roofs.  Such cells form their own ExG mode (open water sits
+    between bare soil and vegetation) and are left out of the threshold histogram.
+    O(N).
+    """
+    r = np.asarray(red, dtype=np.float32)
+    g = np.asarray(green, dtype=np.float32)
+    b = np.asarray(blue, dtype=np.float32)
+    return (b > r) & (b > g)
+
+
 def ndvi(nir: np.ndarray, red: np.ndarray) -> np.ndarray:
     """Normalised difference vegetation index, float32; 0 where NIR + red == 0 [I]."""
     n = np.asarray(nir, dtype=np.float32)

@@ -1,8 +1,12 @@
 """Kite-scale application: bare-soil map of a site-wide orthophoto + DSM, in tiles.
 
-The histogram (and so the valley threshold) is global: the blurred index (ExG, or NDVI
-where a NIR orthophoto exists and ``obia.classification.index`` is ``ndvi``) is
-accumulated tile by tile into one fixed-range histogram.  Segmentation and classification then run per
+The histogram (and so the valley threshold) is global: blurred ExG is accumulated tile
+by tile into one fine fixed-range histogram (``FINE_BINS_PER_BIN`` x ``hist_bins`` bins over
+the whole ExG range; cells whose blue band is the brightest, open water above all, are
+left out: :func:`kitegully.obia.indices.blue_dominant`), re-binned into ``hist_bins`` bins over the range the data occupy
+(:func:`kitegully.obia.threshold.central_histogram`, as a scene's histogram spans its
+data), and split at the valley that bounds its lowest mode, bare soil
+(:func:`kitegully.obia.threshold.find_bare_threshold`).  Segmentation and classification then run per
 tile (segments do not cross tile borders [I]); the tile core is written to the output.
 Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T cells.
 """
@@ -21,8 +25,14 @@ from rasterio.warp import reproject
 from kitegully import InputError
 from kitegully.io.raster import _profile, grid_of, iter_tiles
 from kitegully.obia.classify import NODATA, classify_segments, remove_small_eroded, segment_means
-from kitegully.obia.scene import ObiaParams, blurred_index, segment
-from kitegully.obia.threshold import ThresholdResult, find_thresholds
+from kitegully.obia.indices import EXG_RANGE, blue_dominant
+from kitegully.obia.scene import ObiaParams, blurred_exg, segment
+from kitegully.obia.threshold import ThresholdResult, central_histogram, find_bare_threshold
+
+FINE_BINS_PER_BIN = 64
+"""Fine bins per final bin of the accumulated histogram [I]: 256 x 64 bins over ExG [-1, 2]
+are 0.00018 wide, far below the spread of one cover type (~0.01), so the re-binned
+histogram is the one a single pass over the data's own range would give."""
 
 log = logging.getLogger("kitegully.obia.kite")
 
@@ -148,8 +158,8 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
             raise ValueError(f"tile_cells {tile_cells} must be at least 4 seed band widths ({4 * params.seed_bandwidth_cells} cells)")
         grid = grid_of(ortho, ortho_path)
         halo = params.blur_radius_cells + params.slope_window_cells
-        counts = np.zeros(params.hist_bins, dtype=np.int64)
-        edges = np.linspace(*params.index_range, params.hist_bins + 1)
+        counts = np.zeros(params.hist_bins * FINE_BINS_PER_BIN, dtype=np.int64)
+        edges = np.linspace(EXG_RANGE[0], EXG_RANGE[1], params.hist_bins * FINE_BINS_PER_BIN + 1)
         tiles = list(iter_tiles(grid, tile_cells, halo))
         water_cells = 0
         for i, (read, core) in enumerate(tiles):
@@ -158,11 +168,12 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
             _, blur, _ = _tile_index(rgb, nir_band, valid, params, src)
             r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
             inner = blur[r0:r0 + core.height, c0:c0 + core.width]
-            counts += np.histogram(inner[np.isfinite(inner)], bins=edges)[0]
+            land = ~blue_dominant(*(b[r0:r0 + core.height, c0:c0 + core.width] for b in rgb))
+            counts += np.histogram(inner[np.isfinite(inner) & land], bins=edges)[0]
             log.info("histogram: tile %d/%d", i + 1, len(tiles))
-        centres = 0.5 * (edges[:-1] + edges[1:])
-        thr = find_thresholds(counts, centres, params.min_class_fraction, params.max_valley_ratio)
-        log.info("global %s threshold: valley %s, Otsu %s (%s)", params.index, thr.valley, thr.otsu, thr.reason)
+        coarse, centres = central_histogram(counts, edges, params.hist_bins)
+        thr = find_bare_threshold(coarse, centres, params.min_class_fraction, params.max_valley_ratio)
+        log.info("global threshold: valley %s (valleys %s), Otsu %s (%s)", thr.valley, thr.valleys, thr.otsu, thr.reason)
         unimodal = 0 if params.unimodal_class == "grass" else 1
         profile = _profile(grid, 1, "uint8", NODATA, cog=True)
         Path(out_path).parent.mkdir(parents=True, exist_ok=True)

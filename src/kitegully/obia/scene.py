@@ -3,6 +3,12 @@
 features (R, G, B, Wood slope; z-normalised) -> seeds (variance minima) -> seeded region
 growing -> ExG, Gaussian blur -> histogram valley threshold (Otsu alongside) -> segment
 mean ExG -> grass / eroded -> optional minimum-area filter.
+
+The histogram leaves out cells whose blue band is the brightest (open water, sky-lit
+shade: :func:`kitegully.obia.indices.blue_dominant`), and the valley is the one that
+bounds the lowest ExG mode, bare soil (:func:`kitegully.obia.threshold.find_bare_threshold`):
+on a scene of grass over soil that is the valley between the two peaks, as in the paper;
+with senescent grass and green shrubs beside the soil it is the valley below the straw.
 """
 
 from __future__ import annotations
@@ -18,11 +24,11 @@ from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 from kitegully.obia.classify import ERODED, GRASS, NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.features import normalise_features
-from kitegully.obia.indices import EXG_RANGE, NDVI_RANGE, excess_green, gaussian_blur, ndvi
+from kitegully.obia.indices import EXG_RANGE, blue_dominant, excess_green, gaussian_blur
 from kitegully.obia.seeds import generate_seeds
 from kitegully.obia.slope import wood_slope
 from kitegully.obia.srg import seeded_region_growing
-from kitegully.obia.threshold import ThresholdResult, find_thresholds, histogram
+from kitegully.obia.threshold import ThresholdResult, find_bare_threshold, histogram
 
 log = logging.getLogger("kitegully.obia")
 
@@ -265,8 +271,9 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
     t.update(seg.timings_s)
     t0 = time.perf_counter()
     exg, exg_blur = blurred_exg(red, green, blue, ok, params)
-    counts, centres = histogram(exg_blur, params.hist_bins)
-    thr = find_thresholds(counts, centres, params.min_class_fraction, params.max_valley_ratio)
+    land = ~blue_dominant(red, green, blue)
+    counts, centres = histogram(exg_blur[land] if land.any() else exg_blur, params.hist_bins)
+    thr = find_bare_threshold(counts, centres, params.min_class_fraction, params.max_valley_ratio)
     feature = exg_blur if params.segment_feature == "blurred" else exg
     means = segment_means(feature, segments, nseg)
     unimodal = GRASS if params.unimodal_class == "grass" else ERODED

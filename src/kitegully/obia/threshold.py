@@ -18,6 +18,18 @@ Before the peaks are sought, the outermost ``tail_fraction`` of the cells on eac
 cut off the histogram [I]: a kite orthophoto holds rare ExG outliers (deep shadow,
 saturated roofs) far from the data, and those isolated counts would otherwise outlive
 the smoothing as a "peak" while the real two modes merge into one.
+
+Lowest mode (:func:`find_bare_threshold`) [I]: a histogram may hold more than two cover
+types, for example bare soil, senescent (straw-coloured) grass and green shrubs.  The
+peak search above keeps the two strongest modes and then puts the valley between
+"soil + straw" and "green", so dry grass is mapped as bare.  Every plant surface,
+green or senescent, reflects more green relative to red and blue than soil does
+(chlorophyll peak at 550 nm; straw keeps carotenoids and lignin, G close to R, while
+iron-oxide soils have R > G > B [I]), so bare soil is the LOWEST ExG mode.  The split is
+therefore repeated on the cells below the valley, with the same bimodality tests, as
+long as that lower part is itself bimodal; the last valley found bounds the lowest
+mode.  A two-class scene (grass over soil) has a unimodal lower part and keeps the
+first valley.
 """
 
 from __future__ import annotations
@@ -46,6 +58,9 @@ class ThresholdResult:
         Bin centres of the two peaks of the smoothed histogram.
     valley_ratio : float or None
         Smoothed count at the valley / the lower of the two peaks.
+    valleys : list of float
+        Every valley found by :func:`find_bare_threshold`, from the first (two strongest
+        modes) down to the one bounding the lowest mode; empty for :func:`find_thresholds`.
     low_fraction : float or None
         Share of cells at or below the valley.
     counts, centres : numpy.ndarray
@@ -65,14 +80,11 @@ class ThresholdResult:
     low_fraction: float | None = None
     counts: np.ndarray = field(default_factory=lambda: np.zeros(0))
     centres: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    water_cells: int | None = None
+    valleys: list = field(default_factory=list)
 
     def as_dict(self) -> dict:
-        keys = ("valley", "otsu", "bimodal", "reason", "low_peak", "high_peak", "valley_ratio", "low_fraction")
-        out = {k: getattr(self, k) for k in keys}
-        if self.water_cells is not None:
-            out["water_cells"] = self.water_cells
-        return out
+        keys = ("valley", "otsu", "bimodal", "reason", "low_peak", "high_peak", "valley_ratio", "low_fraction", "valleys")
+        return {k: getattr(self, k) for k in keys}
 
 
 def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -85,6 +97,49 @@ def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | 
             value_range = (value_range[0] - 0.5, value_range[1] + 0.5)
     counts, edges = np.histogram(v, bins=bins, range=value_range)
     return counts.astype(np.int64), (0.5 * (edges[:-1] + edges[1:]))
+
+
+def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fraction: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Re-bin a fine histogram into about ``bins`` bins over the range its central cells occupy.
+
+    A scene's histogram spans the data's own range (:func:`histogram`); a site-wide
+    histogram is accumulated tile by tile on a fixed fine grid over the whole ExG range
+    and re-binned here, so that its ``bins`` bins also span the data and not the
+    theoretical [-1, 2] [I].  The range is that of the cells left once ``tail_fraction``
+    is cut off each end (rare outliers in deep shadow or on roofs would otherwise widen
+    it and coarsen the bins); the cut-off cells are counted in the end bins.  Each new bin
+    is a whole number of fine bins.
+
+    Parameters
+    ----------
+    counts, edges
+        Fine histogram: counts (n) and bin edges (n + 1), equal widths.
+    bins
+        Wanted number of bins over the central range (the result may have a few more).
+    tail_fraction
+        Share of the cells cut off each end [I] (as in :func:`find_thresholds`).
+
+    Returns
+    -------
+    (counts, centres)
+        The re-binned histogram.
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    if counts.sum() == 0:
+        return counts, 0.5 * (edges[:-1] + edges[1:])
+    lo, hi = _central_bins(counts, tail_fraction)
+    group = max(1, int(np.ceil((hi - lo + 1) / bins)))
+    n = int(np.ceil((hi - lo + 1) / group))
+    start = max(0, min(lo, counts.size - n * group))
+    stop = start + n * group
+    pad = max(0, stop - counts.size)
+    fine = np.concatenate([counts, np.zeros(pad, dtype=np.int64)])
+    out = fine[start:stop].reshape(n, group).sum(axis=1)
+    out[0] += counts[:start].sum()
+    out[-1] += counts[stop:].sum() if stop < counts.size else 0
+    width = float(edges[1] - edges[0])
+    new_edges = edges[0] + width * (start + group * np.arange(n + 1))
+    return out, 0.5 * (new_edges[:-1] + new_edges[1:])
 
 
 def _local_maxima(hist: np.ndarray) -> list[int]:
@@ -190,3 +245,59 @@ def find_thresholds(
         res.valley = None
         res.reason = f"the valley is too shallow (valley/peak = {ratio:.2f} > {max_valley_ratio:.2f})"
     return res
+
+
+def find_bare_threshold(
+    counts: np.ndarray,
+    centres: np.ndarray,
+    min_class_fraction: float,
+    max_valley_ratio: float,
+    max_splits: int = 8,
+) -> ThresholdResult:
+    """Valley that bounds the lowest ExG mode (bare soil) of a possibly multimodal histogram.
+
+    Runs :func:`find_thresholds`; while a valley is found, the histogram is cut at it and
+    the part at or below the valley is searched again with the same tests (each side of
+    a new valley must also hold ``min_class_fraction`` of ALL cells).  The result is the
+    last valid split: its ``valley``, peaks, ratio and ``low_fraction`` (of all cells)
+    describe the lowest mode and the mode just above it; ``valleys`` lists every valley
+    from the first to the last; ``otsu`` is Otsu's threshold of the whole histogram.
+    A histogram that is not bimodal at the first split is returned as
+    :func:`find_thresholds` returns it.
+
+    Parameters
+    ----------
+    counts, centres
+        Histogram (see :func:`histogram`).
+    min_class_fraction, max_valley_ratio
+        As in :func:`find_thresholds` [I].
+    max_splits
+        Safety bound on the number of splits (each removes at least one mode).
+
+    Complexity: O(max_splits x bins x smoothing iterations).
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    centres = np.asarray(centres, dtype=np.float64)
+    total = int(counts.sum())
+    best = find_thresholds(counts, centres, min_class_fraction, max_valley_ratio)
+    if best.valley is None:
+        return best
+    valleys = [best.valley]
+    for _ in range(max_splits):
+        keep = centres <= best.valley
+        sub = find_thresholds(counts[keep], centres[keep], min_class_fraction, max_valley_ratio)
+        if sub.valley is None or sub.valley >= best.valley:
+            break
+        below = int(counts[centres <= sub.valley].sum())
+        above = int(counts[keep].sum()) - below
+        if min(below, above) < min_class_fraction * total:
+            break
+        valleys.append(sub.valley)
+        best = ThresholdResult(
+            sub.valley, best.otsu, True,
+            f"lowest of {len(valleys)} modes separated by valleys" if len(valleys) > 1 else best.reason,
+            low_peak=sub.low_peak, high_peak=sub.high_peak, valley_ratio=sub.valley_ratio,
+            low_fraction=below / total, counts=counts, centres=centres,
+        )
+    best.valleys = [float(v) for v in valleys]
+    return best
