@@ -26,6 +26,12 @@ Usage::
 
 Writes ``<out>/obia_ensemble.csv`` and ``.md`` (about 1.5 min per member on the loaded
 2-core machine). ``--reuse`` scores an existing ``<out>/<site>/bare_soil.tif`` again.
+
+``--scenes RESULTS/<site>/obia/scenes`` also classifies the stored close-range scenes again
+with the current code (:func:`kitegully.obia.classify_scene_products`, the obia_classify
+rule's entry point) and compares their confusion matrices with the stored ``confusion.json``
+(``<out>/obia_scenes_recheck.csv``/``.md``): the close-range (Mayr Table 3) accuracy must not
+drop.
 """
 
 from __future__ import annotations
@@ -195,6 +201,41 @@ def diagnosis_figure(site_dir: Path, new_bare: Path, params: ObiaParams, cfg: di
     save_figure(fig, out_png)
 
 
+def recheck_scenes(scenes_dir: Path, out: Path) -> pd.DataFrame:
+    """Classify every stored close-range scene again and compare with its stored confusion matrix."""
+    from kitegully.obia import classify_scene_products, evaluate_scene
+    from kitegully.obia.accuracy import accuracies
+    from kitegully.obia.stage import METHOD_KEYS
+
+    cfg = load_yaml(BASE)["obia"]
+    ocfg = {k: cfg[k] for k in METHOD_KEYS}
+    rows, tot_old, tot_new = [], np.zeros((2, 2)), np.zeros((2, 2))
+    for d in sorted(p for p in scenes_dir.glob("scene_*") if (p / "confusion.json").exists()):
+        rgb, g = read_raster(str(d / "orthophoto.tif"), band=None)
+        dem, dg = read_raster(str(d / "dem.tif"))
+        truth, _ = read_raster(str(d / "truth" / "eroded.tif"))
+        paths = {"orthophoto": str(d / "orthophoto.tif"), "dem": str(d / "dem.tif"), "markers": str(d / "markers.csv")}
+        sc = classify_scene_products(rgb, dem, g, dg, pd.read_csv(d / "markers.csv"), ocfg, d.name, paths)
+        new = np.asarray(evaluate_scene(sc.result.classes, sc.result.classes_otsu, truth, g.cell, sc.info, d.name)["confusion"])
+        stored = json.loads((d / "confusion.json").read_text())
+        old = np.asarray(stored["confusion"])
+        tot_old += old
+        tot_new += new
+        rows.append({"scene": d.name, "valley_stored": stored["threshold"]["valley"], "valley_now": sc.info["valley"],
+                     "oa_stored_pct": 100 * accuracies(old)["overall"], "oa_now_pct": 100 * accuracies(new)["overall"],
+                     "eroded_pa_stored_pct": 100 * accuracies(old)["producers"][1], "eroded_pa_now_pct": 100 * accuracies(new)["producers"][1],
+                     "eroded_ua_stored_pct": 100 * accuracies(old)["users"][1], "eroded_ua_now_pct": 100 * accuracies(new)["users"][1]})
+    if rows:
+        rows.append({"scene": "all", "oa_stored_pct": 100 * accuracies(tot_old)["overall"], "oa_now_pct": 100 * accuracies(tot_new)["overall"],
+                     "eroded_pa_stored_pct": 100 * accuracies(tot_old)["producers"][1], "eroded_pa_now_pct": 100 * accuracies(tot_new)["producers"][1],
+                     "eroded_ua_stored_pct": 100 * accuracies(tot_old)["users"][1], "eroded_ua_now_pct": 100 * accuracies(tot_new)["users"][1]})
+    df = pd.DataFrame(rows)
+    out.mkdir(parents=True, exist_ok=True)
+    write_table(df, out / "obia_scenes_recheck.csv", floatfmt=".2f")
+    print(df.to_string(index=False), flush=True)
+    return df
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--root", default="results", help="folder holding <site>/dense and <site>/twin/truth of each member")
@@ -202,8 +243,11 @@ def main() -> int:
     ap.add_argument("--out", default="results/benchmarks")
     ap.add_argument("--diagnose", default=None, help="member for the diagnosis figure")
     ap.add_argument("--reuse", action="store_true", help="score an existing <out>/<site>/bare_soil.tif again")
+    ap.add_argument("--scenes", default=None, help="stored close-range scenes folder to classify again and compare")
     args = ap.parse_args()
     root, out = Path(args.root), Path(args.out)
+    if args.scenes:
+        recheck_scenes(Path(args.scenes), out)
     rows = []
     for member in args.members.split(","):
         cfg = member_config(member)

@@ -70,10 +70,12 @@ def test_untiled_map_matches_truth_and_global_threshold(site_files):
     # the valley lies between the two colours' ExG (soil 0.0, grass 0.64 for these DNs)
     assert excess_green(*[np.array([v]) for v in (130, 110, 90)])[0] < thr.valley < excess_green(*[np.array([v]) for v in (60, 120, 40)])[0]
     # the threshold is that of the whole image's blurred-ExG histogram on the fixed range
+    # (two colours: one split, the paper's two-peak valley on hist_bins bins)
     exg = gaussian_blur(excess_green(*rgb.astype(np.float32)), PARAMS.blur_sigma_cells, PARAMS.blur_radius_cells)
     edges = np.linspace(*EXG_RANGE, PARAMS.hist_bins + 1)
     ref = find_thresholds(np.histogram(exg, bins=edges)[0], 0.5 * (edges[1:] + edges[:-1]), PARAMS.min_class_fraction, PARAMS.max_valley_ratio)
     assert thr.valley == pytest.approx(ref.valley, abs=1e-12)
+    assert thr.valleys == [thr.valley]
     # pure colours: only segments straddling a patch edge can be wrong, i.e. cells
     # within one seed band width of the edge
     wrong = classes != truth

@@ -3,10 +3,10 @@
 The histogram (and so the valley threshold) is global: blurred ExG is accumulated tile
 by tile into one fine fixed-range histogram (``FINE_BINS_PER_BIN`` x ``hist_bins`` bins over
 the whole ExG range; cells whose blue band is the brightest, open water above all, are
-left out: :func:`kitegully.obia.indices.blue_dominant`), re-binned into ``hist_bins`` bins over the range the data occupy
-(:func:`kitegully.obia.threshold.central_histogram`, as a scene's histogram spans its
-data), and split at the valley that bounds its lowest mode, bare soil
-(:func:`kitegully.obia.threshold.find_bare_threshold`).  Segmentation and classification then run per
+left out: :func:`kitegully.obia.indices.blue_dominant`) and split at the valley that
+bounds its lowest mode, bare soil (:func:`kitegully.obia.threshold.find_bare_threshold`:
+the first valley on ``hist_bins`` bins over the fixed range, as before, then again on
+the finer re-binned part below it while that part is bimodal).  Segmentation and classification then run per
 tile (segments do not cross tile borders [I]); the tile core is written to the output.
 Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T cells.
 """
@@ -27,12 +27,7 @@ from kitegully.io.raster import _profile, grid_of, iter_tiles
 from kitegully.obia.classify import NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.indices import EXG_RANGE, blue_dominant
 from kitegully.obia.scene import ObiaParams, blurred_exg, segment
-from kitegully.obia.threshold import ThresholdResult, central_histogram, find_bare_threshold
-
-FINE_BINS_PER_BIN = 64
-"""Fine bins per final bin of the accumulated histogram [I]: 256 x 64 bins over ExG [-1, 2]
-are 0.00018 wide, far below the spread of one cover type (~0.01), so the re-binned
-histogram is the one a single pass over the data's own range would give."""
+from kitegully.obia.threshold import FINE_BINS_PER_BIN, ThresholdResult, find_bare_threshold
 
 log = logging.getLogger("kitegully.obia.kite")
 
@@ -171,8 +166,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
             land = ~blue_dominant(*(b[r0:r0 + core.height, c0:c0 + core.width] for b in rgb))
             counts += np.histogram(inner[np.isfinite(inner) & land], bins=edges)[0]
             log.info("histogram: tile %d/%d", i + 1, len(tiles))
-        coarse, centres = central_histogram(counts, edges, params.hist_bins)
-        thr = find_bare_threshold(coarse, centres, params.min_class_fraction, params.max_valley_ratio)
+        thr = find_bare_threshold(counts, edges, params.hist_bins, params.min_class_fraction, params.max_valley_ratio)
         log.info("global threshold: valley %s (valleys %s), Otsu %s (%s)", thr.valley, thr.valleys, thr.otsu, thr.reason)
         unimodal = 0 if params.unimodal_class == "grass" else 1
         profile = _profile(grid, 1, "uint8", NODATA, cog=True)

@@ -28,7 +28,7 @@ from kitegully.obia.indices import EXG_RANGE, blue_dominant, excess_green, gauss
 from kitegully.obia.seeds import generate_seeds
 from kitegully.obia.slope import wood_slope
 from kitegully.obia.srg import seeded_region_growing
-from kitegully.obia.threshold import ThresholdResult, find_bare_threshold, histogram
+from kitegully.obia.threshold import ThresholdResult, find_bare_threshold, fine_histogram
 
 log = logging.getLogger("kitegully.obia")
 
@@ -272,8 +272,8 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
     t0 = time.perf_counter()
     exg, exg_blur = blurred_exg(red, green, blue, ok, params)
     land = ~blue_dominant(red, green, blue)
-    counts, centres = histogram(exg_blur[land] if land.any() else exg_blur, params.hist_bins)
-    thr = find_bare_threshold(counts, centres, params.min_class_fraction, params.max_valley_ratio)
+    fine, edges = fine_histogram(exg_blur[land] if land.any() else exg_blur, params.hist_bins)
+    thr = find_bare_threshold(fine, edges, params.hist_bins, params.min_class_fraction, params.max_valley_ratio)
     feature = exg_blur if params.segment_feature == "blurred" else exg
     means = segment_means(feature, segments, nseg)
     unimodal = GRASS if params.unimodal_class == "grass" else ERODED

@@ -40,6 +40,11 @@ import numpy as np
 from scipy import ndimage
 from skimage.filters import threshold_otsu
 
+FINE_BINS_PER_BIN = 64
+"""Fine bins per histogram bin [I]: 256 x 64 bins over ExG [-1, 2] are 0.00018 wide, far below
+the spread of one cover type (~0.01), so re-binning the fine histogram over any part of the
+range gives the histogram a pass over that part's own range would give."""
+
 
 @dataclass
 class ThresholdResult:
@@ -247,55 +252,107 @@ def find_thresholds(
     return res
 
 
+DIP_SIGMAS = 3.0
+"""A further split needs a dip of at least 3 Poisson standard deviations [I] (the usual
+significance convention): a bump of counting noise on a flat tail is no mode."""
+
+
+def _dip_is_significant(counts: np.ndarray, centres: np.ndarray, valley: float, peak: float, sigmas: float = DIP_SIGMAS) -> bool:
+    """True if the counts around ``peak`` exceed those around ``valley`` by ``sigmas`` Poisson SDs.
+
+    Both windows are half the valley-peak distance wide on each side (so they do not
+    overlap); N_peak - N_valley > sigmas x sqrt(N_peak + N_valley) [I].
+    """
+    half = 0.5 * abs(peak - valley)
+    n_peak = float(counts[np.abs(centres - peak) <= half].sum())
+    n_valley = float(counts[np.abs(centres - valley) <= half].sum())
+    return n_peak - n_valley > sigmas * np.sqrt(max(n_peak + n_valley, 1.0))
+
+
+def fine_histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Histogram of the finite values on ``bins`` x :data:`FINE_BINS_PER_BIN` fine bins: (counts, edges).
+
+    The range is ``value_range`` or the data's own (min, max), as :func:`histogram` takes it;
+    grouping every :data:`FINE_BINS_PER_BIN` fine bins gives exactly :func:`histogram`'s
+    ``bins`` bins.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if value_range is None:
+        value_range = (float(v.min()), float(v.max())) if v.size else (0.0, 1.0)
+        if value_range[0] == value_range[1]:
+            value_range = (value_range[0] - 0.5, value_range[1] + 0.5)
+    counts, edges = np.histogram(v, bins=bins * FINE_BINS_PER_BIN, range=value_range)
+    return counts.astype(np.int64), edges
+
+
 def find_bare_threshold(
-    counts: np.ndarray,
-    centres: np.ndarray,
+    fine_counts: np.ndarray,
+    fine_edges: np.ndarray,
+    bins: int,
     min_class_fraction: float,
     max_valley_ratio: float,
     max_splits: int = 8,
 ) -> ThresholdResult:
     """Valley that bounds the lowest ExG mode (bare soil) of a possibly multimodal histogram.
 
-    Runs :func:`find_thresholds`; while a valley is found, the histogram is cut at it and
-    the part at or below the valley is searched again with the same tests (each side of
-    a new valley must also hold ``min_class_fraction`` of ALL cells).  The result is the
-    last valid split: its ``valley``, peaks, ratio and ``low_fraction`` (of all cells)
-    describe the lowest mode and the mode just above it; ``valleys`` lists every valley
-    from the first to the last; ``otsu`` is Otsu's threshold of the whole histogram.
-    A histogram that is not bimodal at the first split is returned as
-    :func:`find_thresholds` returns it.
+    The first split is :func:`find_thresholds` on the fine histogram grouped into ``bins``
+    bins over its whole range (exactly the paper's two-peak valley on ``bins`` bins).  While
+    a valley is found, the cells at or below it are re-binned into ``bins`` bins over the
+    range they occupy (:func:`central_histogram`; finer bins, so that two close modes such
+    as soil at ExG 0.0 and straw at 0.05 are resolved) and searched again with the same
+    tests; each side of a new valley must also hold ``min_class_fraction`` of ALL cells,
+    and the dip must be significant against counting noise (:data:`DIP_SIGMAS`).
+    The result is the last valid split: its ``valley``, peaks, ratio and ``low_fraction``
+    (of all cells) describe the lowest mode and the mode just above it; ``valleys`` lists
+    every valley from the first to the last; ``otsu``, ``counts`` and ``centres`` are those
+    of the first (``bins``-bin) histogram.  A histogram that is not bimodal at the first
+    split is returned as :func:`find_thresholds` returns it.
 
     Parameters
     ----------
-    counts, centres
-        Histogram (see :func:`histogram`).
+    fine_counts, fine_edges
+        Fine histogram with ``bins`` x k equal bins (:func:`fine_histogram`).
+    bins
+        Bins of the first histogram and of each re-binned lower part [I].
     min_class_fraction, max_valley_ratio
         As in :func:`find_thresholds` [I].
     max_splits
-        Safety bound on the number of splits (each removes at least one mode).
+        Safety bound on the number of further splits (each removes at least one mode).
 
-    Complexity: O(max_splits x bins x smoothing iterations).
+    Complexity: O(fine bins + max_splits x bins x smoothing iterations).
     """
-    counts = np.asarray(counts, dtype=np.int64)
-    centres = np.asarray(centres, dtype=np.float64)
-    total = int(counts.sum())
+    fine_counts = np.asarray(fine_counts, dtype=np.int64)
+    fine_edges = np.asarray(fine_edges, dtype=np.float64)
+    group = fine_counts.size // bins
+    if group < 1 or group * bins != fine_counts.size:
+        raise ValueError(f"fine histogram of {fine_counts.size} bins is not a multiple of {bins} bins")
+    counts = fine_counts.reshape(bins, group).sum(axis=1)
+    coarse_edges = fine_edges[::group]
+    centres = 0.5 * (coarse_edges[:-1] + coarse_edges[1:])
+    fine_centres = 0.5 * (fine_edges[:-1] + fine_edges[1:])
+    total = int(fine_counts.sum())
     best = find_thresholds(counts, centres, min_class_fraction, max_valley_ratio)
     if best.valley is None:
         return best
     valleys = [best.valley]
     for _ in range(max_splits):
-        keep = centres <= best.valley
-        sub = find_thresholds(counts[keep], centres[keep], min_class_fraction, max_valley_ratio)
+        keep = fine_centres <= best.valley
+        if keep.sum() < 2:
+            break
+        sub_counts, sub_centres = central_histogram(fine_counts[keep], fine_edges[:int(keep.sum()) + 1], bins)
+        sub = find_thresholds(sub_counts, sub_centres, min_class_fraction, max_valley_ratio)
         if sub.valley is None or sub.valley >= best.valley:
             break
-        below = int(counts[centres <= sub.valley].sum())
-        above = int(counts[keep].sum()) - below
+        below = int(fine_counts[fine_centres <= sub.valley].sum())
+        above = int(fine_counts[keep].sum()) - below
         if min(below, above) < min_class_fraction * total:
+            break
+        if not _dip_is_significant(sub_counts, sub_centres, sub.valley, sub.high_peak):
             break
         valleys.append(sub.valley)
         best = ThresholdResult(
-            sub.valley, best.otsu, True,
-            f"lowest of {len(valleys)} modes separated by valleys" if len(valleys) > 1 else best.reason,
+            sub.valley, best.otsu, True, f"lowest of {len(valleys) + 1} modes separated by valleys",
             low_peak=sub.low_peak, high_peak=sub.high_peak, valley_ratio=sub.valley_ratio,
             low_fraction=below / total, counts=counts, centres=centres,
         )
