@@ -172,3 +172,73 @@ def test_bad_inputs_raise_input_error(tmp_path, site_files, problem, match):
     with pytest.raises(InputError, match=match) as err:
         _run(tmp_path, "bad", tile=N, dsm=dsm_name)
     assert ".tif" in str(err.value)
+
+
+def _dry_site(seed: int = 11, pond: bool = True, grass=(92.0, 84.0, 56.0)):
+    """Orthophoto + DSM of a site with bare soil, grass (default: senescent straw), green shrubs and a pond.
+
+    Reflectances near the twin's palette (x 255): soil (117, 102, 82) ExG 0.02, straw
+    (92, 84, 56) ExG 0.09, shrubs (18, 33, 13) ExG 0.55, water (50, 90, 110) ExG 0.08 with
+    blue brightest.  Texture: a smooth +-15 % brightness field (sun and shade: ExG does not
+    see it) and 3 DN sensor noise.  Returns grid, rgb, dsm and the cover codes
+    (0 soil, 1 grass, 2 shrub, 3 water).
+    """
+    rng = np.random.default_rng(seed)
+    grid = GridSpec(500000.0, 4100000.0, CELL, N, N, CRS)
+    rows, cols = np.mgrid[0:N, 0:N]
+    cover = np.zeros((N, N), dtype=np.uint8)
+    cover[:, 120:] = 1
+    for r, c, rad in ((40, 200, 14), (120, 170, 18), (200, 215, 16), (190, 140, 10)):
+        cover[(rows - r) ** 2 + (cols - c) ** 2 <= rad ** 2] = 2
+    if pond:
+        cover[(rows - 150) ** 2 + (cols - 50) ** 2 <= 22 ** 2] = 3
+    colours = np.array([[117.0, 102.0, 82.0], grass, [18.0, 33.0, 13.0], [50.0, 90.0, 110.0]])
+    field = ndimage.gaussian_filter(rng.standard_normal((N, N)), 6)
+    light = 1.0 + 0.15 * field / field.std()
+    rgb = colours[cover].transpose(2, 0, 1) * light[None]
+    rgb = np.clip(np.round(rgb + rng.normal(0, 3.0, rgb.shape)), 1, 255).astype(np.uint8)
+    dsm = (300.0 - np.tan(np.radians(5)) * cols * CELL + 0.8 * (cover == 2)).astype(np.float32)
+    return grid, rgb, dsm, cover
+
+
+def _exg(rgb):
+    return float(excess_green(*[np.array([v], dtype=np.float32) for v in rgb])[0])
+
+
+def test_dry_straw_is_mapped_vegetated(tmp_path):
+    grid, rgb, dsm, cover = _dry_site(pond=False)
+    write_raster(tmp_path / "orthophoto.tif", rgb, grid, nodata=None)
+    write_raster(tmp_path / "dsm.tif", dsm, grid)
+    thr, classes, _ = _run(tmp_path, "bare", tile=128)
+    # the paper's two-peak valley falls between "soil + straw" and shrubs ...
+    exg = gaussian_blur(excess_green(*rgb.astype(np.float32)), PARAMS.blur_sigma_cells, PARAMS.blur_radius_cells)
+    edges = np.linspace(*EXG_RANGE, PARAMS.hist_bins + 1)
+    two = find_thresholds(np.histogram(exg, bins=edges)[0], 0.5 * (edges[1:] + edges[:-1]), PARAMS.min_class_fraction, PARAMS.max_valley_ratio)
+    assert two.valley > _exg((92, 84, 56))
+    # ... the lowest-mode valley between soil and straw
+    assert len(thr.valleys) == 2 and thr.valleys[0] == pytest.approx(two.valley)
+    assert _exg((117, 102, 82)) < thr.valley < _exg((92, 84, 56))
+    # segments straddling a cover edge may go either way; elsewhere the map is right
+    soil = cover == 0
+    edge = ndimage.binary_dilation(soil, iterations=BANDWIDTH) & ~ndimage.binary_erosion(soil, iterations=BANDWIDTH)
+    wrong = classes != soil
+    assert np.mean(wrong & ~edge) < 0.002
+    assert np.mean(classes[(cover == 1) & ~edge] == GRASS) > 0.99
+    assert np.mean(~wrong) > 0.95
+
+
+def test_pond_is_left_out_of_the_histogram(tmp_path, monkeypatch):
+    # green grass site with a pond whose ExG (0.08) lies between soil and grass: with the
+    # water cells in the histogram the pond would be split off as a mode above soil
+    grid, rgb, dsm, cover = _dry_site(pond=True, grass=(26.0, 56.0, 18.0))
+    write_raster(tmp_path / "orthophoto.tif", rgb, grid, nodata=None)
+    write_raster(tmp_path / "dsm.tif", dsm, grid)
+    thr, classes, _ = _run(tmp_path, "bare", tile=128)
+    assert len(thr.valleys) == 1 and thr.valley > 0.2
+    land = cover != 3
+    assert np.mean(classes[land] == (cover[land] == 0)) > 0.95
+    import kitegully.obia.kite as kite
+
+    monkeypatch.setattr(kite, "blue_dominant", lambda r, g, b: np.zeros(np.shape(r), dtype=bool))
+    thr_all, _, _ = _run(tmp_path, "bare_all", tile=128)
+    assert len(thr_all.valleys) == 2 and thr_all.valley < _exg((50, 90, 110))

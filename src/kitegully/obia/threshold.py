@@ -105,7 +105,7 @@ def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | 
 
 
 def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fraction: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
-    """Re-bin a fine histogram into about ``bins`` bins over the range its central cells occupy.
+    """Re-bin a fine histogram into at most ``bins`` bins over the range its central cells occupy.
 
     A scene's histogram spans the data's own range (:func:`histogram`); a site-wide
     histogram is accumulated tile by tile on a fixed fine grid over the whole ExG range
@@ -113,14 +113,15 @@ def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fra
     theoretical [-1, 2] [I].  The range is that of the cells left once ``tail_fraction``
     is cut off each end (rare outliers in deep shadow or on roofs would otherwise widen
     it and coarsen the bins); the cut-off cells are counted in the end bins.  Each new bin
-    is a whole number of fine bins.
+    is the smallest whole number of fine bins that keeps the count at most ``bins`` (so
+    between ``bins``/2 and ``bins`` bins when the range spans more than ``bins`` fine bins).
 
     Parameters
     ----------
     counts, edges
         Fine histogram: counts (n) and bin edges (n + 1), equal widths.
     bins
-        Wanted number of bins over the central range (the result may have a few more).
+        Largest number of bins over the central range.
     tail_fraction
         Share of the cells cut off each end [I] (as in :func:`find_thresholds`).
 
