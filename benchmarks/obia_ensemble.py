@@ -27,7 +27,8 @@ Usage::
 Writes ``<out>/obia_ensemble.csv`` and ``.md`` (about 1.5 min per member on the loaded
 2-core machine). ``--reuse`` scores an existing ``<out>/<site>/bare_soil.tif`` again.
 
-``--scenes RESULTS/<site>/obia/scenes`` also classifies the stored close-range scenes again
+``--scenes RESULTS/<site>/obia/scenes`` (and ``--sfm-scenes RESULTS/<site>/closerange/scenes``,
+the photogrammetric close-range orthophotos) also classifies the stored close-range scenes again
 with the current code (:func:`kitegully.obia.classify_scene_products`, the obia_classify
 rule's entry point) and compares their confusion matrices with the stored ``confusion.json``
 (``<out>/obia_scenes_recheck.csv``/``.md``): the close-range (Mayr Table 3) accuracy must not
@@ -201,8 +202,12 @@ def diagnosis_figure(site_dir: Path, new_bare: Path, params: ObiaParams, cfg: di
     save_figure(fig, out_png)
 
 
-def recheck_scenes(scenes_dir: Path, out: Path) -> pd.DataFrame:
-    """Classify every stored close-range scene again and compare with its stored confusion matrix."""
+def recheck_scenes(scenes_dir: Path, out: Path, reference_dir: Path | None = None, name: str = "obia_scenes_recheck") -> pd.DataFrame:
+    """Classify every stored close-range scene again and compare with its stored confusion matrix.
+
+    ``reference_dir`` (the obia stage's ``scenes`` folder) holds the markers and truth masks
+    when ``scenes_dir`` is the closerange stage's (SfM orthophotos, same grid).
+    """
     from kitegully.obia import classify_scene_products, evaluate_scene
     from kitegully.obia.accuracy import accuracies
     from kitegully.obia.stage import METHOD_KEYS
@@ -213,9 +218,10 @@ def recheck_scenes(scenes_dir: Path, out: Path) -> pd.DataFrame:
     for d in sorted(p for p in scenes_dir.glob("scene_*") if (p / "confusion.json").exists()):
         rgb, g = read_raster(str(d / "orthophoto.tif"), band=None)
         dem, dg = read_raster(str(d / "dem.tif"))
-        truth, _ = read_raster(str(d / "truth" / "eroded.tif"))
-        paths = {"orthophoto": str(d / "orthophoto.tif"), "dem": str(d / "dem.tif"), "markers": str(d / "markers.csv")}
-        sc = classify_scene_products(rgb, dem, g, dg, pd.read_csv(d / "markers.csv"), ocfg, d.name, paths)
+        ref = (reference_dir / d.name) if reference_dir is not None else d
+        truth, _ = read_raster(str(ref / "truth" / "eroded.tif"))
+        paths = {"orthophoto": str(d / "orthophoto.tif"), "dem": str(d / "dem.tif"), "markers": str(ref / "markers.csv")}
+        sc = classify_scene_products(rgb, dem, g, dg, pd.read_csv(ref / "markers.csv"), ocfg, d.name, paths)
         new = np.asarray(evaluate_scene(sc.result.classes, sc.result.classes_otsu, truth, g.cell, sc.info, d.name)["confusion"])
         stored = json.loads((d / "confusion.json").read_text())
         old = np.asarray(stored["confusion"])
@@ -231,7 +237,7 @@ def recheck_scenes(scenes_dir: Path, out: Path) -> pd.DataFrame:
                      "eroded_ua_stored_pct": 100 * accuracies(tot_old)["users"][1], "eroded_ua_now_pct": 100 * accuracies(tot_new)["users"][1]})
     df = pd.DataFrame(rows)
     out.mkdir(parents=True, exist_ok=True)
-    write_table(df, out / "obia_scenes_recheck.csv", floatfmt=".2f")
+    write_table(df, out / f"{name}.csv", floatfmt=".2f")
     print(df.to_string(index=False), flush=True)
     return df
 
@@ -243,11 +249,16 @@ def main() -> int:
     ap.add_argument("--out", default="results/benchmarks")
     ap.add_argument("--diagnose", default=None, help="member for the diagnosis figure")
     ap.add_argument("--reuse", action="store_true", help="score an existing <out>/<site>/bare_soil.tif again")
-    ap.add_argument("--scenes", default=None, help="stored close-range scenes folder to classify again and compare")
+    ap.add_argument("--scenes", default=None, help="stored close-range scenes folder (obia/scenes) to classify again and compare")
+    ap.add_argument("--sfm-scenes", default=None, help="stored closerange/scenes folder (SfM orthophotos; needs --scenes for truth)")
     args = ap.parse_args()
     root, out = Path(args.root), Path(args.out)
     if args.scenes:
         recheck_scenes(Path(args.scenes), out)
+    if args.sfm_scenes:
+        recheck_scenes(Path(args.sfm_scenes), out, Path(args.scenes), "closerange_sfm_recheck")
+    if args.members == "none":
+        return 0
     rows = []
     for member in args.members.split(","):
         cfg = member_config(member)
