@@ -322,6 +322,8 @@ def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: T
         ax.set_xlim(thr.centres[nz[0]], thr.centres[nz[-1]])
     if thr.valley is not None:
         ax.axvline(thr.valley, color="#d7301f", label=f"valley {thr.valley:.3f}")
+    for v in thr.valleys[:-1]:  # valleys above the lowest mode (straw / green shrubs), not used
+        ax.axvline(v, color="0.3", ls=":", label=f"upper valley {v:.3f}")
     if thr.otsu is not None:
         ax.axvline(thr.otsu, color="#2b8cbe", ls="--", label=f"Otsu {thr.otsu:.3f}")
     ax.set_xlabel("ExG, Gaussian-blurred (-)")
