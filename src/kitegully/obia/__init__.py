@@ -7,7 +7,7 @@ Modules, one job each:
 ``features``     z-normalisation of the segmentation features.
 ``seeds``        seed cells at minima of local feature variance (band-width smoothing).
 ``srg``          seeded region growing (Adams & Bischof 1994), compiled priority queue.
-``threshold``    histogram-valley threshold with a bimodality check, Otsu alongside.
+``threshold``    histogram-valley threshold with a bimodality check, Otsu alongside; the valley bounding the lowest ExG mode (bare soil) for histograms with more modes.
 ``classify``     segment means, grass/eroded labels, minimum-area filter, polygons.
 ``accuracy``     confusion matrix C[mapped, reference], user's/producer's/overall accuracy,
                  area errors.
