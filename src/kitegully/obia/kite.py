@@ -1,12 +1,14 @@
 """Kite-scale application: bare-soil map of a site-wide orthophoto + DSM, in tiles.
 
-The histogram (and so the valley threshold) is global: blurred ExG is accumulated tile
-by tile into one fine fixed-range histogram (``FINE_BINS_PER_BIN`` x ``hist_bins`` bins over
-the whole ExG range; cells whose blue band is the brightest, open water above all, are
-left out: :func:`kitegully.obia.indices.blue_dominant`) and split at the valley that
-bounds its lowest mode, bare soil (:func:`kitegully.obia.threshold.find_bare_threshold`:
-the first valley on ``hist_bins`` bins over the fixed range, as before, then again on
-the finer re-binned part below it while that part is bimodal).  Segmentation and classification then run per
+The histogram (and so the valley threshold) is global: the blurred index (ExG, or NDVI
+where a NIR orthophoto exists and ``obia.classification.index`` is ``ndvi``) is
+accumulated tile by tile into one fine fixed-range histogram (``FINE_BINS_PER_BIN`` x
+``hist_bins`` bins over the index's range; cells whose blue band is the brightest, open
+water above all, are left out: :func:`kitegully.obia.indices.blue_dominant`) and split at
+the valley that bounds its lowest mode, bare soil
+(:func:`kitegully.obia.threshold.find_bare_threshold`: the first valley on ``hist_bins``
+bins over the fixed range, as before, then again on the finer re-binned part below it
+while that part is bimodal).  Segmentation and classification then run per
 tile (segments do not cross tile borders [I]); the tile core is written to the output.
 Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T cells.
 """
@@ -25,8 +27,8 @@ from rasterio.warp import reproject
 from kitegully import InputError
 from kitegully.io.raster import _profile, grid_of, iter_tiles
 from kitegully.obia.classify import NODATA, classify_segments, remove_small_eroded, segment_means
-from kitegully.obia.indices import EXG_RANGE, blue_dominant
-from kitegully.obia.scene import ObiaParams, blurred_exg, segment
+from kitegully.obia.indices import blue_dominant
+from kitegully.obia.scene import ObiaParams, blurred_index, segment
 from kitegully.obia.threshold import FINE_BINS_PER_BIN, ThresholdResult, find_bare_threshold
 
 log = logging.getLogger("kitegully.obia.kite")
@@ -154,7 +156,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         grid = grid_of(ortho, ortho_path)
         halo = params.blur_radius_cells + params.slope_window_cells
         counts = np.zeros(params.hist_bins * FINE_BINS_PER_BIN, dtype=np.int64)
-        edges = np.linspace(EXG_RANGE[0], EXG_RANGE[1], params.hist_bins * FINE_BINS_PER_BIN + 1)
+        edges = np.linspace(*params.index_range, params.hist_bins * FINE_BINS_PER_BIN + 1)
         tiles = list(iter_tiles(grid, tile_cells, halo))
         water_cells = 0
         for i, (read, core) in enumerate(tiles):
@@ -167,7 +169,8 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
             counts += np.histogram(inner[np.isfinite(inner) & land], bins=edges)[0]
             log.info("histogram: tile %d/%d", i + 1, len(tiles))
         thr = find_bare_threshold(counts, edges, params.hist_bins, params.min_class_fraction, params.max_valley_ratio)
-        log.info("global threshold: valley %s (valleys %s), Otsu %s (%s)", thr.valley, thr.valleys, thr.otsu, thr.reason)
+        log.info("global %s threshold: valley %s (valleys %s), Otsu %s (%s)", params.index, thr.valley, thr.valleys,
+                 thr.otsu, thr.reason)
         unimodal = 0 if params.unimodal_class == "grass" else 1
         profile = _profile(grid, 1, "uint8", NODATA, cog=True)
         Path(out_path).parent.mkdir(parents=True, exist_ok=True)

@@ -24,7 +24,7 @@ from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 from kitegully.obia.classify import ERODED, GRASS, NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.features import normalise_features
-from kitegully.obia.indices import EXG_RANGE, blue_dominant, excess_green, gaussian_blur
+from kitegully.obia.indices import EXG_RANGE, NDVI_RANGE, blue_dominant, excess_green, gaussian_blur, ndvi
 from kitegully.obia.seeds import generate_seeds
 from kitegully.obia.slope import wood_slope
 from kitegully.obia.srg import seeded_region_growing

@@ -87,11 +87,15 @@ class ThresholdResult:
     low_fraction: float | None = None
     counts: np.ndarray = field(default_factory=lambda: np.zeros(0))
     centres: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    water_cells: int | None = None
     valleys: list = field(default_factory=list)
 
     def as_dict(self) -> dict:
         keys = ("valley", "otsu", "bimodal", "reason", "low_peak", "high_peak", "valley_ratio", "low_fraction", "valleys")
-        return {k: getattr(self, k) for k in keys}
+        out = {k: getattr(self, k) for k in keys}
+        if self.water_cells is not None:
+            out["water_cells"] = self.water_cells
+        return out
 
 
 def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
