@@ -101,14 +101,42 @@ def quadratic_coefficients(z: np.ndarray, cell: float, window: int) -> tuple[np.
     return tuple(out)
 
 
-def _edge_profiles(z: np.ndarray, cell: float, window: int, rr: np.ndarray, cc: np.ndarray):
+def ground_opening(z: np.ndarray, cell: float, segment_m: float) -> np.ndarray:
+    """The DEM without raised objects narrower than ``segment_m``: 2-D grey opening with a flat disc.
+
+    The disc's diameter is ``segment_m`` (an odd number of cells, at least 3); NaN cells are
+    filled with the nearest valid value first (and stay filled: the result only steers the
+    upper-edge test). Removes shrub clumps and hedge crowns narrower than the disc, keeps
+    concave forms (gullies) and planes; at a convex edge it bevels the corner (by up to
+    the along-edge gradient × the disc radius), so it is used for the *direction* across
+    an edge only (:func:`_edge_profiles`). O(n · k²) for k cells across the disc.
+    """
+    k = max(3, 2 * int(round(0.5 * segment_m / cell)) + 1)
+    h = k // 2
+    yy, xx = np.mgrid[-h:h + 1, -h:h + 1]
+    disc = xx * xx + yy * yy <= h * h + 1e-9
+    zf = fill_nearest(np.asarray(z, dtype=np.float64))
+    return ndi.grey_opening(zf, footprint=disc, mode="nearest")
+
+
+def _edge_profiles(z: np.ndarray, cell: float, window: int, rr: np.ndarray, cc: np.ndarray, ground_m: float = 0.0):
     """Direction of strongest convex bending at cells (rr, cc) and the DEM sampled across it.
 
     Returns (vx, vy, z0, near_p, far_p, near_m, far_m): unit vector (x east, y north) of
     the eigenvector of the quadratic's Hessian with the most negative eigenvalue, the cell
     elevation, and bilinear samples at +r/2, +r, -r/2, -r along it (r = half the window).
+
+    With ``ground_m`` > 0 both are taken on the ground instead of the DEM: the direction
+    from the quadratic fitted to the 2-D opening of the DEM with a disc of that diameter
+    (:func:`ground_opening`; a clump on a rim no longer turns it), the samples from the DEM's
+    profile along that direction from -(r + ground_m) to +(r + ground_m), opened in 1-D with
+    a ``ground_m`` segment (:func:`kitegully.polygons.morphometry.ground_profile`'s filter:
+    removes bumps narrower than the segment, keeps a step edge and a straight slope exactly,
+    and, being across the edge, is not biased by the edge's own gradient along its length).
+    O(m · (r + ground_m) / cell) for m cells.
     """
-    a, b, c, _, _ = quadratic_coefficients(z, cell, window)
+    zd = ground_opening(z, cell, ground_m) if ground_m > 0 else z
+    a, b, c, _, _ = quadratic_coefficients(zd, cell, window)
     a, b, c = a[rr, cc], b[rr, cc], c[rr, cc]
     # Hessian [[2a, c], [c, 2b]] in (x east, y north); eigenvector of the smaller eigenvalue
     lam = (a + b) - np.sqrt((a - b) ** 2 + c**2)
@@ -121,6 +149,22 @@ def _edge_profiles(z: np.ndarray, cell: float, window: int, rr: np.ndarray, cc: 
     vx, vy = vx / n, vy / n
     r = (window // 2) * cell
     zf = np.where(np.isfinite(z), z, np.nanmin(z))
+    if ground_m > 0:
+        n_half = int(np.ceil((r + ground_m) / cell))
+        s = np.arange(-n_half, n_half + 1) * cell  # metres along the profile, 0 at the cell
+        prof = ndi.map_coordinates(zf, [(rr[:, None] - s[None, :] * vy[:, None] / cell).ravel(),
+                                        (cc[:, None] + s[None, :] * vx[:, None] / cell).ravel()],
+                                   order=1, mode="nearest").reshape(len(rr), len(s))
+        k = int(round(ground_m / cell)) + 1
+        if len(rr) and k >= 2:
+            prof = ndi.grey_opening(prof, size=(1, k), mode="nearest")
+        i0 = n_half
+
+        def at(dist):
+            return prof[:, i0 + int(round(dist / cell))] if len(rr) else np.zeros(0)
+
+        # the opened profile at the cell itself: its ground (a clump on the rim is removed)
+        return vx, vy, at(0.0), at(0.5 * r), at(r), at(-0.5 * r), at(-r)
 
     def side(sign, dist):  # rows go south: a step vy north is -vy / cell rows
         return ndi.map_coordinates(zf, [rr - sign * dist * vy / cell, cc + sign * dist * vx / cell], order=1, mode="nearest")
@@ -128,7 +172,8 @@ def _edge_profiles(z: np.ndarray, cell: float, window: int, rr: np.ndarray, cc: 
     return vx, vy, zf[rr, cc], side(1, 0.5 * r), side(1, r), side(-1, 0.5 * r), side(-1, r)
 
 
-def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, candidates: np.ndarray) -> np.ndarray:
+def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, candidates: np.ndarray,
+                    ground_m: float = 0.0) -> np.ndarray:
     """Which candidate cells are upper edges (level ground on one side) rather than ridges.
 
     Across the direction of strongest convex bending (eigenvector of the fitted quadratic's
@@ -139,10 +184,16 @@ def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, c
     tree in a DSM, drops by more than δ on both sides, and its flanks rise by more than δ
     to it.
 
+    ``ground_m`` > 0: the test is made on the ground under plants narrower than ``ground_m``
+    (:func:`_edge_profiles`): a shrub clump standing *on* a rim makes the DSM drop on both
+    sides (into the gully and off the clump), i.e. a ridge, though the ground is an upper
+    edge; a free-standing shrub or a hedge narrower than ``ground_m`` leaves level ground
+    on both sides and is dropped as before; wider crowns stay ridges.
+
     Returns a boolean mask (subset of ``candidates``). O(candidates).
     """
     rr, cc = np.nonzero(candidates)
-    _, _, z0, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc)
+    _, _, z0, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc, ground_m)
     r = (window // 2) * cell
     delta = threshold * r * r / 2.0
     plus_high = near_p + far_p >= near_m + far_m
@@ -154,14 +205,16 @@ def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, c
     return out
 
 
-def low_sides(z: np.ndarray, cell: float, window: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def low_sides(z: np.ndarray, cell: float, window: int, edges: np.ndarray,
+              ground_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Breakline cells and the unit step (rows, cols) towards their lower side.
 
     Returns (rows, cols, d_row, d_col): for each cell of ``edges``, the direction across
-    the edge in which the DEM falls (the incision side of an upper edge).
+    the edge in which the DEM (with ``ground_m`` > 0: the ground, as in :func:`upper_edge_mask`) falls
+    (the incision side of an upper edge).
     """
     rr, cc = np.nonzero(edges)
-    vx, vy, _, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc)
+    vx, vy, _, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc, ground_m)
     sign = np.where(near_p + far_p >= near_m + far_m, -1.0, 1.0)  # towards the lower side
     return rr, cc, -sign * vy, sign * vx
 
@@ -200,7 +253,7 @@ def convexity(z: np.ndarray, cell: float, window: int, kind: str = "maximum", mi
 
 def detect_breaklines(
     z: np.ndarray, cell: float, window: int, threshold: float, kind: str = "maximum", min_length_m: float = 0.0,
-    upper_edges_only: bool = False,
+    upper_edges_only: bool = False, edge_ground_m: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Breakline raster: skeleton of the mask ``convexity > threshold``.
 
@@ -220,6 +273,8 @@ def detect_breaklines(
         Skeleton pieces shorter than this (counted in cells × cell) are dropped.
     upper_edges_only : bool
         Drop ridge cells (:func:`upper_edge_mask`) before skeletonising.
+    edge_ground_m : float
+        Make that test on the ground under plants narrower than this (m); 0 = on the DEM.
 
     Returns
     -------
@@ -235,8 +290,9 @@ def detect_breaklines(
     mask = np.nan_to_num(k, nan=0.0) > threshold
     n_conv = int(mask.sum())
     if upper_edges_only:
-        mask = upper_edge_mask(z, cell, window, threshold, mask)
-        log.info("breaklines: %d of %d convex cells are upper edges (the rest ridges)", int(mask.sum()), n_conv)
+        mask = upper_edge_mask(z, cell, window, threshold, mask, edge_ground_m)
+        log.info("breaklines: %d of %d convex cells are upper edges (the rest ridges; tested on %s)", int(mask.sum()), n_conv,
+                 f"the ground under plants < {edge_ground_m:g} m" if edge_ground_m > 0 else "the DEM")
     skel = skeletonize(mask)
     n_min = int(np.ceil(min_length_m / cell))
     if n_min > 1:

@@ -50,6 +50,14 @@ class PolygonParams:
     upper_edges_only : bool
         Keep only convex cells with level ground on one side, not ridges (hedge and tree
         crowns of a DSM) [I] (:func:`kitegully.polygons.breaklines.upper_edge_mask`).
+    edge_ground_m : float
+        Make the upper-edge test (and the lower side of each breakline for ``below_rims``) on
+        the ground under plants narrower than this (m): direction from the DEM's 2-D opening
+        with a disc of this diameter, levels from the 1-D opening of the profile across the
+        edge with a segment of this length [I]; 0 = on the DEM (a DTM). A shrub clump standing
+        on a rim makes the DSM drop on both sides of it, a ridge, though the ground is an
+        upper edge; the value is the widest clump to see through (the site's shrub-clump
+        spacing, as ``ground_segment_m`` of the sections).
     tci_threshold : float
         Thalweg mask TCI > this [P 9, a in m²/m].
     mfd_exponent : float
@@ -125,6 +133,7 @@ class PolygonParams:
     curvature_threshold_per_m: float = 0.2
     breakline_min_length_m: float = 2.0
     upper_edges_only: bool = False
+    edge_ground_m: float = 0.0
     tci_threshold: float = 9.0
     mfd_exponent: float = 1.1
     min_tan_slope: float = 0.001
@@ -162,7 +171,8 @@ class PolygonParams:
         cfg = config_section(cfg, "polygons", ["cell_m", "gap_fill", "breaklines", "thalweg", "transects", "conditioning", "morphometry"],
                              optional=["dem_file", "evaluation", "figure_max_px"])
         g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"])
-        b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"])
+        b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"],
+                           optional=["ground_segment_m"])
         t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m", "mask_closing_cells",
                                                                 "smooth_step_m", "snakes_alpha", "snakes_beta"])
         tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"])
@@ -174,6 +184,7 @@ class PolygonParams:
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
             breakline_min_length_m=b["min_length_m"], upper_edges_only=b["upper_edges_only"],
+            edge_ground_m=float(b.get("ground_segment_m", 0.0)),
             tci_threshold=t["tci_threshold"], mfd_exponent=t["mfd_exponent"], min_tan_slope=t["min_tan_slope"],
             thalweg_min_length_m=t["min_length_m"], min_incision_m=t["min_incision_m"],
             thalweg_closing_cells=t["mask_closing_cells"], smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
@@ -198,6 +209,8 @@ class PolygonParams:
             raise InputError(f"polygons.morphometry.branches: must be one of {BRANCHES}, got {self.branches!r}")
         if self.ground_segment_m < 0:
             raise InputError(f"polygons.morphometry.ground_segment_m: must be 0 or more, got {self.ground_segment_m}")
+        if self.edge_ground_m < 0:
+            raise InputError(f"polygons.breaklines.ground_segment_m: must be 0 or more, got {self.edge_ground_m}")
         if self.rim_search_m < 0:
             raise InputError(f"polygons.morphometry.rim_search_m: must be 0 or more, got {self.rim_search_m}")
         if self.window_cells < 3 or self.window_cells % 2 == 0:
@@ -277,7 +290,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
 
     t = time.perf_counter()
     bl_cells, curv = detect_breaklines(dem, grid.cell, p.window_cells, p.curvature_threshold_per_m, p.curvature, p.breakline_min_length_m,
-                                         p.upper_edges_only)
+                                         p.upper_edges_only, p.edge_ground_m)
     bl_lines = _lines_gdf(skeleton_paths(bl_cells, min_cells=2), grid)
     T["breaklines_s"] = time.perf_counter() - t
 
@@ -307,7 +320,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         bridgeable = barrier_mask(tr_cells, np.zeros_like(tr_cells), p.grow_cells) & ~bl_band & ~bl_cells
     fd, cond = fill_depth(dem, barriers, p.raise_m)
     level = cond + fd
-    rims = low_sides(dem, grid.cell, p.window_cells, bl_cells) if p.below_rims else None
+    rims = low_sides(dem, grid.cell, p.window_cells, bl_cells, p.edge_ground_m) if p.below_rims else None
     held = fill_depth(dem, barrier_mask(np.zeros_like(tr_cells), tr_cells, p.grow_cells), p.raise_m)[0] if p.terrain_held else None
     seeds = th_cells if p.keep_on_thalweg else None
     labels, polys = {}, {}
@@ -339,6 +352,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         ("empty cells after minimum-z resampling", prep["empty_cells"]),
         ("cells filled by moving planes", prep["filled_cells"]),
         ("curvature", f"{p.curvature}, {p.window_cells} x {p.window_cells} cells ({window_m:.1f} m), > {p.curvature_threshold_per_m} 1/m"),
+        ("upper edges tested on", f"ground under plants < {p.edge_ground_m:g} m" if p.edge_ground_m > 0 else "the DEM"),
         ("breakline cells", int(bl_cells.sum())),
         ("breakline length (m)", round(float(breaklines["length_m"].sum()), 1)),
         ("thalweg lines", len(th_lines)),
