@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """The polygons stage's [I] rules, each switched off alone, on every ensemble member's DSM (issue 16).
 
-For each rule (``upper_edges_only``, ``bridge``, ``terrain_held``, ``below_rims``,
+For each rule (``upper_edges_only``, ``edge_ground_m`` (= ``breaklines.ground_segment_m``:
+upper edges tested on the DEM instead of the ground), ``bridge``, ``terrain_held``, ``below_rims``,
 ``ground_segment_m``) the member's site settings are used with only that rule set to its
 "off" value, and the member is scored as ``benchmarks/polygons_ensemble.py`` does (without the
 Table 1 comparison, to save time). Reported: mean and worst over the members of the wide-gully
@@ -35,7 +36,7 @@ import polygons_ensemble as pe  # noqa: E402
 
 from kitegully.polygons import PolygonParams  # noqa: E402
 
-RULES_OFF = {"upper_edges_only": False, "bridge": "all", "terrain_held": False, "below_rims": False, "ground_segment_m": 0.0}
+RULES_OFF = {"upper_edges_only": False, "edge_ground_m": 0.0, "bridge": "all", "terrain_held": False, "below_rims": False, "ground_segment_m": 0.0}
 _NO_TABLE1 = pd.DataFrame({"statistic": [f"{k} (-)" for k in ("auto_in_union_pct", "intersection_covered_pct", "union_covered_pct",
                                                               "auto_over_intersection", "mean_auto_over_mean_manual_pct")],
                            "value": [np.nan] * 5})
