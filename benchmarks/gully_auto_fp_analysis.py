@@ -79,7 +79,7 @@ def analyse_member(cfg: dict, site: Path) -> pd.DataFrame:
     relief, rough = head_scale_relief(dem, grid.cell, ip, 1)
     thr = ip.relief_k * max(ip.dsm_sigma_z_m, rough)
     # each head's own path (traced in the same order as the pipeline)
-    _zh, zt, _n = tracing_surface(dem, grid, params, 1)
+    _zh, zt, _n = tracing_surface(dem, grid, params, 1, ip)
     filled, _r = priority_flood_fill(zt, 0.0)
     dirs = flow_directions(filled)[0]
     cells, _down, starts, ends = trace_paths(filled, heads, dirs)

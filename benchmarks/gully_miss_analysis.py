@@ -97,7 +97,7 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     params = GullyParams.from_config(g)
     res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto, incision=ip)
     # cells raised by the fill of the tracing surface (filled depressions and flats) and nodata
-    _zh, zt, _n = tracing_surface(dem, grid, params, 1)
+    _zh, zt, _n = tracing_surface(dem, grid, params, 1, ip)
     filled, _r = priority_flood_fill(zt, 0.0 if params.flat_routing == "resolve" else params.fill_epsilon_m)
     raised = np.isfinite(zt) & (filled > zt + 1e-6)
     nodata = ~np.isfinite(zt)

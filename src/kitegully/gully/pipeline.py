@@ -13,8 +13,8 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from kitegully.gully.depth import depth_map
-from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, head_scale_relief,
-                                   incision_map, visible_incisions)
+from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
+                                   head_scale_relief, incision_map, surface_roughness, visible_incisions)
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
 from kitegully.gully.patches import depth_patches
@@ -72,6 +72,18 @@ class GullyParams:
     trace_smoothing_m : float
         Gaussian σ (m) of a smoothing of the DEM used only for the flow tracing (0 = trace
         on the DEM itself); the depth map always uses the raw DEM.
+    trace_ground : bool
+        Trace on the ground, not on the objects standing on it ([I] ``true`` on a
+        photogrammetric DSM): cells of the tracing surface standing more than
+        ``relief_k``·max(σ_z, ρ) above the ground surface (:func:`kitegully.gully.heads.ground_surface`,
+        the automatic detector's; σ_z the DSM noise at the checkpoints, ρ the surface's
+        head-scale micro-relief) are shrubs, trees or hedgerows and take the ground
+        surface's elevation (a progressive-morphological-filter step, Zhang et al. 2003,
+        with the elevation threshold from the DSM's own noise). Water runs on the soil
+        under a shrub: on the DSM a 1 m shrub crown over a gully floor is a 1 m dam, and
+        the steepest-descent path goes round it, down the field beside the gully, or
+        spills from the depression the fill makes behind it. Needs ``gully.automatic_heads``.
+        ``false`` = trace on the DSM (the DTM of a lidar or TLS survey has no objects).
     buffer_m : float
         Buffer around the network (m); 15 m.
     """
@@ -88,11 +100,14 @@ class GullyParams:
     head_snap_radius_m: float = 1.0
     trace_smoothing_m: float = 0.0
     buffer_m: float = 15.0
+    trace_ground: bool = False
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "GullyParams":
-        """Build from the ``gully:`` config section (keys of the same names)."""
-        return cls(**{k: cfg[k] for k in cls.__dataclass_fields__})
+        """Build from the ``gully:`` config section (keys of the same names; ``trace_ground``
+        is optional, default ``false``)."""
+        optional = {"trace_ground"}
+        return cls(**{k: cfg[k] for k in cls.__dataclass_fields__ if k not in optional or k in cfg})
 
     def __post_init__(self) -> None:
         if self.flat_routing not in FLAT_ROUTINGS:
@@ -192,7 +207,8 @@ def map_gullies(
     log.info("patches: %d of %d kept (volume >= %.3g m3)", int(table["kept"].sum()), len(table), params.min_patch_volume_m3)
 
     t0 = time.perf_counter()
-    z_heads, zi, n_holes = tracing_surface(dem, grid, params, workers)
+    ip = incision if incision is not None else auto_heads
+    z_heads, zi, n_holes = tracing_surface(dem, grid, params, workers, ip)
     resolve = params.flat_routing == "resolve"
     if filled is None:
         filled, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
@@ -209,7 +225,6 @@ def map_gullies(
     if resolve:
         dirs, n_flat, n_left = flow_directions(filled)
     incised = relief = None
-    ip = incision if incision is not None else auto_heads
     if params.head_snap in ("incision", "relief") and np.size(heads_x) and ip is None:
         raise ValueError(f"head_snap {params.head_snap!r} needs the incision-map parameters (gully.automatic_heads)")
     if params.head_snap == "relief" and np.size(heads_x):
@@ -273,12 +288,15 @@ def map_gullies(
 
 
 def tracing_surface(
-    dem: np.ndarray, grid: GridSpec, params: GullyParams, workers: int = 1
+    dem: np.ndarray, grid: GridSpec, params: GullyParams, workers: int = 1,
+    incision: HeadDetectionParams | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """The surface the network is traced on (steps f-g before the fill).
 
     Holes smaller than ``water_min_area_m2`` are interpolated (larger ones stay NaN: open
-    water), then the surface is smoothed with ``trace_smoothing_m`` when that is > 0.
+    water), then the surface is smoothed with ``trace_smoothing_m`` when that is > 0, and
+    with ``trace_ground`` the objects standing on the ground are removed
+    (:func:`remove_objects`, with the ``incision`` parameters: ground surface and threshold).
 
     Parameters
     ----------
@@ -311,7 +329,42 @@ def tracing_surface(
         z_trace = gaussian_smooth_fft(zi, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas,
                                       workers=workers)
         z_trace[holes] = np.nan
+    if params.trace_ground:
+        if incision is None:
+            raise ValueError("gully.trace_ground needs the incision-map parameters (gully.automatic_heads)")
+        z_trace, n_obj = remove_objects(zi, z_trace, grid.cell, incision, workers)
+        log.info("tracing surface: %d cells (%.2f %%) stand on the ground (objects), traced on the ground surface",
+                 n_obj, 100.0 * n_obj / max(1, int(np.isfinite(zi).sum())))
     return zi, z_trace, n_holes
+
+
+def remove_objects(z: np.ndarray, z_trace: np.ndarray, cell_m: float, params: HeadDetectionParams,
+                   workers: int = 1) -> tuple[np.ndarray, int]:
+    """The tracing surface with objects standing on the ground replaced by the ground surface.
+
+    A cell is an object where ``z_trace`` stands more than ``relief_k``·max(σ_z, ρ) above
+    :func:`kitegully.gully.heads.ground_surface` of ``z`` (σ_z = ``dsm_sigma_z_m``, ρ the
+    head-scale micro-relief of ``z``, :func:`kitegully.gully.heads.surface_roughness`): the
+    same threshold above the ground as the detector's incision threshold below it (a step
+    of 3 noise SDs, out of the furrows and crop rows). There the ground surface replaces it.
+    O(n log n).
+
+    Returns
+    -------
+    z_trace : ndarray (H, W) float64
+        The tracing surface, objects removed.
+    n_objects : int
+        Cells replaced.
+    """
+    valid = np.isfinite(z)
+    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell_m, workers=workers) - z)[valid])
+    ground = ground_surface(z, cell_m, params.scale_m, params.slope_window_m, workers)
+    thr = params.relief_k * max(params.dsm_sigma_z_m, rough)
+    obj = valid & np.isfinite(ground) & (z_trace - ground > thr)
+    out = np.array(z_trace, dtype=np.float64, copy=True)
+    out[obj] = ground[obj]
+    log.info("object removal: threshold %.3f m (σ_z %.3f m, ρ %.3f m)", thr, params.dsm_sigma_z_m, rough)
+    return out, int(obj.sum())
 
 
 def new_heads(auto_idx: np.ndarray, grid: GridSpec, heads_x: np.ndarray, heads_y: np.ndarray,
