@@ -73,6 +73,15 @@ def run(results: Path, names: list[str] | None, heads: str, sets: dict, out: Pat
         miss = df["reason"] != "matched"
         row["missed near a filled flat (%)"] = 100 * df.loc[miss & df["near_flat"], "length_m"].sum() / ref
         row["missed near a DSM hole/edge (%)"] = 100 * df.loc[miss & df["near_nodata"], "length_m"].sum() / ref
+        # base rates: how much of the whole reference carries the flags (a flag found as often on matched
+        # metres as on missed ones is no cause)
+        row["reference near a filled flat (%)"] = 100 * df.loc[df["near_flat_any"], "length_m"].sum() / ref
+        row["reference near a shrub/tree (%)"] = 100 * df.loc[df["near_object"], "length_m"].sum() / ref
+        leaves = df["reason"] == "beside: path leaves the gully"
+        for lab, m in (("matched", df["reason"] == "matched"), ("path leaves", leaves)):
+            tot = df.loc[m, "length_m"].sum()
+            row[f"{lab}: near a filled flat (% of it)"] = 100 * df.loc[m & df["near_flat_any"], "length_m"].sum() / tot if tot else np.nan
+            row[f"{lab}: near a shrub/tree (% of it)"] = 100 * df.loc[m & df["near_object"], "length_m"].sum() / tot if tot else np.nan
         dig = heads_tab[heads_tab["source"] == "digitised"]
         row["digitised heads"] = len(dig)
         row["digitised heads on no gully (>reach)"] = int((dig["gully_id"] < 0).sum())

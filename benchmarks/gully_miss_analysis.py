@@ -17,7 +17,9 @@ protocol) that no mapped network line matches within the tolerance, says why:
   centreline: a snapping miss) and ``beside: path leaves the gully`` (a head sits on the
   gully, the path leaves it further down: a tracing miss).
 
-Every missed sample is also flagged ``near_flat`` (within the tolerance of a cell raised by
+Every sample carries ``near_flat_any`` (the same test for matched samples too: the flag's base
+rate; on a noisy DSM small fills lie near most of the reference) and ``near_object`` (a true
+shrub or tree cell within 1 m). Every missed sample is also flagged ``near_flat`` (within the tolerance of a cell raised by
 the depression fill of the tracing surface: a filled depression or flat the path crosses by
 flat resolution) and ``near_nodata`` (within the tolerance of a DSM hole, open water or the
 DSM edge). A per-head table gives the distance of each used head, as digitised and as
@@ -182,8 +184,18 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     near_flat = _near(raised, tol_cells, pts, grid)
     near_nodata = _near(nodata, tol_cells, pts, grid, outside=True)
     kind_of_gully = cl.groupby("gully_id")["kind"].first() if "kind" in cl.columns else pd.Series(dtype=object)
+    # true shrub or tree cells within 1 m of the sample (a crown over the gully hides its floor from the DSM)
+    lc_path = twin / "truth/landcover.tif"
+    near_object = np.zeros(len(pts), dtype=bool)
+    if lc_path.exists():
+        from kitegully.twin.landcover import CODE
+
+        lc, _g = read_raster(lc_path)
+        obj = np.isin(lc, [CODE["shrub"], CODE["tree"]])
+        near_object = _near(obj, int(np.ceil(1.0 / grid.cell)), pts, grid)
+        del lc, obj
     df = pd.DataFrame({"gully_no": gno, "reason": reason, "length_m": step, "near_flat": near_flat & miss,
-                       "near_nodata": near_nodata & miss,
+                       "near_flat_any": near_flat, "near_object": near_object, "near_nodata": near_nodata & miss,
                        "kind": [kind_of_gully.get(int(i), "?") for i in gno]})
     tab = df.pivot_table(index="gully_no", columns="reason", values="length_m", aggfunc="sum", fill_value=0.0)
     heads_t = th.set_index("gully_id")

@@ -84,6 +84,9 @@ class GullyParams:
         the steepest-descent path goes round it, down the field beside the gully, or
         spills from the depression the fill makes behind it. Needs ``gully.automatic_heads``.
         ``false`` = trace on the DSM (the DTM of a lidar or TLS survey has no objects).
+        Measured worse over the six ensemble DSMs (digitised good fit 77.9 → 68.6 % mean):
+        the crown hides the incision from the depth map too, so the paths under it are
+        clipped from the map, and the ground surface lowers gully rims; hence off by default.
     buffer_m : float
         Buffer around the network (m); 15 m.
     """
