@@ -1,59 +1,55 @@
-"""Speed of the dense matcher's kernels and of one whole tile: new code vs the former one.
+"""Speed of the dense matcher's kernels and of one whole tile: new code vs a former revision.
 
 Renders the synthetic block of ``benchmarks/dense_benchmark.py`` (5 x 5 nadir views), takes
 one tile of the default site's shape (256 + 2 x 32 cells) with the default site's matcher
-settings, and times, alternating old and new in the same process (the machine is shared):
+settings, and times, alternating former and new in the same process (the machine is shared,
+so only ratios taken this way mean something):
 
-- ``sample_stack`` (former loop order: label innermost, vs the new: rows contiguous);
-- the whole winner step (cost, SGM, argmin, parabola) on every pass's real NCC volume:
-  former numpy code vs the compiled cost transpose and fused winner;
-- the share of the sampling, NCC and winner kernels in one tile;
-- ``match_tile`` as a whole with the former and the new winner step.
+- ``sample_stack`` (resampling of the image stack) on every pass's real inputs;
+- ``multiview_ncc_stack`` (multi-view NCC) on every pass's real stack;
+- the share of the sampling, NCC and SGM + winner steps in one tile;
+- ``match_tile`` as a whole with the former and the new kernels.
 
-Reports medians and the max |difference| of the results. Writes
-``benchmarks/out/dense_kernels_speed.md``.
+The former kernels are not copied here: ``src/kitegully/dense/kernels.py`` is read from the
+git revision ``--against`` (default: the last commit before issue 21's kernel rewrite) and
+compiled in this process. Reports medians, the median of the paired ratios and whether the
+results are identical (``array_equal``, NaN = NaN). Writes ``benchmarks/out/dense_kernels_speed.md``.
 
-Usage: PYTHONPATH=src .venv/bin/python benchmarks/dense_kernels_speed.py [--threads 2] [--repeats 5]
+Usage: PYTHONPATH=src .venv/bin/python benchmarks/dense_kernels_speed.py [--threads 2] [--repeats 5] [--against REV]
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numba
 import numpy as np
 import yaml
-from numba import njit, prange
-
-from kitegully.dense.kernels import _bilinear, _project
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
+# main at the end of session 5: the per-cell NCC loop and the full projection per candidate
+FORMER = "3974773"
 
 
-@njit(parallel=True)
-def sample_stack_former(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
-    """The former loop order of ``kitegully.dense.kernels.sample_stack`` (k innermost)."""
-    K, V, H, W = out.shape
-    for i in prange(H):
-        for v in range(V):
-            img = imgs[v]
-            sc = 1.0 / (2.0 ** levels[v])
-            R = Rs[v]
-            C = Cs[v]
-            p = Ps[v]
-            for j in range(W):
-                for k in range(K):
-                    z = base[i, j] + k * dz
-                    u, w, d = _project(R, C, p, xs[j], ys[i], z)
-                    if d <= 0.0 or not np.isfinite(z):
-                        out[k, v, i, j] = np.nan
-                    else:
-                        out[k, v, i, j] = _bilinear(img, (u + 0.5) * sc - 0.5, (w + 0.5) * sc - 0.5)
+def former_kernels(rev: str, tmp: Path):
+    """The module ``kitegully.dense.kernels`` as it was at git revision ``rev``."""
+    src = subprocess.run(["git", "-C", str(REPO), "show", f"{rev}:src/kitegully/dense/kernels.py"],
+                         capture_output=True, text=True, check=True).stdout
+    path = tmp / "former_kernels.py"
+    path.write_text(src.replace("cache=True", "cache=False"), encoding="utf-8")
+    spec = importlib.util.spec_from_file_location("former_kernels", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def main() -> None:
@@ -61,6 +57,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--side", type=int, default=320, help="tile side in cells (core + 2 overlaps)")
+    ap.add_argument("--against", default=FORMER, help="git revision of the former kernels")
     args = ap.parse_args()
     numba.set_num_threads(args.threads)
 
@@ -70,6 +67,9 @@ def main() -> None:
     from kitegully.dense.surface import tile_z_range
     from kitegully.dense.views import PyramidCache
     from kitegully.seeds import rng_for
+
+    tmp = Path(tempfile.mkdtemp(prefix="dense_kernels_"))
+    old = former_kernels(args.against, tmp)
 
     surface = ds.slope(gx=0.2, gy=-0.1)
     views, imgs, _ = ds.block(surface, rng_for(2018, "benchmark", "dense"), extent=12.0, height_m=40.0, f=800.0,
@@ -83,89 +83,85 @@ def main() -> None:
     cache = PyramidCache(views, 32, imgs)
     zr = tile_z_range(views, (xs[0], ys[-1], xs[-1], ys[0]), p.z_margin_m)
 
-    # record every pass's NCC volume and time the kernels inside one tile
-    passes: list[tuple[np.ndarray, int]] = []
-    spent = {"sample_stack": 0.0, "multiview_ncc_stack": 0.0, "winner": 0.0}
+    spent = {"sample_stack": 0.0, "multiview_ncc_stack": 0.0, "SGM + winner": 0.0}
+    sampled, nccin = [], []
 
-    def timed(name, fn):
+    def timed(name, fn, keep=None):
         def wrap(*a, **k):
+            if keep is not None:
+                keep.append(a)
             t = time.perf_counter()
             r = fn(*a, **k)
             spent[name] += time.perf_counter() - t
             return r
         return wrap
 
-    orig = (m.sample_stack, m.multiview_ncc_stack, m._sgm_winner)
-    new_winner = m._sgm_winner
+    def use(sample, ncc):
+        m.sample_stack, m.multiview_ncc_stack = sample, ncc
 
-    sampled = []
-
-    def record_sample(*a):
-        sampled.append(a)
-        return sample_stack(*a)
-
-    def record(score, K, params):
-        passes.append((score.copy(), K))
-        return new_winner(score, K, params)
-
-    m.match_tile(views, cache, xs, ys, cell, zr, p)  # JIT warm-up
-    m._sgm_winner_reference(np.zeros((3, 8, 8), np.float32), 3, p)
-    m.sample_stack = timed("sample_stack", record_sample)
-    m.multiview_ncc_stack = timed("multiview_ncc_stack", multiview_ncc_stack)
-    m._sgm_winner = timed("winner", record)
+    # JIT warm-up of both versions
+    use(old.sample_stack, old.multiview_ncc_stack)
+    m.match_tile(views, cache, xs, ys, cell, zr, p)
+    use(sample_stack, multiview_ncc_stack)
+    m.match_tile(views, cache, xs, ys, cell, zr, p)
+    winner = m._sgm_winner
+    use(timed("sample_stack", sample_stack, sampled), timed("multiview_ncc_stack", multiview_ncc_stack, nccin))
+    m._sgm_winner = timed("SGM + winner", winner)
     t = time.perf_counter()
     m.match_tile(views, cache, xs, ys, cell, zr, p)
     total_one = time.perf_counter() - t
-    m.sample_stack, m.multiview_ncc_stack, m._sgm_winner = orig
+    m._sgm_winner = winner
+    use(sample_stack, multiview_ncc_stack)
+    nccin = [tuple(x.copy() if isinstance(x, np.ndarray) else x for x in a) for a in nccin]
 
     def med_pair(f_old, f_new):
-        old, new = [], []
+        o, n = [], []
         for _ in range(args.repeats):
-            for f, acc in ((f_old, old), (f_new, new)):
+            for f, acc in ((f_old, o), (f_new, n)):
                 t = time.perf_counter()
                 f()
                 acc.append(time.perf_counter() - t)
-        return statistics.median(old), statistics.median(new), [o / n for o, n in zip(old, new)]
+        return statistics.median(o), statistics.median(n), statistics.median([a / b for a, b in zip(o, n)])
+
+    def same(a, b):
+        return all(np.array_equal(x, y, equal_nan=True) for x, y in zip(a, b))
 
     rows = []
     outs = [(np.empty_like(a[-1]), np.empty_like(a[-1])) for a in sampled]
-    o, n_, r = med_pair(lambda: [sample_stack_former(*a[:-1], oo[0]) for a, oo in zip(sampled, outs)],
+    o, n_, r = med_pair(lambda: [old.sample_stack(*a[:-1], oo[0]) for a, oo in zip(sampled, outs)],
                         lambda: [sample_stack(*a[:-1], oo[1]) for a, oo in zip(sampled, outs)])
-    same = all(np.array_equal(a, b, equal_nan=True) for a, b in outs)
-    rows.append(("sample_stack (all passes)", o, n_, statistics.median(r), "identical" if same else "DIFFERENT"))
-    o, n_, r = med_pair(lambda: [m._sgm_winner_reference(s, K, p) for s, K in passes],
-                        lambda: [m._sgm_winner(s, K, p) for s, K in passes])
-    same = all(np.array_equal(a[0], b[0]) and np.array_equal(np.asarray(a[1], np.float64), np.asarray(b[1], np.float64))
-               for a, b in ((m._sgm_winner_reference(s, K, p), m._sgm_winner(s, K, p)) for s, K in passes))
-    rows.append(("winner step: cost + SGM (serial, unchanged) + argmin + parabola (all passes)", o, n_, statistics.median(r),
-                 "identical" if same else "DIFFERENT"))
+    rows.append(("sample_stack (all passes)", o, n_, r,
+                 "identical" if same(*zip(*outs)) else "DIFFERENT"))
+    outs = [tuple((np.empty_like(a[3]), np.empty_like(a[4])) for _ in range(2)) for a in nccin]
+    o, n_, r = med_pair(lambda: [old.multiview_ncc_stack(*a[:3], *oo[0]) for a, oo in zip(nccin, outs)],
+                        lambda: [multiview_ncc_stack(*a[:3], *oo[1]) for a, oo in zip(nccin, outs)])
+    ok = all(same(a, b) for a, b in outs)
+    rows.append(("multiview_ncc_stack (all passes)", o, n_, r, "identical" if ok else "DIFFERENT"))
 
-    # whole tile: former winner step and sampling order vs new
-    def tile(ref: bool):
-        m._sgm_winner = m._sgm_winner_reference if ref else new_winner
-        m.sample_stack = sample_stack_former if ref else sample_stack
+    res = {}
+
+    def tile(former: bool):
+        use(*((old.sample_stack, old.multiview_ncc_stack) if former else (sample_stack, multiview_ncc_stack)))
         try:
             return m.match_tile(views, cache, xs, ys, cell, zr, p)
         finally:
-            m._sgm_winner = new_winner
-            m.sample_stack = sample_stack
-    res = {}
+            use(sample_stack, multiview_ncc_stack)
     o, n_, r = med_pair(lambda: res.__setitem__("old", tile(True)), lambda: res.__setitem__("new", tile(False)))
-    zo, zn = res["old"].z, res["new"].z
-    same = np.array_equal(zo, zn, equal_nan=True) and np.array_equal(res["old"].ncc, res["new"].ncc, equal_nan=True)
-    dz = float(np.nanmax(np.abs(zo.astype(np.float64) - zn))) if np.isfinite(zo).any() else 0.0
-    rows.append((f"match_tile {side}x{side} cells", o, n_, statistics.median(r),
-                 "identical" if same else f"max |dz| {dz:.2e} m"))
+    a, b = res["old"], res["new"]
+    ok = same((a.z, a.ncc, a.nviews), (b.z, b.ncc, b.nviews))
+    rows.append((f"match_tile {side}x{side} cells", o, n_, r, "identical (z, NCC, view counts)" if ok else "DIFFERENT"))
 
+    load = os.getloadavg()
     lines = [
-        "# Dense matcher kernels: former vs new code",
+        f"# Dense matcher kernels: former ({args.against}) vs new code",
         "",
         f"One {side}x{side}-cell tile (default site's tile 256 + 2x32 overlap and matcher settings: "
         f"{p.levels} levels, {p.final_passes} final passes, {p.sgm_directions} SGM directions) of the synthetic "
         f"5x5-view block, {args.threads} numba threads, {args.repeats} alternating repeats in one process, medians "
-        "(shared machine: absolute times are noisy, the ratios are the result).",
+        f"(shared machine, load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} at the end on "
+        f"{os.cpu_count()} CPUs: absolute times are noisy, the ratios are the result).",
         "",
-        f"Share of one tile ({total_one:.2f} s with the new code, {len(passes)} passes): "
+        f"Share of one tile with the new code ({total_one:.2f} s, {side * side / total_one:,.0f} cells/s): "
         + ", ".join(f"{k} {v:.2f} s ({100 * v / total_one:.0f} %)" for k, v in spent.items())
         + f", rest {total_one - sum(spent.values()):.2f} s.",
         "",

@@ -231,24 +231,46 @@ def sample_stack(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
     ``levels`` their pyramid levels; ``out`` (K, V, H, W) gets NaN outside an image or
     behind its camera. One parallel region for the whole level keeps thread
     synchronisation negligible. O(K·V·H·W).
+
+    The rotation's horizontal part ``R[:, 0]·(X − Cx) + R[:, 1]·(Y − Cy)`` does not depend
+    on the candidate elevation: it is computed once per view and cell and the candidates
+    add only ``R[:, 2]·(Z − Cz)``, in the same order of operations as :func:`_project`, so
+    the samples are bit for bit those of projecting every candidate in full.
     """
     K, V, H, W = out.shape
     for i in prange(H):
+        h0 = np.empty(W, dtype=np.float64)
+        h1 = np.empty(W, dtype=np.float64)
+        h2 = np.empty(W, dtype=np.float64)
         for v in range(V):
             img = imgs[v]
             sc = 1.0 / (2.0 ** levels[v])
             R = Rs[v]
             C = Cs[v]
             p = Ps[v]
-            # k outside j: the writes run along contiguous rows of ``out`` (same values)
+            dy = ys[i] - C[1]
+            for j in range(W):
+                dx = xs[j] - C[0]
+                h0[j] = R[0, 0] * dx + R[0, 1] * dy
+                h1[j] = R[1, 0] * dx + R[1, 1] * dy
+                h2[j] = R[2, 0] * dx + R[2, 1] * dy
+            # k outside j: the writes run along contiguous rows of ``out``
             for k in range(K):
                 for j in range(W):
                     z = base[i, j] + k * dz
-                    u, w, d = _project(R, C, p, xs[j], ys[i], z)
-                    if d <= 0.0 or not np.isfinite(z):
+                    dzc = z - C[2]
+                    zc = h2[j] + R[2, 2] * dzc
+                    if not (zc > 1e-6) or not np.isfinite(z):
+                        # behind the camera (or at its centre), or no candidate
                         out[k, v, i, j] = np.nan
-                    else:
-                        out[k, v, i, j] = _bilinear(img, (u + 0.5) * sc - 0.5, (w + 0.5) * sc - 0.5)
+                        continue
+                    x = (h0[j] + R[0, 2] * dzc) / zc
+                    y = (h1[j] + R[1, 2] * dzc) / zc
+                    r2 = x * x + y * y
+                    d = 1.0 + p[3] * r2 + p[4] * r2 * r2
+                    u = p[0] * x * d + p[1]
+                    w = p[0] * y * d + p[2]
+                    out[k, v, i, j] = _bilinear(img, (u + 0.5) * sc - 0.5, (w + 0.5) * sc - 0.5)
 
 
 @njit(cache=True, parallel=True)
@@ -263,6 +285,14 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
     pairs as ``(‖Σ a_v‖² − n) / (n (n − 1))``. ``score`` (K, H, W) gets NaN where fewer
     than two views remain, ``nviews`` the count of usable views.
     O(K·H·W·V·(2·half+1)²).
+
+    Layout: one output row per parallel iteration (``prange`` over rows: both cores); the
+    window sums ``Σ a_v`` of a whole row are accumulated as a ((2·half+1)², W) array,
+    window offset outermost and the cells of the row innermost, so the innermost loop
+    runs along contiguous image rows and compiles to SIMD instructions. Each cell's sums
+    add the views in the same order and float64 arithmetic as a per-cell loop would, so
+    the scores are bit for bit those of the former per-cell kernel
+    (tests/dense/test_kernels_ncc.py).
     """
     K, V, H, W = stack.shape
     m = 2 * half + 1
@@ -273,31 +303,38 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
         colc = np.empty(W, dtype=np.int64)
         mean = np.empty((V, W), dtype=np.float64)
         inv = np.empty((V, W), dtype=np.float64)
-        acc = np.empty(n, dtype=np.float64)
+        acc = np.empty((n, W), dtype=np.float64)
+        tot = np.empty(W, dtype=np.float64)
+        nvr = np.empty(W, dtype=np.int64)
         for k in range(K):
             for j in range(W):
                 score[k, i, j] = np.nan
                 nviews[k, i, j] = 0
             if i < half or i >= H - half:
                 continue
-            # window mean and 1/norm of every view by column sums and a sliding window: O(W·m)
+            acc[:, :] = 0.0
+            nvr[:] = 0
             for v in range(V):
-                for j in range(W):
-                    s1 = 0.0
-                    s2 = 0.0
-                    c = 0
-                    for a in range(i - half, i + half + 1):
-                        x = stack[k, v, a, j]
+                # window mean and 1/norm by column sums (rows outer: contiguous) and a
+                # sliding window along the row: O(W·m)
+                col1[:] = 0.0
+                col2[:] = 0.0
+                colc[:] = 0
+                for a in range(i - half, i + half + 1):
+                    row = stack[k, v, a]
+                    for j in range(W):
+                        x = row[j]
                         if np.isfinite(x):
-                            s1 += x
-                            s2 += x * x
-                            c += 1
-                    col1[j] = s1
-                    col2[j] = s2
-                    colc[j] = c
+                            col1[j] += x
+                            col2[j] += x * x
+                            colc[j] += 1
+                for j in range(W):
+                    inv[v, j] = 0.0
                 s1 = 0.0
                 s2 = 0.0
                 c = 0
+                j_lo = W
+                j_hi = -1
                 for j in range(W):
                     s1 += col1[j]
                     s2 += col2[j]
@@ -311,27 +348,38 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
                         mu = s1 / n
                         ss = s2 - n * mu * mu
                         mean[v, jc] = mu
-                        inv[v, jc] = 1.0 / np.sqrt(ss) if (c == n and ss >= n * min_std[v] * min_std[v] and ss > 0.0) else 0.0
+                        if c == n and ss >= n * min_std[v] * min_std[v] and ss > 0.0:
+                            inv[v, jc] = 1.0 / np.sqrt(ss)
+                            if jc < j_lo:
+                                j_lo = jc
+                            j_hi = jc
+                if j_hi < 0:
+                    continue  # no usable window of this view on this row
+                mv = mean[v]
+                iv = inv[v]
+                for j in range(j_lo, j_hi + 1):
+                    if iv[j] != 0.0:
+                        nvr[j] += 1
+                q = 0
+                for a in range(i - half, i + half + 1):
+                    row = stack[k, v, a]
+                    for b in range(-half, half + 1):
+                        accq = acc[q]
+                        for j in range(j_lo, j_hi + 1):
+                            w = iv[j]
+                            # a view without a usable window adds nothing (its pixels may be NaN)
+                            accq[j] += (row[j + b] - mv[j]) * w if w != 0.0 else 0.0
+                        q += 1
+            tot[:] = 0.0
+            for q in range(n):
+                accq = acc[q]
+                for j in range(W):
+                    tot[j] += accq[j] * accq[j]
             for j in range(half, W - half):
-                acc[:] = 0.0
-                nv = 0
-                for v in range(V):
-                    iv = inv[v, j]
-                    if iv == 0.0:
-                        continue
-                    mu = mean[v, j]
-                    q = 0
-                    for a in range(i - half, i + half + 1):
-                        for b in range(j - half, j + half + 1):
-                            acc[q] += (stack[k, v, a, b] - mu) * iv
-                            q += 1
-                    nv += 1
+                nv = nvr[j]
                 nviews[k, i, j] = nv
                 if nv >= 2:
-                    t = 0.0
-                    for q in range(n):
-                        t += acc[q] * acc[q]
-                    score[k, i, j] = (t - nv) / (nv * (nv - 1.0))
+                    score[k, i, j] = (tot[j] - nv) / (nv * (nv - 1.0))
 
 
 @njit(cache=True, parallel=True)

@@ -84,61 +84,116 @@ def _fifo_push(buf, head, size, item):
 
 
 @njit(cache=True)
+def _grow(buf, used):
+    bigger = np.empty(buf.size * 2, dtype=buf.dtype)
+    bigger[:used] = buf[:used]
+    return bigger
+
+
+@njit(cache=True)
 def _priority_flood(w, valid, eps, dr, dc):
     h, wd = w.shape
+    n = h * wd
     flat = w.ravel()
     vflat = valid.ravel()
-    closed = np.zeros(h * wd, dtype=np.uint8)
+    off = dr * wd + dc  # flat offsets of the 8 neighbours
+    # 0 open, 1 closed (final elevation known), 3 closed seed on the grid edge (bounds checks)
+    closed = np.zeros(n, dtype=np.uint8)
     hidx = np.empty(max(1024, 2 * (h + wd)), dtype=np.int64)
     hkey = np.empty(hidx.size, dtype=np.float64)
     nheap = 0
-    pit = np.empty(1024, dtype=np.int64)
+    pit = np.empty(1024, dtype=np.int64)  # FIFO of raised cells: [phead, ptail), reset when empty
     phead = 0
-    psize = 0
+    ptail = 0
+    trace = np.empty(1024, dtype=np.int64)  # stack of slope cells to expand at once
+    ntrace = 0
     nraised = 0
-    # Seeds: valid cells on the grid edge or next to nodata (outlets).
+    # Seeds: valid cells on the grid edge or next to nodata (outlets). Every other valid
+    # cell is inside the grid with 8 valid or closed neighbours: no bounds checks for it.
     for r in range(h):
         for c in range(wd):
             i = r * wd + c
             if not vflat[i]:
                 closed[i] = 1
                 continue
-            seed = r == 0 or c == 0 or r == h - 1 or c == wd - 1
+            edge = r == 0 or c == 0 or r == h - 1 or c == wd - 1
+            seed = edge
             if not seed:
                 for k in range(8):
-                    if not vflat[(r + dr[k]) * wd + c + dc[k]]:
+                    if not vflat[i + off[k]]:
                         seed = True
                         break
             if seed:
-                closed[i] = 1
+                closed[i] = 3 if edge else 1
                 hidx, hkey, nheap = _heap_push(hidx, hkey, nheap, i, flat[i])
-    while nheap > 0 or psize > 0:
-        if psize > 0 and (nheap == 0 or flat[pit[phead]] <= hkey[0]):
+    while nheap > 0 or phead < ptail:
+        if phead < ptail and (nheap == 0 or flat[pit[phead]] <= hkey[0]):
             i = pit[phead]
-            phead = (phead + 1) % pit.size
-            psize -= 1
+            phead += 1
+            if phead == ptail:
+                phead = 0
+                ptail = 0
         else:
             i, nheap = _heap_pop(hidx, hkey, nheap)
-        r = i // wd
-        c = i - r * wd
-        zc = flat[i]
+        target = flat[i] + eps
+        on_edge = closed[i] == 3
+        r = 0
+        c = 0
+        if on_edge:
+            r = i // wd
+            c = i - r * wd
         for k in range(8):
-            rr = r + dr[k]
-            cc = c + dc[k]
-            if rr < 0 or cc < 0 or rr >= h or cc >= wd:
-                continue
-            j = rr * wd + cc
+            if on_edge:
+                rr = r + dr[k]
+                cc = c + dc[k]
+                if rr < 0 or cc < 0 or rr >= h or cc >= wd:
+                    continue
+            j = i + off[k]
             if closed[j]:
                 continue
             closed[j] = 1
-            target = zc + eps
             if flat[j] <= target:
                 if flat[j] < target:
                     nraised += 1
                 flat[j] = target
-                pit, phead, psize = _fifo_push(pit, phead, psize, j)
-            else:
-                hidx, hkey, nheap = _heap_push(hidx, hkey, nheap, j, flat[j])
+                if ptail == pit.size:
+                    if phead > 0:
+                        pit[: ptail - phead] = pit[phead:ptail]
+                        ptail -= phead
+                        phead = 0
+                    else:
+                        pit = _grow(pit, ptail)
+                pit[ptail] = j
+                ptail += 1
+                continue
+            # j is on a slope: its final elevation is its own (it is higher than the final
+            # elevation + eps of a neighbour). Expand it, and the slope cells found from it, at
+            # once when none of their open neighbours is lower than them + eps: those
+            # neighbours then keep their own elevation too, whatever the order (Zhou et al.
+            # 2016's variant). A cell with a lower open neighbour waits in the heap.
+            trace[0] = j
+            ntrace = 1
+            while ntrace > 0:
+                ntrace -= 1
+                s_ = trace[ntrace]
+                ts = flat[s_] + eps
+                lower = False
+                for kk in range(8):
+                    q = s_ + off[kk]
+                    if closed[q] == 0 and flat[q] < ts:
+                        lower = True
+                        break
+                if lower:
+                    hidx, hkey, nheap = _heap_push(hidx, hkey, nheap, s_, flat[s_])
+                    continue
+                for kk in range(8):
+                    q = s_ + off[kk]
+                    if closed[q] == 0:
+                        closed[q] = 1
+                        if ntrace == trace.size:
+                            trace = _grow(trace, ntrace)
+                        trace[ntrace] = q
+                        ntrace += 1
     return nraised
 
 
