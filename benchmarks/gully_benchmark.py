@@ -48,6 +48,14 @@ PYSHEDS_PIN = "pysheds==0.5"
 # its venv pins the last numba/numpy pair it works with.
 PYSHEDS_VENV_PINS = [PYSHEDS_PIN, "numba==0.61.2", "numpy==2.2.6"]
 CRS = "EPSG:32632"
+# the children import kitegully from here (``--against`` points them at a former revision)
+SRC = os.environ.get("KITEGULLY_BENCH_SRC", str(REPO / "src"))
+# main at the end of session 5 (before issue 21's speed work on the fill and the gully stage)
+FORMER = "3974773"
+
+
+def peak_self_gb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
 # --------------------------------------------------------------------------- synthetic DEM
@@ -117,7 +125,7 @@ def site_gully_config() -> dict:
 def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> None:
     """Whole gully mapping chain as the gully_map rule runs it, with the default site's
     ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
-    sys.path.insert(0, str(REPO / "src"))
+    sys.path.insert(0, SRC)
     from kitegully.gully.pipeline import GullyParams, map_gullies, map_raster
     from kitegully.io.raster import read_raster, write_raster
     from kitegully.io.vectors import write_vector
@@ -139,13 +147,13 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     print(json.dumps({
         "read_s": t_read, "write_s": t_write, **res.timings_s,
         "network_length_m": float(res.lines["length_m"].sum()), "n_gullies": len(res.polygons),
-        "paths_in_pit": res.network.n_paths_not_at_outlet(),
+        "paths_in_pit": res.network.n_paths_not_at_outlet(), "peak_gb": peak_self_gb(),
     }))
 
 
 def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
     """The gully_sensitivity rule's work (its library function with the default site's settings), in a child process."""
-    sys.path.insert(0, str(REPO / "src"))
+    sys.path.insert(0, SRC)
     from kitegully.gully.network import GullyNetwork
     from kitegully.gully.pipeline import GullyParams
     from kitegully.gully.sensitivity import gully_sensitivity
@@ -158,16 +166,17 @@ def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
     net = GullyNetwork.load(Path(out_dir) / "network.npz")
     reference = read_vector(Path(out_dir) / "reference.gpkg")
     g = site_gully_config()
-    gully_sensitivity(dem, grid, net, depth, GullyParams.from_config(g), g["sensitivity"]["sigmas_m"],
-                      g["sensitivity"]["depth_thresholds_m"], g["validation"]["tolerance_m"], reference=reference,
-                      workers=threads)
-    print(json.dumps({"sensitivity_s": time.perf_counter() - t0}))
+    table = gully_sensitivity(dem, grid, net, depth, GullyParams.from_config(g), g["sensitivity"]["sigmas_m"],
+                              g["sensitivity"]["depth_thresholds_m"], g["validation"]["tolerance_m"], reference=reference,
+                              workers=threads)
+    table.to_csv(Path(out_dir) / "sensitivity.csv", index=False)
+    print(json.dumps({"sensitivity_s": time.perf_counter() - t0, "peak_gb": peak_self_gb()}))
 
 
 def run_validation(dem_path: str, out_dir: str) -> None:
     """The gully_validate rule's work (:func:`kitegully.gully.validation.score_network` with the default
     site's ``gully.validation`` settings, then the Fig. 9b map), in a child process."""
-    sys.path.insert(0, str(REPO / "src"))
+    sys.path.insert(0, SRC)
     from kitegully.gully.plots import validation_map
     from kitegully.gully.validation import UNFILTERED, ValidationParams, score_network
     from kitegully.io.figures import save_figure
@@ -190,7 +199,7 @@ def run_validation(dem_path: str, out_dir: str) -> None:
     fig = validation_map(dem, gully == 1, grid, res.pieces, params.tolerance_m)
     save_figure(fig, out / "validation_map.png")
     t["figure_s"] = time.perf_counter() - t0
-    print(json.dumps({**t, "tolerances_m": params.tolerances_m, "good_fit_percent": good}))
+    print(json.dumps({**t, "tolerances_m": params.tolerances_m, "good_fit_percent": good, "peak_gb": peak_self_gb()}))
 
 
 # --------------------------------------------------------------------------- GRASS and pysheds
@@ -281,6 +290,8 @@ def main() -> None:
     ap.add_argument("--skip-grass", action="store_true")
     ap.add_argument("--skip-pysheds", action="store_true")
     ap.add_argument("--skip-scipy", action="store_true", help="skip the scipy.ndimage.gaussian_filter timing")
+    ap.add_argument("--against", default=FORMER, help="git revision whose gully stage and fill are timed beside "
+                    "the working tree's (empty string: no comparison)")
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "gully_benchmark.md"))
     ap.add_argument("--stage-child", nargs=3, metavar=("DEM", "HEADS", "OUTDIR"), help=argparse.SUPPRESS)
     ap.add_argument("--sens-child", nargs=2, metavar=("DEM", "OUTDIR"), help=argparse.SUPPRESS)
@@ -331,47 +342,72 @@ def main() -> None:
 
         write_vector(gpd.GeoDataFrame(geometry=centrelines(gparams, side, cell, grid.x0, grid.y0), crs=CRS),
                      tmp / "out" / "reference.gpkg")
-        t0 = time.perf_counter()
-        p = subprocess.run(
-            [sys.executable, __file__, "--threads", str(args.threads), "--stage-child", str(dem_tif), str(heads), str(tmp / "out")],
-            capture_output=True, text=True,
-        )
-        wall = time.perf_counter() - t0
-        if p.returncode != 0:
-            raise SystemExit(f"whole-stage run failed:\n{p.stderr[-3000:]}")
-        info = json.loads(p.stdout.strip().splitlines()[-1])
+        def whole_stage(src: str, out: Path) -> dict:
+            """The three rules' work in child processes importing kitegully from ``src``."""
+            env = dict(os.environ, KITEGULLY_BENCH_SRC=src)
+            r = {}
+            for key, extra in (("map", ["--stage-child", str(dem_tif), str(heads), str(out)]),
+                               ("sens", ["--sens-child", str(dem_tif), str(out)]),
+                               ("val", ["--val-child", str(dem_tif), str(out)])):
+                t0 = time.perf_counter()
+                p = subprocess.run([sys.executable, __file__, "--threads", str(args.threads), *extra],
+                                   capture_output=True, text=True, env=env)
+                r[key + "_wall"] = time.perf_counter() - t0
+                if p.returncode != 0:
+                    raise SystemExit(f"{key} run failed:\n{p.stderr[-3000:]}")
+                r[key] = json.loads(p.stdout.strip().splitlines()[-1])
+            r["total"] = r["map_wall"] + r["sens_wall"] + r["val_wall"]
+            r["peak"] = max(r[k]["peak_gb"] for k in ("map", "sens", "val"))
+            r["load"] = os.getloadavg()[0]
+            return r
+
+        former = None
+        if args.against:
+            # the former revision's src, run first, on the same DEM and reference (one run each)
+            fsrc = tmp / "former"
+            fsrc.mkdir()
+            arc = subprocess.run(["git", "-C", str(REPO), "archive", args.against, "src"], capture_output=True, check=True)
+            subprocess.run(["tar", "-x", "-C", str(fsrc)], input=arc.stdout, check=True)
+            (tmp / "out_former").mkdir()
+            shutil.copy(tmp / "out" / "reference.gpkg", tmp / "out_former" / "reference.gpkg")
+            former = whole_stage(str(fsrc / "src"), tmp / "out_former")
+        new = whole_stage(str(REPO / "src"), tmp / "out")
+        info, vinfo = new["map"], new["val"]
         say("## Whole gully stage (rules gully_map, gully_sensitivity, gully_validate, one after the other)")
         say("")
-        say(f"- mapping (read DEM -> gully map, network, polygons written): wall time {wall:.1f} s, "
-            f"peak memory {peak_rss_children_gb():.2f} GB")
+        say(f"- mapping (read DEM -> gully map, network, polygons written): wall time {new['map_wall']:.1f} s, "
+            f"peak memory {info['peak_gb']:.2f} GB")
         say("- steps (s): " + ", ".join(f"{k[:-2]} {v:.1f}" for k, v in info.items() if k.endswith("_s")))
         say(f"- {info['n_gullies']} gullies, traced network {info['network_length_m']:.0f} m, paths ending in a pit: {info['paths_in_pit']}")
-        t0 = time.perf_counter()
-        p = subprocess.run([sys.executable, __file__, "--threads", str(args.threads), "--sens-child", str(dem_tif), str(tmp / "out")],
-                           capture_output=True, text=True)
-        if p.returncode != 0:
-            raise SystemExit(f"sensitivity run failed:\n{p.stderr[-3000:]}")
-        wall_s = time.perf_counter() - t0
         g = site_gully_config()
         say(f"- sensitivity table ({len(g['sensitivity']['sigmas_m'])} sigmas x {len(g['sensitivity']['depth_thresholds_m'])} "
             f"thresholds, depth at {g['sigma_m']:g} m reused, network scored at {g['validation']['tolerance_m']:g} m): "
-            f"wall time {wall_s:.1f} s, peak memory of any child so far {peak_rss_children_gb():.2f} GB")
-        t0 = time.perf_counter()
-        p = subprocess.run([sys.executable, __file__, "--val-child", str(dem_tif), str(tmp / "out")],
-                           capture_output=True, text=True)
-        if p.returncode != 0:
-            raise SystemExit(f"validation run failed:\n{p.stderr[-3000:]}")
-        wall_v = time.perf_counter() - t0
-        vinfo = json.loads(p.stdout.strip().splitlines()[-1])
+            f"wall time {new['sens_wall']:.1f} s, peak memory {new['sens']['peak_gb']:.2f} GB")
         say(f"- network validation (score_network: footprint, reference filter, {len(vinfo['tolerances_m'])} tolerances "
             "x 2 reference sets; Fig. 9b map): "
-            f"wall time {wall_v:.1f} s (" + ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in vinfo.items() if k.endswith("_s"))
+            f"wall time {new['val_wall']:.1f} s (" + ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in vinfo.items() if k.endswith("_s"))
             + "); good fit against all the constructed centrelines at "
             + "/".join(f"{t:g}" for t in vinfo["tolerances_m"]) + " m: "
             + " / ".join(f"{v:.1f} %" for v in vinfo["good_fit_percent"].values()))
-        total = wall + wall_s + wall_v
-        say(f"- **whole stage: {total:.1f} s** (target < 180 s), peak memory of any rule {peak_rss_children_gb():.2f} GB "
-            "(target < 8 GB)")
+        say(f"- **whole stage: {new['total']:.1f} s** (issue 21 target <= 90 s on 2 cores), peak memory of any rule "
+            f"{new['peak']:.2f} GB (target < 8 GB); load average {new['load']:.1f} at its end on {os.cpu_count()} CPUs")
+        if former is not None:
+            import pandas as pd
+            import rasterio
+
+            def read(path):
+                with rasterio.open(path) as src:
+                    return src.read(1)
+            same_map = np.array_equal(read(tmp / "out" / "gully_map.tif"), read(tmp / "out_former" / "gully_map.tif"))
+            same_depth = np.array_equal(read(tmp / "out" / "depth.tif"), read(tmp / "out_former" / "depth.tif"), equal_nan=True)
+            same_sens = pd.read_csv(tmp / "out" / "sensitivity.csv").equals(pd.read_csv(tmp / "out_former" / "sensitivity.csv"))
+            say(f"- former code ({args.against}), same DEM, run just before: mapping {former['map_wall']:.1f} s, "
+                f"sensitivity {former['sens_wall']:.1f} s, validation {former['val_wall']:.1f} s, **whole stage "
+                f"{former['total']:.1f} s**, peak {former['peak']:.2f} GB (load average {former['load']:.1f} at its end); "
+                f"ratio former / new = **{former['total'] / new['total']:.2f}x**; gully map "
+                f"{'identical' if same_map else 'DIFFERENT'}, depth map {'identical' if same_depth else 'DIFFERENT'}, "
+                f"sensitivity table {'identical' if same_sens else 'DIFFERENT'}; network length "
+                f"{former['map']['network_length_m']:.0f} m vs {info['network_length_m']:.0f} m")
         say("")
 
         # 2. smoothing: ours vs scipy.ndimage.gaussian_filter
@@ -400,13 +436,33 @@ def main() -> None:
         say(f"## Depression filling on a {tside} x {tside} tile ({tside * tside / 1e6:.1f} M cells)")
         say("")
         priority_flood_fill(tile[:50, :50], 0.0)  # numba compile / cache load
-        t0 = time.perf_counter()
-        f0, n0 = priority_flood_fill(tile, 0.0)
-        t_f0 = time.perf_counter() - t0
+        old_fill = None
+        if args.against:
+            import importlib.util
+
+            spec = importlib.util.spec_from_file_location("former_fill", tmp / "former" / "src" / "kitegully" / "terrain" / "fill.py")
+            old_fill = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(old_fill)
+            old_fill.priority_flood_fill(tile[:50, :50], 0.0)
+        # ours (and the former code's) alternated 3 times: medians
+        t_new, t_old = [], []
+        for _ in range(3):
+            if old_fill is not None:
+                t0 = time.perf_counter()
+                fo, no = old_fill.priority_flood_fill(tile, 0.0)
+                t_old.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            f0, n0 = priority_flood_fill(tile, 0.0)
+            t_new.append(time.perf_counter() - t0)
+        t_f0 = float(np.median(t_new))
+        if old_fill is not None:
+            say(f"- former priority_flood_fill ({args.against}, every slope cell through the heap): {np.median(t_old):.2f} s; "
+                f"ratio former / ours = {np.median(np.array(t_old) / np.array(t_new)):.2f}x (median of 3 paired runs); "
+                f"{'identical' if np.array_equal(fo, f0, equal_nan=True) and no == n0 else 'DIFFERENT'} surface")
         t0 = time.perf_counter()
         priority_flood_fill(tile, 1e-4)
         t_fe = time.perf_counter() - t0
-        say(f"- kitegully priority_flood_fill: {t_f0:.2f} s (eps = 0), {t_fe:.2f} s (eps = 1e-4 m); {n0} cells raised")
+        say(f"- kitegully priority_flood_fill: {t_f0:.2f} s (eps = 0, median of 3), {t_fe:.2f} s (eps = 1e-4 m); {n0} cells raised")
         t0 = time.perf_counter()
         priority_flood_fill(z, 1e-4)
         say(f"- kitegully priority_flood_fill on the full {side * side / 1e6:.0f} M cells (eps = 1e-4 m): {time.perf_counter() - t0:.1f} s")
@@ -428,7 +484,7 @@ def main() -> None:
                 t_g, fg = g
                 inner = (slice(1, -1), slice(1, -1))
                 same = float(np.mean(np.abs(fg[inner] - f0[inner]) < 1e-6)) * 100
-                say(f"- GRASS r.fill.dir: {t_g:.2f} s; ratio GRASS / ours = {t_g / t_f0:.1f}; "
+                say(f"- GRASS r.fill.dir: {t_g:.2f} s (load average {os.getloadavg()[0]:.1f}); ratio GRASS / ours = {t_g / t_f0:.1f}; "
                     f"cells equal to our minimal fill: {same:.2f} % (r.fill.dir is not the minimal fill; edge cells excluded)")
         elif args.skip_grass:
             say("- GRASS comparison skipped (--skip-grass)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -169,7 +170,8 @@ def map_gullies(
     params : GullyParams
         Method parameters.
     workers : int
-        Threads for the FFTs.
+        Threads for the FFTs; with 2 or more, the tracing surface, depression fill and flow
+        directions run in a second thread beside the depth map and patches (same results).
     auto_heads : HeadDetectionParams, optional
         Also detect heads from the DEM (:func:`kitegully.gully.heads.detect_heads`) and
         trace from them after the given heads (``gully.heads: automatic | both``).
@@ -197,39 +199,56 @@ def map_gullies(
     t0 = time.perf_counter()
     if (smoothed is None) != (depth is None):
         raise ValueError("give both the smoothed DEM and the depth map, or neither")
-    if smoothed is None:
-        smoothed, depth = depth_map(dem, grid.cell, params.sigma_m, params.truncate_sigmas, workers)
-    elif smoothed.shape != dem.shape or depth.shape != dem.shape:
+    if smoothed is not None and (smoothed.shape != dem.shape or depth.shape != dem.shape):
         raise ValueError(f"depth map has shape {depth.shape}, the DEM {dem.shape}")
-    t["smoothing_s"] = time.perf_counter() - t0
-    log.info("depth map: σ = %.3g m, %d x %d cells, %.1f s", params.sigma_m, grid.height, grid.width, t["smoothing_s"])
-
-    t0 = time.perf_counter()
-    labels, table = depth_patches(depth, grid.cell, params.depth_threshold_m, params.min_patch_volume_m3, params.connectivity)
-    t["patches_s"] = time.perf_counter() - t0
-    log.info("patches: %d of %d kept (volume >= %.3g m3)", int(table["kept"].sum()), len(table), params.min_patch_volume_m3)
-
-    t0 = time.perf_counter()
-    ip = incision if incision is not None else auto_heads
-    z_heads, zi, n_holes = tracing_surface(dem, grid, params, workers, ip)
     resolve = params.flat_routing == "resolve"
-    if filled is None:
-        filled, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
-    else:
-        if not resolve:
-            raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: resolve")
-        if filled.shape != zi.shape:
-            raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {zi.shape}")
-        filled = np.asarray(filled, dtype=np.float64)  # as priority_flood_fill returns it (same values)
-        n_raised = int(np.count_nonzero(filled > zi))
-        log.info("filled DEM: given (tiled priority flood), not filled here")
-    del zi
-    dirs, n_flat, n_left = (None, 0, 0)
-    if resolve:
-        dirs, n_flat, n_left = flow_directions(filled)
-    incised = relief = None
+    ip = incision if incision is not None else auto_heads
     if params.head_snap in ("incision", "relief") and np.size(heads_x) and ip is None:
         raise ValueError(f"head_snap {params.head_snap!r} needs the incision-map parameters (gully.automatic_heads)")
+    if filled is not None:
+        if not resolve:
+            raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: resolve")
+        if filled.shape != dem.shape:
+            raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {dem.shape}")
+
+    def flow_branch() -> tuple:
+        """Steps f-i before the heads: tracing surface, depression fill, flow directions."""
+        tb = time.perf_counter()
+        z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip)
+        if filled is None:
+            fz, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
+        else:
+            fz = np.asarray(filled, dtype=np.float64)  # as priority_flood_fill returns it (same values)
+            n_raised = int(np.count_nonzero(fz > zi))
+            log.info("filled DEM: given (tiled priority flood), not filled here")
+        del zi
+        dirs, n_flat, n_left = (None, 0, 0)
+        if resolve:
+            dirs, n_flat, n_left = flow_directions(fz)
+        return z_heads, n_holes, fz, n_raised, dirs, n_flat, n_left, time.perf_counter() - tb
+
+    # The fill and flat resolution (compiled, serial, without the GIL) run on one core while
+    # the depth map's FFTs and the patch labelling run beside them: both cores are busy.
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        flow = pool.submit(flow_branch) if workers > 1 else None
+        if smoothed is None:
+            smoothed, depth = depth_map(dem, grid.cell, params.sigma_m, params.truncate_sigmas, workers)
+        t["smoothing_s"] = time.perf_counter() - t0
+        log.info("depth map: σ = %.3g m, %d x %d cells, %.1f s", params.sigma_m, grid.height, grid.width, t["smoothing_s"])
+        t0 = time.perf_counter()
+        labels, table = depth_patches(depth, grid.cell, params.depth_threshold_m, params.min_patch_volume_m3,
+                                      params.connectivity)
+        t["patches_s"] = time.perf_counter() - t0
+        log.info("patches: %d of %d kept (volume >= %.3g m3)", int(table["kept"].sum()), len(table),
+                 params.min_patch_volume_m3)
+        t0 = time.perf_counter()
+        z_heads, n_holes, filled, n_raised, dirs, n_flat, n_left, t_flow = (flow.result() if flow is not None
+                                                                             else flow_branch())
+    # time spent waiting for the fill after the depth map and patches (its own time: t_flow)
+    t["fill_s"] = time.perf_counter() - t0
+    t["fill_branch_s"] = t_flow
+    t0 = time.perf_counter()
+    incised = relief = None
     if params.head_snap == "relief" and np.size(heads_x):
         relief = head_scale_relief(z_heads, grid.cell, ip, workers)[0]
     if params.head_snap == "incision" and np.size(heads_x):
@@ -243,13 +262,12 @@ def map_gullies(
         smoothed=smoothed, incised=incised, relief=relief,
     )
     del incised, relief
-    t["fill_s"] = time.perf_counter() - t0
+    t["snap_s"] = time.perf_counter() - t0
     log.info(
         "filled DEM (%s): %d hole cells interpolated (holes >= %s m2 kept as open water), %d cells raised, %d flat cells routed by the flat mask, "
         "%d cells left undrained, %.1f s",
-        params.flat_routing, n_holes, params.water_min_area_m2, n_raised, n_flat, n_left, t["fill_s"],
+        params.flat_routing, n_holes, params.water_min_area_m2, n_raised, n_flat, n_left, t_flow,
     )
-
     auto_idx = np.zeros(0, dtype=np.int64)
     if auto_heads is not None:
         t0 = time.perf_counter()

@@ -11,6 +11,7 @@ threshold, not the paper's number.
 from __future__ import annotations
 
 import logging
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Sequence
 
 import numpy as np
@@ -64,33 +65,50 @@ def sensitivity_table(
     """
     buf = buffer_mask(network.mask(), grid.cell, buffer_m)
     scorer = NetworkScorer(reference, domain) if reference is not None else None
+
+    def depth_at(sigma: float) -> np.ndarray:
+        return depth_map(dem, grid.cell, sigma, truncate, workers)[1]
+
+    known = known_depths or {}
+    # With 2+ workers the depth maps still to make are smoothed one after the other in a
+    # second thread while the thresholds of the known σ (then of the previous σ) are scored
+    # here: both cores stay busy, and at most two depth maps wait in memory.
+    order = sorted(dict.fromkeys(float(s) for s in sigmas_m), key=lambda s: s not in known)
+    rows_of: dict[float, list[dict]] = {}
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = {s: pool.submit(depth_at, s) for s in order if s not in known} if workers > 1 else {}
+        for sigma in order:
+            depth = known[sigma] if sigma in known else pending.pop(sigma).result() if sigma in pending else depth_at(sigma)
+            rows_of[sigma] = _threshold_rows(depth, sigma, thresholds_m, grid, network, buf, min_volume_m3,
+                                             connectivity, reference, scorer, tolerance_m, truth_mask)
+            del depth
+    return pd.DataFrame([row for s in sigmas_m for row in rows_of[float(s)]])
+
+
+def _threshold_rows(depth, sigma, thresholds_m, grid, network, buf, min_volume_m3, connectivity, reference, scorer,
+                    tolerance_m, truth_mask) -> list[dict]:
+    """Rows of :func:`sensitivity_table` for one depth map (one σ), one per threshold."""
     rows = []
-    for sigma in sigmas_m:
-        if known_depths and float(sigma) in known_depths:
-            depth = known_depths[float(sigma)]
-        else:
-            _, depth = depth_map(dem, grid.cell, sigma, truncate, workers)
-        for thr in thresholds_m:
-            labels, _ = depth_patches(depth, grid.cell, thr, min_volume_m3, connectivity)
-            gully = final_map(labels, buf)
-            row = {
-                "sigma_m": float(sigma),
-                "depth_threshold_m": float(thr),
-                "gully_area_m2": float(gully.sum()) * grid.cell**2,
-                "gully_volume_m3": float(np.nansum(depth[gully], dtype=np.float64)) * grid.cell**2,
-            }
-            if reference is not None:
-                ext = network_lines(network, grid, keep=gully)
-                v = scorer.score(ext, tolerance_m).set_index("category")["percent"]
-                row["good_fit_percent"] = float(v["good_fit"])
-                row["false_positive_percent"] = float(v["false_positive"])
-            if truth_mask is not None:
-                s = area_scores(gully, truth_mask, grid.cell)
-                row.update(precision=s["precision"], recall=s["recall"], iou=s["iou"])
-            log.info("sensitivity σ = %.3g m, threshold = %.3g m: %s", sigma, thr, row)
-            rows.append(row)
-        del depth
-    return pd.DataFrame(rows)
+    for thr in thresholds_m:
+        labels, _ = depth_patches(depth, grid.cell, thr, min_volume_m3, connectivity)
+        gully = final_map(labels, buf)
+        row = {
+            "sigma_m": float(sigma),
+            "depth_threshold_m": float(thr),
+            "gully_area_m2": float(gully.sum()) * grid.cell**2,
+            "gully_volume_m3": float(np.nansum(depth[gully], dtype=np.float64)) * grid.cell**2,
+        }
+        if reference is not None:
+            ext = network_lines(network, grid, keep=gully)
+            v = scorer.score(ext, tolerance_m).set_index("category")["percent"]
+            row["good_fit_percent"] = float(v["good_fit"])
+            row["false_positive_percent"] = float(v["false_positive"])
+        if truth_mask is not None:
+            s = area_scores(gully, truth_mask, grid.cell)
+            row.update(precision=s["precision"], recall=s["recall"], iou=s["iou"])
+        log.info("sensitivity σ = %.3g m, threshold = %.3g m: %s", sigma, thr, row)
+        rows.append(row)
+    return rows
 
 
 def gully_sensitivity(

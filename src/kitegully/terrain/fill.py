@@ -90,7 +90,7 @@ def _grow(buf, used):
     return bigger
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _priority_flood(w, valid, eps, dr, dc):
     h, wd = w.shape
     n = h * wd

@@ -259,7 +259,7 @@ def _drain_flats(flat, h, w, offs, inv, dirs, outlet, labels, mask):
     return n_resolved, n_left
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _directions_with_flats(z, offs, inv):
     """D8 directions with flats resolved: the six phases above, in order."""
     h, w = z.shape
