@@ -440,7 +440,9 @@ def main() -> None:
         if args.against:
             import importlib.util
 
-            spec = importlib.util.spec_from_file_location("former_fill", tmp / "former" / "src" / "kitegully" / "terrain" / "fill.py")
+            ff = tmp / "former_fill.py"  # compiled here without numba's cache (a module without a package)
+            ff.write_text((tmp / "former" / "src" / "kitegully" / "terrain" / "fill.py").read_text().replace("cache=True", "cache=False"))
+            spec = importlib.util.spec_from_file_location("former_fill", ff)
             old_fill = importlib.util.module_from_spec(spec)
             spec.loader.exec_module(old_fill)
             old_fill.priority_flood_fill(tile[:50, :50], 0.0)
