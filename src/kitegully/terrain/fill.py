@@ -14,8 +14,8 @@ surface W with W ≥ Z and ``W(c) ≥ min_neighbour W + ε`` for every inner cel
 Two speed-ups (issue 21) leave that surface unchanged bit for bit: a slope cell (higher
 than its neighbour's final elevation + ε, so its own elevation is final) whose open
 neighbours are all at least its elevation + ε is expanded at once instead of waiting in
-the heap, and so are the slope cells found from it (Zhou, Sun & Fu 2016's variant; on the
-benchmark tile 1.6 M of 4 M cells skip the heap); the heap is 4-ary with key and cell
+the heap, and so are the slope cells found from it (after Zhou, Sun & Fu 2016; on a
+4 M-cell synthetic catchment 1.6 M cells skip the heap); the heap is 4-ary with key and cell
 stored side by side (one cache line per level).
 """
 
