@@ -298,10 +298,11 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
     window sums ``Σ a_v`` of a whole row are accumulated as a ((2·half+1)², W) array,
     window offset outermost and the cells of the row innermost, over slices starting at
     index 0 (no negative-index checks), so the innermost loops run along contiguous image
-    rows and compile to SIMD instructions (measured 4× faster than the per-cell loop). Each cell's sums
-    add the views in the same order and float64 arithmetic as a per-cell loop would, so
-    the scores are bit for bit those of the former per-cell kernel
-    (tests/dense/test_kernels_ncc.py).
+    rows and compile to SIMD instructions (3× faster than the former per-cell loop on one
+    thread). Each cell's sums add the views in the same order and float64 arithmetic as a
+    per-cell loop would, so the scores are bit for bit those of the former kernel
+    (benchmarks/dense_kernels_speed.py; tests/dense/test_kernels_ncc.py checks them
+    against the definition).
     """
     K, V, H, W = stack.shape
     m = 2 * half + 1
