@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks speed-benchmarks
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -94,6 +94,15 @@ polygons-benchmarks: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_ensemble.py $(POLYGONS_ENSEMBLE_ARGS)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_dsm_diagnosis.py $(POLYGONS_ENSEMBLE_ARGS)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_rules_off.py $(POLYGONS_ENSEMBLE_ARGS)
+
+# Speed of the heavy stages (issue 21), each beside its reference in one run: the dense kernels
+# against the former revision's (benchmarks/out/dense_kernels_speed.md, ~6 min on a loaded machine),
+# the gully stage at 80 M cells against the former revision's and the fill against GRASS r.fill.dir
+# and pysheds (results/benchmarks/gully_benchmark.md, ~30 min loaded; installs grass-core with apt
+# and pysheds in its own venv on first use).
+speed-benchmarks: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/dense_kernels_speed.py
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/gully_benchmark.py --skip-scipy
 
 clean-venv:
 	rm -rf $(VENV)
