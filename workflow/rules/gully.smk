@@ -9,7 +9,7 @@ if "gully" in config:
     # Each rule gets only the keys it reads (the params rerun trigger): the mapping keys are
     # exactly the fields of GullyParams, so a change to gully.validation.* or
     # gully.sensitivity.* does not rerun gully_map.
-    GULLY_MAPPING = {k: GULLY[k] for k in _GullyParams.__dataclass_fields__}
+    GULLY_MAPPING = {k: GULLY[k] for k in _GullyParams.__dataclass_fields__ if k in GULLY}  # optional keys keep their defaults
     GULLY_CAT = "Gully network"
     GULLY_ATTRIBUTION = config["site"].get("attribution")
     if GULLY["dem"] == "truth_plus_noise" and not IS_TWIN:
