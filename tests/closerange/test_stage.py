@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from kitegully import InputError
-from kitegully.closerange import CloseRangeParams, closerange_tables, photogrammetric_orthophoto
+from kitegully.closerange import CloseRangeParams, closerange_tables, failed_scene_record, photogrammetric_orthophoto
 from kitegully.io.raster import GridSpec
 from kitegully.twin.exif import exif_bytes, write_jpeg
 from kitegully.twin.polewalk import PoleWalk
@@ -96,3 +96,40 @@ def test_mismatched_points_are_dropped_and_small_holes_filled():
     ortho = np.full((3, 50, 50), 100, np.uint8)
     dem2, ortho2, filled = _fill_holes(dem, ortho, np.ones((50, 50), bool), 100)
     assert filled == 4 and np.isfinite(dem2[10:12, 10:12]).all() and np.isnan(dem2[30:, 30:]).all()
+
+
+def test_on_scene_failure_key_defaults_to_stop_and_is_checked():
+    assert CloseRangeParams().on_scene_failure == "stop"
+    assert CloseRangeParams.from_config(SITE["closerange"]).on_scene_failure == "stop"
+    assert CloseRangeParams.from_config({"on_scene_failure": "record"}).on_scene_failure == "record"
+    with pytest.raises(InputError, match="^closerange.on_scene_failure: 'skip' is not one of stop, record$"):
+        CloseRangeParams.from_config({"on_scene_failure": "skip"})
+    schema = yaml.safe_load((REPO / "config" / "schema" / "stages" / "closerange.schema.yaml").read_text())
+    key = schema["properties"]["on_scene_failure"]
+    assert key["enum"] == ["stop", "record"] and key["description"]
+    assert "on_scene_failure" not in schema["required"]
+
+
+def test_a_failed_scene_is_a_row_with_its_sentence_and_left_out_of_the_overall_accuracy():
+    def rec(scene, aligned):
+        return {"scene": scene, "status": "ok", "images_used": 36, "images_aligned": aligned, "marker_error_m": 0.02,
+                "spheres_measured": 4, "scale_error_pct": 1.0, "rule": {"leg_a_m": 1.0, "leg_b_m": 1.01},
+                "tie_points": 9000, "dense_points": 2_000_000, "holes_pct": 3.0, "timings_s": {"total": 60.0}}
+
+    reason = "photos: 11 of 36 photos were registered"
+    records = [rec("scene_01", 36), failed_scene_record("scene_08", reason), rec("scene_10", 34)]
+    conf_sfm = [{"scene": "scene_01", "confusion": [[90, 10], [0, 100]], "area_auto_m2": 4.1, "area_ref_m2": 4.0},
+                {"scene": "scene_10", "confusion": [[100, 0], [0, 100]], "area_auto_m2": 4.0, "area_ref_m2": 4.0}]
+    conf_dir = [{"scene": s, "confusion": [[100, 0], [0, 100]], "area_auto_m2": 4.0, "area_ref_m2": 4.0}
+                for s in ("scene_01", "scene_10")]
+    t = closerange_tables(records, conf_sfm, conf_dir)
+    acc, t1 = t.accuracy.set_index("scene"), t.table1.set_index("scene")
+    assert list(acc.index) == ["scene_01", "scene_08", "scene_10", "all"]
+    assert acc.loc["scene_08", "status"] == "failed" and acc.loc["scene_08", "reason"] == reason
+    assert np.isnan(acc.loc["scene_08", "oa_sfm_pct"]) and np.isnan(acc.loc["scene_08", "oa_direct_pct"])
+    assert acc.loc["all", "oa_sfm_pct"] == pytest.approx(97.5)  # 390 of 400 cells of the two scenes that succeeded
+    assert acc.loc["all", "status"] == "2 of 3 scenes" and acc.loc["all", "reason"] == "failed: scene_08"
+    assert t1.loc["scene_08", "status"] == "failed" and t1.loc["scene_08", "reason"] == reason
+    assert np.isnan(t1.loc["scene_08", "images_aligned"]) and t1.loc["scene_08", "paper_images_used"] == 279
+    assert t1.loc["all", "images_aligned"] == pytest.approx(35.0) and t1.loc["all", "status"] == "2 of 3 scenes"
+    assert t1.loc["all", "paper_images_used"] == pytest.approx((613 + 251) / 2)  # the paper over the same scenes

@@ -6,7 +6,12 @@
 # 2 cm trimmed-mean DEM and orthophoto cropped by the camera circle -> the obia stage's
 # classification and evaluation on these orthophotos -> Table 1 and the accuracy next to the
 # direct renders' and the paper's. The default run builds closerange.scenes (one scene);
-# `make closerange` sets closerange.scenes to all.
+# `make closerange` sets closerange.scenes to all and closerange.on_scene_failure to record:
+# closerange_sfm is then a checkpoint whose record says whether the scene was georeferenced;
+# the summary reads the records and asks for the classification / evaluation of the scenes
+# that succeeded only, and lists the failed ones with their sentence.
+
+import json
 
 if "closerange" in config and "obia" in config and IS_TWIN:
 
@@ -18,7 +23,8 @@ if "closerange" in config and "obia" in config and IS_TWIN:
     # what closerange_sfm reads (CloseRangeParams); the walk belongs to the photos rule
     CR_SFM_KEYS = ("spheres", "sfm_max_num_features", "sphere_tolerance_m", "marker_budget_m", "dense", "trim", "periphery",
                    "fill_holes_cells", "outlier_cell_m", "outlier_tolerance_m", "min_dense_points",
-                   "rule_paint_rgb", "rule_min_paint_fraction")
+                   "rule_paint_rgb", "rule_min_paint_fraction", "on_scene_failure")
+    CR_ON_FAILURE = CR.get("on_scene_failure", "stop")
 
 
     def _cr(name):
@@ -51,8 +57,10 @@ if "closerange" in config and "obia" in config and IS_TWIN:
             "../scripts/closerange_photos.py"
 
 
-    rule closerange_sfm:
-        """SfM, spheres as GCPs (similarity), dense points, 2 cm DEM and orthophoto, folding-rule legs (photos and survey only)."""
+    checkpoint closerange_sfm:
+        """SfM, spheres as GCPs (similarity), dense points, 2 cm DEM and orthophoto, folding-rule legs (photos and survey only).
+
+        A checkpoint: with on_scene_failure: record its record may say ``failed`` (the summary then skips the scene)."""
         input:
             photos=_cr("photos"),
             markers=_obia_scene("markers.csv"),
@@ -68,7 +76,7 @@ if "closerange" in config and "obia" in config and IS_TWIN:
             spheres=_cr("sphere_residuals.csv"),
             record=_cr("closerange.json"),
         params:
-            closerange=dict({k: CR[k] for k in CR_SFM_KEYS}, pole_height_m=CR["walk"].get("pole_height_m", 3.0),
+            closerange=dict({k: CR[k] for k in CR_SFM_KEYS if k in CR}, pole_height_m=CR["walk"].get("pole_height_m", 3.0),
                             sphere_radius_m=OBIA["scenes"]["marker_radius_m"]),
             sfm=config["sfm"],
             seed=config["seed"],
@@ -122,15 +130,32 @@ if "closerange" in config and "obia" in config and IS_TWIN:
             logfile("closerange", "evaluate_{scene}"),
 
 
+    def _cr_succeeded(wildcards):
+        """Scenes whose SfM georeferenced them: all with on_scene_failure: stop (a failure stops the run),
+        else read from the checkpoints' records (the records are static inputs, so all scenes run at once)."""
+        if CR_ON_FAILURE == "stop":
+            return CR_SCENES
+        ok = []
+        for s in CR_SCENES:
+            with open(checkpoints.closerange_sfm.get(scene=s).output.record, encoding="utf-8") as fh:
+                if json.load(fh).get("status", "ok") == "ok":
+                    ok.append(s)
+        return ok
+
+
+    def _cr_each(pattern):
+        return lambda wildcards: expand(pattern, scene=_cr_succeeded(wildcards))
+
+
     rule closerange_summary:
         """Table 1 (001) next to the paper's; OBIA accuracy on the photogrammetric vs direct orthophotos (evaluation)."""
         input:
             records=expand(_cr("closerange.json"), scene=CR_SCENES),
-            confusion_sfm=expand(_cr("confusion.json"), scene=CR_SCENES),
-            confusion_direct=expand(_obia_scene("confusion.json"), scene=CR_SCENES),
-            class_direct=expand(_obia_scene("classification.tif"), scene=CR_SCENES),
-            class_sfm=expand(_cr("classification.tif"), scene=CR_SCENES),
-            truth=expand(_obia_scene("truth/eroded.tif"), scene=CR_SCENES),
+            confusion_sfm=_cr_each(_cr("confusion.json")),
+            confusion_direct=_cr_each(_obia_scene("confusion.json")),
+            class_direct=_cr_each(_obia_scene("classification.tif")),
+            class_sfm=_cr_each(_cr("classification.tif")),
+            truth=_cr_each(_obia_scene("truth/eroded.tif")),
         output:
             table1=report(result("obia", "closerange_sfm.csv"), caption=caption("closerange_table1"), category="Bare soil (OBIA)", subcategory="Close-range SfM scenes"),
             table1_md=result("obia", "closerange_sfm.md"),
@@ -146,5 +171,6 @@ if "closerange" in config and "obia" in config and IS_TWIN:
         add_targets(
             result("obia", "closerange_sfm.csv"),
             result("obia", "closerange_accuracy.csv"),
-            *expand(_cr("scene_figure.png"), scene=CR_SCENES),
+            # record mode: the figures of the scenes that succeeded come with the summary's evaluations
+            *(expand(_cr("scene_figure.png"), scene=CR_SCENES) if CR_ON_FAILURE == "stop" else []),
         )

@@ -17,6 +17,7 @@ from importlib import import_module
 _EXPORTS = {
     "CloseRangeParams": "stage", "photograph_scene": "stage", "photogrammetric_orthophoto": "stage",
     "closerange_tables": "stage", "CloseRangeTables": "stage",
+    "failed_scene_record": "stage", "scene_succeeded": "stage",
 }
 __all__ = sorted(_EXPORTS)
 

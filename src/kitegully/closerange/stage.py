@@ -116,6 +116,13 @@ class CloseRangeParams:
         covers at least half of one cell in every row across it, so 0.25 is the midpoint
         between no paint and that guaranteed half (replaces a saturation threshold that had
         been set on scene 10).
+    on_scene_failure : str
+        ``stop`` (default): a scene that cannot be georeferenced stops the run with its one
+        sentence (InputError). ``record`` (``make closerange``): the sentence is logged and
+        written as the scene's record (:func:`failed_scene_record`), the scene is skipped
+        downstream and listed as ``failed`` in the summary. [I] in a 10-scene study a scene
+        that cannot be georeferenced is a result (001 reports per-scene numbers); a single
+        scene run has nothing to summarise, so it stops.
     """
 
     scenes: tuple[str, ...] | str = ("scene_10",)
@@ -136,6 +143,7 @@ class CloseRangeParams:
     min_dense_points: int = 10000
     rule_paint_rgb: tuple[float, float, float] = (0.93, 0.80, 0.20)
     rule_min_paint_fraction: float = 0.25
+    on_scene_failure: str = "stop"
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "CloseRangeParams":
@@ -165,6 +173,8 @@ class CloseRangeParams:
             raise InputError(f"closerange.trim: {p.trim} is not in [0, 0.5) (share cut from each tail)")
         if p.periphery not in ("circle", "hull"):
             raise InputError(f"closerange.periphery: '{p.periphery}' is not one of circle, hull")
+        if p.on_scene_failure not in ("stop", "record"):
+            raise InputError(f"closerange.on_scene_failure: '{p.on_scene_failure}' is not one of stop, record")
         if p.dense.block_size_px % 2 == 0 or p.dense.downscale < 1:
             raise InputError("closerange.dense: block_size_px must be odd and downscale at least 1")
         return p
@@ -368,7 +378,7 @@ def photogrammetric_orthophoto(
     t3 = time.perf_counter()
     n_inside = int(inside.sum())
     record = {
-        "scene": scene,
+        "scene": scene, "status": "ok",
         "images_used": int(summary["n_images"]), "images_aligned": int(summary["n_registered"]),
         "marker_error_m": float(err.mean()), "marker_error_max_m": float(err.max()),
         "spheres_measured": len(rows), "sphere_detections": len(det_rows),
@@ -388,6 +398,28 @@ def photogrammetric_orthophoto(
 
 
 # --------------------------------------------------------------------------- closerange_summary
+def failed_scene_record(scene: str, reason: str) -> dict:
+    """The record of a scene that could not be georeferenced (``on_scene_failure: record``).
+
+    Parameters
+    ----------
+    scene : scene name.
+    reason : the InputError's one sentence.
+
+    Returns
+    -------
+    dict
+        ``{"scene", "status": "failed", "reason"}``; :func:`closerange_tables` lists it as a
+        row without numbers and leaves it out of the means and the overall accuracy.
+    """
+    return {"scene": scene, "status": "failed", "reason": str(reason)}
+
+
+def scene_succeeded(record: Mapping[str, Any]) -> bool:
+    """Whether a ``closerange.json`` record is a georeferenced scene (records without ``status`` are)."""
+    return record.get("status", "ok") == "ok"
+
+
 @dataclass
 class CloseRangeTables:
     """Products of :func:`closerange_tables`."""
@@ -402,35 +434,45 @@ def closerange_tables(
 ) -> CloseRangeTables:
     """001 Table 1 per scene next to the paper's, and OBIA accuracy on the photogrammetric vs the direct orthophotos.
 
-    ``records`` are the :func:`photogrammetric_orthophoto` records, the confusions the
-    obia stage's ``confusion.json`` records of the same scenes (photogrammetric and direct
-    renders).  Each table ends with an ``all`` row (means for Table 1, summed confusion
-    matrices for the accuracy).  ``same_cells`` gives per scene the paths of the direct and
-    the photogrammetric classification and the truth mask: the direct classification is then
+    ``records`` are the :func:`photogrammetric_orthophoto` records of all requested scenes,
+    failed ones included (:func:`failed_scene_record`); the confusions are the obia stage's
+    ``confusion.json`` records of the scenes that succeeded (photogrammetric and direct
+    renders).  Both tables have ``status`` and ``reason`` columns: a failed scene is a row
+    with its sentence and no numbers.  Each table ends with an ``all`` row over the scenes
+    that succeeded (means for Table 1, the paper's too, over the same scenes; summed
+    confusion matrices for the accuracy), whose ``status`` states the count ("8 of 10
+    scenes").  ``same_cells`` gives per succeeded scene the paths of the direct and the
+    photogrammetric classification and the truth mask: the direct classification is then
     also scored on the cells the photogrammetric one covers (``oa_direct_same_cells_pct``),
     which separates the effect of the crop from that of the SfM defects.
     """
     from kitegully.io.raster import read_raster
     from kitegully.obia.accuracy import accuracies, confusion_matrix
 
+    ok_recs = [r for r in records if scene_succeeded(r)]
+    failed = [r for r in records if not scene_succeeded(r)]
+    count = f"{len(ok_recs)} of {len(records)} scenes"
     t1 = pd.DataFrame([{
-        "scene": r["scene"], "images_used": r["images_used"], "images_aligned": r["images_aligned"],
+        "scene": r["scene"], "status": "ok", "reason": "", "images_used": r["images_used"], "images_aligned": r["images_aligned"],
         "marker_error_m": r["marker_error_m"], "spheres_measured": r["spheres_measured"],
         "scale_error_pct": np.nan if r["scale_error_pct"] is None else r["scale_error_pct"],
         "leg_a_m": np.nan if r["rule"] is None else r["rule"]["leg_a_m"],
         "leg_b_m": np.nan if r["rule"] is None else r["rule"]["leg_b_m"],
         "tie_points": r["tie_points"], "dense_points": r["dense_points"], "holes_pct": r["holes_pct"],
         "time_s": r["timings_s"]["total"],
-    } for r in records])
-    t1 = t1.merge(PAPER_TABLE1, on="scene", how="left")
-    mean = {c: t1[c].mean() for c in t1.columns if c != "scene"}
-    t1.loc[len(t1)] = {"scene": "all", **mean}
+    } if scene_succeeded(r) else {"scene": r["scene"], "status": "failed", "reason": r["reason"]} for r in records])
+    if len(t1):
+        t1 = t1.merge(PAPER_TABLE1, on="scene", how="left")
+        ok = t1["status"] == "ok"
+        mean = {c: t1.loc[ok, c].mean() for c in t1.columns if c not in ("scene", "status", "reason")}
+        t1.loc[len(t1)] = {"scene": "all", "status": count, "reason": "", **mean}
 
     def acc_row(scene, conf):
         a = accuracies(np.asarray(conf))
         return {"oa": 100 * a["overall"], "ua_eroded": 100 * a["users"][1], "pa_eroded": 100 * a["producers"][1]}
 
     direct = {c["scene"]: c for c in confusion_direct}
+    sfm = {c["scene"]: c for c in confusion_sfm}
     same = {}
     for (direct_path, sfm_path, truth_path), c in zip(same_cells, confusion_sfm):
         dc, _ = read_raster(direct_path)
@@ -438,28 +480,38 @@ def closerange_tables(
         tr, _ = read_raster(truth_path)
         same[c["scene"]] = confusion_matrix(dc, tr, valid=(sc != 255) & (dc != 255))
     rows, tot_s, tot_d, tot_x = [], np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2))
-    for c in confusion_sfm:
-        d = direct[c["scene"]]
+    for r in records:
+        if not scene_succeeded(r):
+            rows.append({"scene": r["scene"], "status": "failed", "reason": r["reason"], "oa_paper_pct": PAPER_OA.get(r["scene"])})
+            continue
+        c, d = sfm[r["scene"]], direct[r["scene"]]
         tot_s += np.asarray(c["confusion"])
         tot_d += np.asarray(d["confusion"])
         x_ = acc_row(c["scene"], same[c["scene"]])["oa"] if c["scene"] in same else np.nan
         if c["scene"] in same:
             tot_x += same[c["scene"]]
         s_, d_ = acc_row(c["scene"], c["confusion"]), acc_row(c["scene"], d["confusion"])
-        rows.append({"scene": c["scene"], "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"], "oa_direct_same_cells_pct": x_,
+        rows.append({"scene": c["scene"], "status": "ok", "reason": "",
+                     "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"], "oa_direct_same_cells_pct": x_,
                      "oa_paper_pct": PAPER_OA.get(c["scene"]),
                      "ua_eroded_sfm_pct": s_["ua_eroded"], "pa_eroded_sfm_pct": s_["pa_eroded"],
                      "ua_eroded_direct_pct": d_["ua_eroded"], "pa_eroded_direct_pct": d_["pa_eroded"],
                      "area_sfm_m2": c["area_auto_m2"], "area_ref_in_crop_m2": c["area_ref_m2"],
                      "area_direct_m2": d["area_auto_m2"], "area_ref_full_m2": d["area_ref_m2"]})
-    if rows:
+    if ok_recs:
         s_, d_ = acc_row("all", tot_s), acc_row("all", tot_d)
-        rows.append({"scene": "all", "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"],
+        rows.append({"scene": "all", "status": count,
+                     "reason": "" if not failed else "failed: " + ", ".join(r["scene"] for r in failed),
+                     "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"],
                      "oa_direct_same_cells_pct": acc_row("all", tot_x)["oa"] if same else np.nan, "oa_paper_pct": PAPER_OA["all"],
                      "ua_eroded_sfm_pct": s_["ua_eroded"], "pa_eroded_sfm_pct": s_["pa_eroded"],
                      "ua_eroded_direct_pct": d_["ua_eroded"], "pa_eroded_direct_pct": d_["pa_eroded"]})
     acc = pd.DataFrame(rows)
-    if len(acc):
-        log.info("OBIA over %d scenes: OA %.1f %% on the photogrammetric orthophotos, %.1f %% on the direct renders (paper 94.3 %%)",
-                 len(rows) - 1, acc["oa_sfm_pct"].iloc[-1], acc["oa_direct_pct"].iloc[-1])
+    for r in failed:
+        log.info("%s: failed, not in the overall accuracy: %s", r["scene"], r["reason"])
+    if ok_recs:
+        log.info("OBIA: OA %.1f %% over %s on the photogrammetric orthophotos, %.1f %% on the direct renders of the same "
+                 "scenes (paper 94.3 %% over 10)", acc["oa_sfm_pct"].iloc[-1], count, acc["oa_direct_pct"].iloc[-1])
+    else:
+        log.info("OBIA: no scene of %d was georeferenced; no overall accuracy", len(records))
     return CloseRangeTables(t1, acc)
