@@ -132,4 +132,5 @@ def test_a_failed_scene_is_a_row_with_its_sentence_and_left_out_of_the_overall_a
     assert t1.loc["scene_08", "status"] == "failed" and t1.loc["scene_08", "reason"] == reason
     assert np.isnan(t1.loc["scene_08", "images_aligned"]) and t1.loc["scene_08", "paper_images_used"] == 279
     assert t1.loc["all", "images_aligned"] == pytest.approx(35.0) and t1.loc["all", "status"] == "2 of 3 scenes"
+    assert t.table1.columns[1] == "status" and t.accuracy.columns[-1] == "reason"
     assert t1.loc["all", "paper_images_used"] == pytest.approx((613 + 251) / 2)  # the paper over the same scenes

@@ -452,6 +452,7 @@ def closerange_tables(
     ok_recs = [r for r in records if scene_succeeded(r)]
     failed = [r for r in records if not scene_succeeded(r)]
     count = f"{len(ok_recs)} of {len(records)} scenes"
+    failed_note = "" if not failed else "failed: " + ", ".join(r["scene"] for r in failed)
     t1 = pd.DataFrame([{
         "scene": r["scene"], "status": "ok", "reason": "", "images_used": r["images_used"], "images_aligned": r["images_aligned"],
         "marker_error_m": r["marker_error_m"], "spheres_measured": r["spheres_measured"],
@@ -465,7 +466,8 @@ def closerange_tables(
         t1 = t1.merge(PAPER_TABLE1, on="scene", how="left")
         ok = t1["status"] == "ok"
         mean = {c: t1.loc[ok, c].mean() for c in t1.columns if c not in ("scene", "status", "reason")}
-        t1.loc[len(t1)] = {"scene": "all", "status": count, "reason": "", **mean}
+        t1.loc[len(t1)] = {"scene": "all", "status": count, "reason": failed_note, **mean}
+        t1 = t1[[c for c in t1.columns if c != "reason"] + ["reason"]]  # the sentence last: the .md stays readable
 
     def acc_row(scene, conf):
         a = accuracies(np.asarray(conf))
@@ -500,13 +502,14 @@ def closerange_tables(
                      "area_direct_m2": d["area_auto_m2"], "area_ref_full_m2": d["area_ref_m2"]})
     if ok_recs:
         s_, d_ = acc_row("all", tot_s), acc_row("all", tot_d)
-        rows.append({"scene": "all", "status": count,
-                     "reason": "" if not failed else "failed: " + ", ".join(r["scene"] for r in failed),
+        rows.append({"scene": "all", "status": count, "reason": failed_note,
                      "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"],
                      "oa_direct_same_cells_pct": acc_row("all", tot_x)["oa"] if same else np.nan, "oa_paper_pct": PAPER_OA["all"],
                      "ua_eroded_sfm_pct": s_["ua_eroded"], "pa_eroded_sfm_pct": s_["pa_eroded"],
                      "ua_eroded_direct_pct": d_["ua_eroded"], "pa_eroded_direct_pct": d_["pa_eroded"]})
     acc = pd.DataFrame(rows)
+    if len(acc):
+        acc = acc[[c for c in acc.columns if c != "reason"] + ["reason"]]
     for r in failed:
         log.info("%s: failed, not in the overall accuracy: %s", r["scene"], r["reason"])
     if ok_recs:
