@@ -242,3 +242,14 @@ def test_pond_is_left_out_of_the_histogram(tmp_path, monkeypatch):
     monkeypatch.setattr(kite, "blue_dominant", lambda r, g, b: np.zeros(np.shape(r), dtype=bool))
     thr_all, _, _ = _run(tmp_path, "bare_all", tile=128)
     assert len(thr_all.valleys) == 2 and thr_all.valley < _exg((50, 90, 110))
+
+
+@pytest.mark.parametrize("index, name", [("exg", "ExG"), ("ndvi", "NDVI")])
+def test_map_figure_names_the_thresholded_index(site_files, index, name):
+    from kitegully.obia import kite_map_figure
+
+    d = site_files[0]
+    thr, classes, grid = _run(d, f"figure_{index}", N)
+    fig = kite_map_figure(d / "orthophoto.tif", classes, grid, thr, 200, index)
+    assert fig.axes[2].get_xlabel() == f"{name}, Gaussian-blurred (-)"
+    assert fig.axes[1].get_legend().get_texts()[0].get_text() == f"bare soil ({name} below the valley)"

@@ -13,7 +13,8 @@ from kitegully.obia.scene import ObiaParams
 
 log = setup_script_logging(snakemake.log[0])
 inp, out, cfg = snakemake.input, snakemake.output, snakemake.params.obia
-thr = bare_soil_map(inp.orthophoto, inp.dsm, out.bare_soil, ObiaParams.from_config(cfg), int(snakemake.params.tile_cells))
+params = ObiaParams.from_config(cfg)
+thr = bare_soil_map(inp.orthophoto, inp.dsm, out.bare_soil, params, int(snakemake.params.tile_cells))
 classes, grid = read_raster(out.bare_soil)
 polygons = eroded_polygons(classes, grid.transform, grid.crs)
 write_vector(polygons, out.polygons)
@@ -22,5 +23,5 @@ with open(out.info, "w", encoding="utf-8") as fh:
 bare = classes == 1
 log.info("bare soil: %.1f m² in %d polygons (%.2f %% of the mapped cells)", float(bare.sum() * grid.cell ** 2),
          len(polygons), 100.0 * bare.sum() / max(int((classes != 255).sum()), 1))
-fig = kite_map_figure(inp.orthophoto, classes, grid, thr, snakemake.params.figure_max_px)
+fig = kite_map_figure(inp.orthophoto, classes, grid, thr, snakemake.params.figure_max_px, params.index)
 save_figure(fig, out.figure, attribution=snakemake.params.attribution)

@@ -172,7 +172,7 @@ def scene_figure(
         ax.axvline(info["otsu"], color="tab:blue", ls="--", lw=1.5, label=f"Otsu T = {info['otsu']:.3f}")
     shown = hist["exg"][hist["count"] > 0.001 * hist["count"].max()]
     ax.set_xlim(shown.min() - 0.05, shown.max() + 0.05)
-    ax.set_xlabel("ExG, Gaussian-blurred (-)")
+    ax.set_xlabel(f"{name}, Gaussian-blurred (-)")
     ax.set_ylabel("cells (count)")
     ax.set_title("ExG histogram" + ("" if info["bimodal"] else f" - not bimodal: {info['reason']}"),
                  fontsize=8 if not info["bimodal"] else None)
@@ -284,11 +284,14 @@ def summary_figure(summary: SceneSummary, paper_overall_accuracy_pct: float = 94
 
 
 # --------------------------------------------------------------------------- obia_kite_scale
-def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: ThresholdResult, figure_max_px: float):
-    """Orthophoto, the bare-soil map over it, and the blurred-ExG histogram with both thresholds.
+def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: ThresholdResult, figure_max_px: float,
+                    index: str = "exg"):
+    """Orthophoto, the bare-soil map over it, and the blurred-index histogram with both thresholds.
 
-    The orthophoto is read averaged down to at most ``figure_max_px`` pixels a side.
+    The orthophoto is read averaged down to at most ``figure_max_px`` pixels a side;
+    ``index`` ("exg" or "ndvi", ``obia.classification.index``) names the thresholded index.
     """
+    name = {"exg": "ExG", "ndvi": "NDVI"}[index]
     import rasterio
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
@@ -309,7 +312,7 @@ def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: T
     axes[1].imshow(img, extent=ext)
     overlay = np.ma.masked_where(cls_small != 1, cls_small)
     axes[1].imshow(overlay, extent=ext, cmap=ListedColormap(["#d7301f"]), alpha=0.75, interpolation="nearest")
-    axes[1].legend(handles=[Patch(color="#d7301f", label="bare soil (ExG below the valley)")], loc="lower right",
+    axes[1].legend(handles=[Patch(color="#d7301f", label=f"bare soil ({name} below the valley)")], loc="lower right",
                    fontsize=7)
     axes[1].set_title("bare-soil map")
     for ax in axes[:2]:
@@ -326,7 +329,7 @@ def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: T
         ax.axvline(v, color="0.3", ls=":", label=f"upper valley {v:.3f}")
     if thr.otsu is not None:
         ax.axvline(thr.otsu, color="#2b8cbe", ls="--", label=f"Otsu {thr.otsu:.3f}")
-    ax.set_xlabel("ExG, Gaussian-blurred (-)")
+    ax.set_xlabel(f"{name}, Gaussian-blurred (-)")
     ax.set_ylabel("cells")
     ax.set_title("bimodal" if thr.bimodal else f"not bimodal: {thr.reason}", fontsize=8)
     ax.legend(fontsize=7)
