@@ -83,9 +83,12 @@ lowcost: $(STAMP)
 # and closerange_accuracy.csv (~43 min of job time for all 10 measured on the loaded shared machine).
 # on_scene_failure: record: a scene that cannot be georeferenced (05, 08 today) is a `failed` row
 # with its one sentence, and the overall accuracy is over the scenes that succeeded ("8 of 10").
+# --forcerun closerange_classify (about 5 s a scene): Snakemake 9.27 does not rerun a scene's
+# classification when the SfM checkpoint's orthophoto is newer (the classify job is only found
+# after the checkpoint; measured: a rerun SfM left the old classification in the summary).
 closerange: $(STAMP)
 	@$(CONFIG_CHECK)
-	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) --config 'closerange={scenes: all, on_scene_failure: record}' $(SNAKE_ARGS) -- closerange_summary
+	$(BIN)/snakemake --cores $(CORES) $(CONFIG_ARG) --config 'closerange={scenes: all, on_scene_failure: record}' --forcerun closerange_classify $(SNAKE_ARGS) -- closerange_summary
 
 # Gully polygons (issue 16): the paper's settings against ours on the peat valley (~4 min), and the
 # stage on every ensemble member's DSM that `make ensemble` has written (~1 min per member):
