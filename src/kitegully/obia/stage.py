@@ -172,7 +172,7 @@ def scene_figure(
         ax.axvline(info["otsu"], color="tab:blue", ls="--", lw=1.5, label=f"Otsu T = {info['otsu']:.3f}")
     shown = hist["exg"][hist["count"] > 0.001 * hist["count"].max()]
     ax.set_xlim(shown.min() - 0.05, shown.max() + 0.05)
-    ax.set_xlabel(f"{name}, Gaussian-blurred (-)")
+    ax.set_xlabel("ExG, Gaussian-blurred (-)")
     ax.set_ylabel("cells (count)")
     ax.set_title("ExG histogram" + ("" if info["bimodal"] else f" - not bimodal: {info['reason']}"),
                  fontsize=8 if not info["bimodal"] else None)
