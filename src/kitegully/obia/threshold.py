@@ -98,14 +98,21 @@ class ThresholdResult:
         return out
 
 
-def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Histogram of the finite values: (counts, bin centres)."""
+def _finite_with_range(values: np.ndarray, value_range: tuple[float, float] | None) -> tuple[np.ndarray, tuple[float, float]]:
+    """The finite values as float64 and the histogram range: ``value_range`` or the data's own
+    (min, max), widened by 0.5 either side when all values are equal."""
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
     if value_range is None:
         value_range = (float(v.min()), float(v.max())) if v.size else (0.0, 1.0)
         if value_range[0] == value_range[1]:
             value_range = (value_range[0] - 0.5, value_range[1] + 0.5)
+    return v, value_range
+
+
+def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Histogram of the finite values: (counts, bin centres)."""
+    v, value_range = _finite_with_range(values, value_range)
     counts, edges = np.histogram(v, bins=bins, range=value_range)
     return counts.astype(np.int64), (0.5 * (edges[:-1] + edges[1:]))
 
@@ -283,12 +290,7 @@ def fine_histogram(values: np.ndarray, bins: int, value_range: tuple[float, floa
     grouping every :data:`FINE_BINS_PER_BIN` fine bins gives exactly :func:`histogram`'s
     ``bins`` bins.
     """
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
-    if value_range is None:
-        value_range = (float(v.min()), float(v.max())) if v.size else (0.0, 1.0)
-        if value_range[0] == value_range[1]:
-            value_range = (value_range[0] - 0.5, value_range[1] + 0.5)
+    v, value_range = _finite_with_range(values, value_range)
     counts, edges = np.histogram(v, bins=bins * FINE_BINS_PER_BIN, range=value_range)
     return counts.astype(np.int64), edges
 
