@@ -161,7 +161,8 @@ def main() -> int:
         ov.write_text(yaml.safe_dump(override, sort_keys=False))
         configfiles.append(str(ov))
     env = dict(os.environ, PYTHONPATH=f"{REPO / 'src'}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
-    base = ["--configfile", *configfiles, "--config", f"results_dir={results}"]
+    # a run of hours may be interrupted: resuming reruns the jobs it left incomplete
+    base = ["--configfile", *configfiles, "--config", f"results_dir={results}", "--rerun-incomplete"]
 
     rows = []
     if args.dry_run:
