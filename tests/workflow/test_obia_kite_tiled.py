@@ -14,6 +14,7 @@ import json
 
 import geopandas as gpd
 import numpy as np
+import pytest
 import yaml
 
 from kitegully.io.raster import read_raster, write_raster
@@ -46,6 +47,7 @@ def _run(results, blocks_yaml, tiled):
     return out, proc.stdout + proc.stderr
 
 
+@pytest.mark.slow
 def test_tiled_kite_map_equals_untiled(tmp_path):
     blocks = tmp_path / "blocks.yaml"  # both runs: blocks of 64 cells (4 x 4 on the 240-cell orthophoto)
     blocks.write_text(yaml.safe_dump({"obia": {"kite_scale": {"tile_cells": 64}}}))
