@@ -64,45 +64,214 @@ if "change" in config:
             files["sections"] = CHANGE["sections_file"]
         return files
 
-    rule change_detect:
-        """Co-registration, DoD, sigma, thresholds, budgets, headcuts and figures."""
-        input:
-            unpack(change_inputs),
-        output:
-            dod=result("change", "dod.tif"),
-            sigma_dod=result("change", "sigma_dod.tif"),
-            stable=result("change", "stable_ground.tif"),
-            **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
-            coregistration=report(result("change", "coregistration.csv"), caption=caption("change_coregistration"), category=CHANGE_CAT),
-            sigma=report(result("change", "sigma.csv"), caption=caption("change_sigma"), category=CHANGE_CAT),
-            thresholds=result("change", "thresholds.csv"),
-            variogram=result("change", "variogram.csv"),
-            budget=report(result("change", "budget.csv"), caption=caption("change_budget"), category=CHANGE_CAT),
-            headcuts=result("change", "headcut_retreat.csv"),
-            widening=result("change", "widening.csv"),
-            dod_map=report(result("change", "dod_map.png"), caption=caption("change_dod_map"), category=CHANGE_CAT),
-            budget_bars=report(result("change", "budget_bars.png"), caption=caption("change_budget_bars"), category=CHANGE_CAT),
-            histogram=report(result("change", "dod_histogram.png"), caption=caption("change_histogram"), category=CHANGE_CAT),
-            variogram_png=report(result("change", "variogram.png"), caption=caption("change_variogram"), category=CHANGE_CAT),
-        params:
-            epochs=CHANGE["epochs"],
-            masks=CHANGE["masks"],
-            heads_file=CHANGE["heads_file"],
-            sections_file=CHANGE.get("sections_file"),
-            methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "quality", "widening") if k in CHANGE},
-            figure=CHANGE["figure"],
-            seed=config["seed"],
-            crs=config["site"]["crs"],
-            attribution=config["site"].get("attribution"),
-        log:
-            logfile("change", "detect"),
-        benchmark:
-            benchfile("change", "detect")
-        threads: 1
-        script:
-            "../scripts/change_detect.py"
+    CHANGE_METHOD_KEYS = ("coregistration", "thresholds", "budget", "headcuts", "quality", "widening")
+    CHANGE_PARAMS_METHODS = {k: CHANGE[k] for k in CHANGE_METHOD_KEYS if k in CHANGE}
+    # issue 21: sites with a tiling section run the per-cell work as tile jobs of the common grid
+    # (kitegully.change.tiles): change_plan, change_stable_tile per tile, change_coregister (one
+    # global fit on the untiled sample), change_tile per tile (DoD, sigma, thresholds with the
+    # coherence window's halo, partial budget sums) and change_merge (rasters, budgets from the
+    # sums, variogram, headcuts, widening, figures); the products equal change_detect's.
+    CHANGE_TILED = "tiling" in config
 
-    add_targets(rules.change_detect.output.budget, rules.change_detect.output.dod_map)
+    def change_epoch_inputs(wildcards=None):
+        files = {f"dem{i + 1}": e["dem"] for i, e in enumerate(CHANGE["epochs"])}
+        for i, e in enumerate(CHANGE["epochs"]):
+            for k in ("error_raster", "checkpoints"):
+                if e["accuracy"].get(k):
+                    files[f"{k}{i + 1}"] = e["accuracy"][k]
+            if e.get("correlation"):
+                files[f"correlation{i + 1}"] = e["correlation"]
+        return files
+
+    def change_mask_inputs(wildcards=None):
+        return {f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]}
+
+    def change_feature_inputs(wildcards=None):
+        files = {}
+        if CHANGE["heads_file"]:
+            files["heads"] = CHANGE["heads_file"]
+        if CHANGE.get("sections_file"):
+            files["sections"] = CHANGE["sections_file"]
+        return files
+
+    if CHANGE_TILED:
+        from kitegully.terrain.tiling import TilingParams as _ChangeTilingParams
+
+        _CHANGE_TILING = _ChangeTilingParams.from_config(config)
+        CHANGE_TILE_NAMES = _CHANGE_TILING.names()
+        CHANGE_TILING_PARAMS = {"tile_m": _CHANGE_TILING.tile_m, "width_m": _CHANGE_TILING.width_m,
+                                "height_m": _CHANGE_TILING.height_m}
+
+        wildcard_constraints:
+            tile=r"r\d{3}_c\d{3}",
+
+        rule change_plan:
+            """Whole-grid numbers of the tiled change stage: epoch-1 maximum, each epoch's sigma (issue 21)."""
+            input:
+                unpack(change_epoch_inputs),
+            output:
+                plan=result("change", "tiles/plan.json"),
+            params:
+                epochs=CHANGE["epochs"],
+                crs=config["site"]["crs"],
+            log:
+                logfile("change", "plan"),
+            benchmark:
+                benchfile("change", "plan")
+            script:
+                "../scripts/change_plan.py"
+
+        rule change_stable_tile:
+            """Stable ground, co-registration candidates and dh before co-registration of one tile (issue 21)."""
+            input:
+                unpack(change_epoch_inputs),
+                unpack(change_mask_inputs),
+                plan=result("change", "tiles/plan.json"),
+            output:
+                tile=temp(result("change", "tiles/{tile}.stable.npz")),
+            params:
+                epochs=CHANGE["epochs"],
+                masks=CHANGE["masks"],
+                methods=CHANGE_PARAMS_METHODS,
+                seed=config["seed"],
+                crs=config["site"]["crs"],
+                tiling=CHANGE_TILING_PARAMS,
+            log:
+                logfile("change", "stable_tile_{tile}"),
+            benchmark:
+                benchfile("change", "stable_tile_{tile}")
+            script:
+                "../scripts/change_stable_tile.py"
+
+        rule change_coregister:
+            """The global co-registration fit on the stable cells of all tiles (issue 21)."""
+            input:
+                unpack(change_epoch_inputs),
+                tiles=expand(result("change", "tiles/{tile}.stable.npz"), tile=CHANGE_TILE_NAMES),
+            output:
+                coreg=result("change", "tiles/coregistration.json"),
+            params:
+                epochs=CHANGE["epochs"],
+                methods=CHANGE_PARAMS_METHODS,
+                seed=config["seed"],
+                crs=config["site"]["crs"],
+            log:
+                logfile("change", "coregister"),
+            benchmark:
+                benchfile("change", "coregister")
+            script:
+                "../scripts/change_coregister.py"
+
+        rule change_tile:
+            """DoD, sigma, thresholds and partial budget sums of one tile (issue 21)."""
+            input:
+                unpack(change_epoch_inputs),
+                unpack(change_mask_inputs),
+                plan=result("change", "tiles/plan.json"),
+                coreg=result("change", "tiles/coregistration.json"),
+                stable=result("change", "tiles/{tile}.stable.npz"),
+            output:
+                tile=temp(result("change", "tiles/{tile}.change.npz")),
+            params:
+                epochs=CHANGE["epochs"],
+                masks=CHANGE["masks"],
+                methods=CHANGE_PARAMS_METHODS,
+                seed=config["seed"],
+                crs=config["site"]["crs"],
+                tiling=CHANGE_TILING_PARAMS,
+            log:
+                logfile("change", "tile_{tile}"),
+            benchmark:
+                benchfile("change", "tile_{tile}")
+            script:
+                "../scripts/change_tile.py"
+
+        rule change_merge:
+            """The change products from the tiles: rasters, budgets from the tiles' sums, tables and figures (issue 21)."""
+            input:
+                unpack(change_feature_inputs),
+                dem1=CHANGE["epochs"][0]["dem"],
+                dem2=CHANGE["epochs"][1]["dem"],
+                tiles=expand(result("change", "tiles/{tile}.change.npz"), tile=CHANGE_TILE_NAMES),
+                plan=result("change", "tiles/plan.json"),
+                coreg=result("change", "tiles/coregistration.json"),
+            output:
+                dod=result("change", "dod.tif"),
+                sigma_dod=result("change", "sigma_dod.tif"),
+                stable=result("change", "stable_ground.tif"),
+                **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
+                coregistration=report(result("change", "coregistration.csv"), caption=caption("change_coregistration"), category=CHANGE_CAT),
+                sigma=report(result("change", "sigma.csv"), caption=caption("change_sigma"), category=CHANGE_CAT),
+                thresholds=result("change", "thresholds.csv"),
+                variogram=result("change", "variogram.csv"),
+                budget=report(result("change", "budget.csv"), caption=caption("change_budget"), category=CHANGE_CAT),
+                headcuts=result("change", "headcut_retreat.csv"),
+                widening=result("change", "widening.csv"),
+                dod_map=report(result("change", "dod_map.png"), caption=caption("change_dod_map"), category=CHANGE_CAT),
+                budget_bars=report(result("change", "budget_bars.png"), caption=caption("change_budget_bars"), category=CHANGE_CAT),
+                histogram=report(result("change", "dod_histogram.png"), caption=caption("change_histogram"), category=CHANGE_CAT),
+                variogram_png=report(result("change", "variogram.png"), caption=caption("change_variogram"), category=CHANGE_CAT),
+            params:
+                epochs=CHANGE["epochs"],
+                heads_file=CHANGE["heads_file"],
+                sections_file=CHANGE.get("sections_file"),
+                methods=CHANGE_PARAMS_METHODS,
+                figure=CHANGE["figure"],
+                seed=config["seed"],
+                crs=config["site"]["crs"],
+                attribution=config["site"].get("attribution"),
+            log:
+                logfile("change", "merge"),
+            benchmark:
+                benchfile("change", "merge")
+            script:
+                "../scripts/change_merge.py"
+
+        CHANGE_OUT = rules.change_merge.output
+
+    else:
+
+        rule change_detect:
+            """Co-registration, DoD, sigma, thresholds, budgets, headcuts and figures."""
+            input:
+                unpack(change_inputs),
+            output:
+                dod=result("change", "dod.tif"),
+                sigma_dod=result("change", "sigma_dod.tif"),
+                stable=result("change", "stable_ground.tif"),
+                **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
+                coregistration=report(result("change", "coregistration.csv"), caption=caption("change_coregistration"), category=CHANGE_CAT),
+                sigma=report(result("change", "sigma.csv"), caption=caption("change_sigma"), category=CHANGE_CAT),
+                thresholds=result("change", "thresholds.csv"),
+                variogram=result("change", "variogram.csv"),
+                budget=report(result("change", "budget.csv"), caption=caption("change_budget"), category=CHANGE_CAT),
+                headcuts=result("change", "headcut_retreat.csv"),
+                widening=result("change", "widening.csv"),
+                dod_map=report(result("change", "dod_map.png"), caption=caption("change_dod_map"), category=CHANGE_CAT),
+                budget_bars=report(result("change", "budget_bars.png"), caption=caption("change_budget_bars"), category=CHANGE_CAT),
+                histogram=report(result("change", "dod_histogram.png"), caption=caption("change_histogram"), category=CHANGE_CAT),
+                variogram_png=report(result("change", "variogram.png"), caption=caption("change_variogram"), category=CHANGE_CAT),
+            params:
+                epochs=CHANGE["epochs"],
+                masks=CHANGE["masks"],
+                heads_file=CHANGE["heads_file"],
+                sections_file=CHANGE.get("sections_file"),
+                methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "quality", "widening") if k in CHANGE},
+                figure=CHANGE["figure"],
+                seed=config["seed"],
+                crs=config["site"]["crs"],
+                attribution=config["site"].get("attribution"),
+            log:
+                logfile("change", "detect"),
+            benchmark:
+                benchfile("change", "detect")
+            threads: 1
+            script:
+                "../scripts/change_detect.py"
+
+        CHANGE_OUT = rules.change_detect.output
+
+    add_targets(CHANGE_OUT.budget, CHANGE_OUT.dod_map)
 
     if CHANGE["evaluation"]:
 
@@ -111,11 +280,11 @@ if "change" in config:
         rule change_evaluate:
             """Evaluation only: reads the known change (truth surfaces and heads)."""
             input:
-                dod=rules.change_detect.output.dod,
-                sigma_dod=rules.change_detect.output.sigma_dod,
-                budget=rules.change_detect.output.budget,
-                headcuts=rules.change_detect.output.headcuts,
-                widening=rules.change_detect.output.widening,
+                dod=CHANGE_OUT.dod,
+                sigma_dod=CHANGE_OUT.sigma_dod,
+                budget=CHANGE_OUT.budget,
+                headcuts=CHANGE_OUT.headcuts,
+                widening=CHANGE_OUT.widening,
                 **({"sections": CHANGE["sections_file"]} if CHANGE.get("sections_file") else {}),
                 **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
                 truth1=CHANGE_EVAL["dem1_truth"],

@@ -115,28 +115,106 @@ if "obia" in config:
             "../scripts/obia_summary.py"
 
 
-    rule obia_kite_scale:
-        """Bare-soil map of the site's kite orthophoto (tiled OBIA with a global threshold)."""
-        input:
-            orthophoto=result("dense", "orthophoto.tif"),
-            dsm=result("dense", "dsm.tif"),
-        output:
-            bare_soil=result("obia", "kite/bare_soil.tif"),
-            polygons=result("obia", "kite/bare_soil.gpkg"),
-            info=result("obia", "kite/threshold.json"),
-            figure=report(result("obia", "kite/bare_soil_map.png"), caption=caption("obia_kite_map"), category="Bare soil (OBIA)", subcategory="Kite scale"),
-        params:
-            obia=OBIA_METHOD,
-            tile_cells=OBIA["kite_scale"]["tile_cells"],
-            figure_max_px=OBIA["kite_scale"]["figure_max_px"],
-            attribution=config["site"].get("attribution"),
-        log:
-            logfile("obia", "kite_scale"),
-        benchmark:
-            benchfile("obia", "kite_scale")
-        threads: 1
-        script:
-            "../scripts/obia_kite_scale.py"
+    # issue 21: sites with a tiling section map the kite orthophoto as tile jobs of whole blocks
+    # of obia.kite_scale.tile_cells (kitegully.obia.kite_tiles): obia_kite_histogram per tile,
+    # obia_kite_tile per tile (the global threshold from all tiles' histograms), obia_kite_merge;
+    # the merged map equals the untiled obia_kite_scale cell for cell. Other sites keep one job.
+    OBIA_KITE_TILED = "tiling" in config and OBIA["kite_scale"]["enabled"]
+
+    if OBIA_KITE_TILED:
+        from kitegully.terrain.tiling import TilingParams as _KiteTilingParams
+
+        _KITE_TILING = _KiteTilingParams.from_config(config)
+        KITE_TILE_NAMES = _KITE_TILING.names()
+        KITE_TILING_PARAMS = {"tile_m": _KITE_TILING.tile_m, "width_m": _KITE_TILING.width_m,
+                              "height_m": _KITE_TILING.height_m}
+
+        wildcard_constraints:
+            tile=r"r\d{3}_c\d{3}",
+
+        rule obia_kite_histogram:
+            """Fine histogram of the blurred index over one tile's blocks (issue 21)."""
+            input:
+                orthophoto=result("dense", "orthophoto.tif"),
+                dsm=result("dense", "dsm.tif"),
+            output:
+                hist=temp(result("obia", "kite/tiles/{tile}.hist.npz")),
+            params:
+                obia=OBIA_METHOD,
+                tile_cells=OBIA["kite_scale"]["tile_cells"],
+                tiling=KITE_TILING_PARAMS,
+            log:
+                logfile("obia", "kite_histogram_{tile}"),
+            benchmark:
+                benchfile("obia", "kite_histogram_{tile}")
+            script:
+                "../scripts/obia_kite_histogram.py"
+
+        rule obia_kite_tile:
+            """Segment and classify one tile's blocks with the global threshold (issue 21)."""
+            input:
+                orthophoto=result("dense", "orthophoto.tif"),
+                dsm=result("dense", "dsm.tif"),
+                hists=expand(result("obia", "kite/tiles/{tile}.hist.npz"), tile=KITE_TILE_NAMES),
+            output:
+                tile=temp(result("obia", "kite/tiles/{tile}.classes.npz")),
+            params:
+                obia=OBIA_METHOD,
+                tile_cells=OBIA["kite_scale"]["tile_cells"],
+                tiling=KITE_TILING_PARAMS,
+            log:
+                logfile("obia", "kite_tile_{tile}"),
+            benchmark:
+                benchfile("obia", "kite_tile_{tile}")
+            script:
+                "../scripts/obia_kite_tile.py"
+
+        rule obia_kite_merge:
+            """The tiles' classes into the bare-soil map, its polygons, threshold record and figure (issue 21)."""
+            input:
+                tiles=expand(result("obia", "kite/tiles/{tile}.classes.npz"), tile=KITE_TILE_NAMES),
+                hists=expand(result("obia", "kite/tiles/{tile}.hist.npz"), tile=KITE_TILE_NAMES),
+                orthophoto=result("dense", "orthophoto.tif"),
+            output:
+                bare_soil=result("obia", "kite/bare_soil.tif"),
+                polygons=result("obia", "kite/bare_soil.gpkg"),
+                info=result("obia", "kite/threshold.json"),
+                figure=report(result("obia", "kite/bare_soil_map.png"), caption=caption("obia_kite_map"), category="Bare soil (OBIA)", subcategory="Kite scale"),
+            params:
+                obia=OBIA_METHOD,
+                figure_max_px=OBIA["kite_scale"]["figure_max_px"],
+                attribution=config["site"].get("attribution"),
+            log:
+                logfile("obia", "kite_merge"),
+            benchmark:
+                benchfile("obia", "kite_merge")
+            script:
+                "../scripts/obia_kite_merge.py"
+
+    if not OBIA_KITE_TILED:
+
+        rule obia_kite_scale:
+            """Bare-soil map of the site's kite orthophoto (tiled OBIA with a global threshold)."""
+            input:
+                orthophoto=result("dense", "orthophoto.tif"),
+                dsm=result("dense", "dsm.tif"),
+            output:
+                bare_soil=result("obia", "kite/bare_soil.tif"),
+                polygons=result("obia", "kite/bare_soil.gpkg"),
+                info=result("obia", "kite/threshold.json"),
+                figure=report(result("obia", "kite/bare_soil_map.png"), caption=caption("obia_kite_map"), category="Bare soil (OBIA)", subcategory="Kite scale"),
+            params:
+                obia=OBIA_METHOD,
+                tile_cells=OBIA["kite_scale"]["tile_cells"],
+                figure_max_px=OBIA["kite_scale"]["figure_max_px"],
+                attribution=config["site"].get("attribution"),
+            log:
+                logfile("obia", "kite_scale"),
+            benchmark:
+                benchfile("obia", "kite_scale")
+            threads: 1
+            script:
+                "../scripts/obia_kite_scale.py"
 
 
     rule obia_kite_accuracy:

@@ -48,11 +48,17 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class MaskGroup:
-    """One budget row's cells: ``name`` (``mask`` or ``mask:value``) and a boolean map."""
+    """One budget row's cells: ``name`` (``mask`` or ``mask:value``) and a boolean map.
+
+    ``order`` places the row among its mask's rows (the ``by`` value's rank of a vector
+    mask, the class value of a raster mask; -inf for the union): tiles of a site (issue 21)
+    merge their rows in the order of the untiled table.
+    """
 
     name: str
     mask: np.ndarray
     source: str
+    order: float = float("-inf")
 
 
 def _vector_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
@@ -66,10 +72,10 @@ def _vector_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
     if by:
         if by not in gdf.columns:
             raise InputError(f"{spec['file']}: mask '{name}' has no column '{by}' (columns: {', '.join(map(str, gdf.columns))})")
-        for value, part in gdf.groupby(by, sort=True):
+        for i, (value, part) in enumerate(gdf.groupby(by, sort=True)):
             m = features.rasterize(((g, 1) for g in part.geometry), out_shape=shape, transform=grid.transform,
                                    fill=0, dtype="uint8").astype(bool)
-            out.append(MaskGroup(f"{name}:{value}", m, str(spec["file"])))
+            out.append(MaskGroup(f"{name}:{value}", m, str(spec["file"]), float(i)))
     return out
 
 
@@ -97,7 +103,7 @@ def _raster_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
     for v in np.unique(vals[ok]):
         if wanted is not None and int(v) not in wanted and names.get(int(v)) not in wanted:
             continue
-        out.append(MaskGroup(f"{spec['name']}:{names.get(int(v), int(v))}", ok & (vals == v), str(spec["file"])))
+        out.append(MaskGroup(f"{spec['name']}:{names.get(int(v), int(v))}", ok & (vals == v), str(spec["file"]), float(v)))
     union = np.zeros(vals.shape, bool)
     for g in out:
         union |= g.mask
@@ -281,14 +287,30 @@ def budget_row(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray, cell: fl
     ``coreg_sd_m``: SD of the co-registration's vertical offset, an error shared by every
     cell (adds A·σ_offset in quadrature to the correlated SD).
     """
-    a = cell * cell
+    return budget_row_from_sums(budget_sums(dod, sigma, counted), cell, vg, coreg_sd_m)
+
+
+def budget_sums(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray) -> tuple[int, float, float, float]:
+    """The sums a budget row needs over the cells ``counted`` with a finite DoD and σ.
+
+    Returns ``(n, Σ max(−DoD, 0), Σ max(DoD, 0), Σ σ²)`` (float64 sums, m and m²); sums of
+    disjoint parts (tiles) add up to the whole's (up to the order of floating-point sums).
+    """
     c = counted & np.isfinite(dod) & np.isfinite(sigma)
     d, s = dod[c].astype(np.float64), sigma[c].astype(np.float64)
-    ero = float(np.sum(np.clip(-d, 0, None)) * a)
-    dep = float(np.sum(np.clip(d, 0, None)) * a)
-    area = float(c.sum() * a)
-    sd_ind = float(a * np.sqrt(np.sum(s**2)))
-    sd_cor = float(area * np.sqrt(np.mean(s**2) * correlation_factor(area, cell, vg))) if (vg is not None and area > 0) else float("nan")
+    return int(c.sum()), float(np.sum(np.clip(-d, 0, None))), float(np.sum(np.clip(d, 0, None))), float(np.sum(s**2))
+
+
+def budget_row_from_sums(sums: tuple[int, float, float, float], cell: float, vg: Variogram | None,
+                         coreg_sd_m: float = 0.0) -> dict[str, float]:
+    """:func:`budget_row` from :func:`budget_sums` (of the whole area, e.g. summed over tiles)."""
+    n, ero_sum, dep_sum, s2_sum = sums
+    a = cell * cell
+    ero = float(ero_sum * a)
+    dep = float(dep_sum * a)
+    area = float(n * a)
+    sd_ind = float(a * np.sqrt(s2_sum))
+    sd_cor = float(area * np.sqrt(s2_sum / n * correlation_factor(area, cell, vg))) if (vg is not None and area > 0) else float("nan")
     sd_reg = float(area * coreg_sd_m)
     base = sd_cor if np.isfinite(sd_cor) else sd_ind
     return dict(area_m2=area, erosion_m3=ero, deposition_m3=dep, net_m3=dep - ero,

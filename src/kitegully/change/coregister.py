@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import asdict, dataclass, field
+from typing import Callable
 
 import numpy as np
 import pandas as pd
@@ -84,20 +85,27 @@ class Coregistration:
         return asdict(self)
 
 
-def above_ground(z: np.ndarray, cell: float, window_m: float, height_m: float) -> np.ndarray:
+def above_ground(z: np.ndarray, cell: float, window_m: float, height_m: float, fill: float | None = None) -> np.ndarray:
     """Cells standing more than ``height_m`` above the grey opening (a ``window_m`` square) of the box-smoothed surface.
 
     Shrubs, trees and buildings: not stable ground (vegetation grows and moves, dense
-    matching smooths it), dilated by half a window to catch their edges. O(cells · window).
+    matching smooths it), dilated by half a window to catch their edges. Nodata cells take ``fill`` (default the
+    highest elevation of ``z``; a tile of a larger grid passes the whole grid's). O(cells · window).
     """
     k = max(3, int(round(window_m / cell)) | 1)
-    zf = np.where(np.isfinite(z), z, np.nanmax(z))
+    zf = np.where(np.isfinite(z), z, np.nanmax(z) if fill is None else fill)
     # a box mean over a third of the window first: the opening is a lower envelope, and of a
     # noisy surface it sits ~3 σ low (white noise of 0.05 m alone then "stands" 0.15 m high)
     zf = ndimage.uniform_filter(zf, max(3, (k // 3) | 1), mode="nearest")
     h = zf - ndimage.grey_opening(zf, size=(k, k))
     obj = np.isfinite(h) & (h > height_m)
     return ndimage.binary_dilation(obj, structure=np.ones((k // 2 | 1, k // 2 | 1), bool))
+
+
+def above_ground_halo(cell: float, window_m: float) -> int:
+    """Cells beyond a window that :func:`above_ground` reads for the window's cells (box mean, opening, dilation)."""
+    k = max(3, int(round(window_m / cell)) | 1)
+    return max(3, (k // 3) | 1) // 2 + 2 * (k // 2) + (k // 2 | 1) // 2
 
 
 def _sample(idx: np.ndarray, n: int) -> np.ndarray:
@@ -152,13 +160,28 @@ def coregister(z1: np.ndarray, dem2: Raster, grid: GridSpec, stable: np.ndarray,
         info.after = info.before
         return z2, info
     rr, cc = np.unravel_index(idx, z1.shape)
-    px, py = xs[cc] - xc, ys[rr] - yc
-    gxs, gys = gx.ravel()[idx], gy.ravel()[idx]
-    flat = tan_a.ravel()[idx] < np.tan(np.radians(params.coreg_min_slope_deg))
+    fit_shift_plane(info, z1.ravel()[idx], gx.ravel()[idx], gy.ravel()[idx], tan_a.ravel()[idx], xs[cc] - xc, ys[rr] - yc,
+                    lambda dx, dy: resample(dem2, grid, dx, dy).ravel()[idx], params)
+    z2 = resample(dem2, grid, info.dx_m, info.dy_m) - info.plane(grid)
+    info.after = residual_stats(np.where(stable, z2 - z1, np.nan))
+    log.info("stable-ground dh NMAD %.3f -> %.3f m, median %.3f -> %.3f m", info.before["nmad_m"],
+             info.after["nmad_m"], info.before["median_m"], info.after["median_m"])
+    return z2.astype(np.float32), info
+
+
+def fit_shift_plane(info: Coregistration, z1s: np.ndarray, gxs: np.ndarray, gys: np.ndarray, tans: np.ndarray,
+                    px: np.ndarray, py: np.ndarray, z2_at: Callable[[float, float], np.ndarray],
+                    params: ChangeParams) -> Coregistration:
+    """The iterated Nuth & Kääb shift + plane fit on sampled stable cells; updates and returns ``info``.
+
+    ``z1s`` (float32), ``gxs, gys, tans`` (slope terms, float64) and ``px, py`` (offsets from
+    the grid centre, m) are the sampled cells' values; ``z2_at(dx, dy)`` gives DEM₂ resampled
+    at those cells shifted by (dx, dy) m (float32). O(iterations × samples).
+    """
+    flat = tans < np.tan(np.radians(params.coreg_min_slope_deg))
     for it in range(1, params.coreg_max_iterations + 1):
         info.iterations = it
-        z2 = resample(dem2, grid, info.dx_m, info.dy_m)
-        dh = z2.ravel()[idx] - z1.ravel()[idx] - (info.dz_m + info.tilt_x * px + info.tilt_y * py)
+        dh = z2_at(info.dx_m, info.dy_m) - z1s - (info.dz_m + info.tilt_x * px + info.tilt_y * py)
         ok = np.isfinite(dh)
         med, s = np.median(dh[ok]), nmad(dh[ok])
         ok &= np.abs(dh - med) <= params.coreg_outlier_nmad * max(s, 1e-6)
@@ -179,8 +202,4 @@ def coregister(z1: np.ndarray, dem2: Raster, grid: GridSpec, stable: np.ndarray,
         if np.hypot(ddx, ddy) < params.coreg_tolerance_m:
             info.converged = True
             break
-    z2 = resample(dem2, grid, info.dx_m, info.dy_m) - info.plane(grid)
-    info.after = residual_stats(np.where(stable, z2 - z1, np.nan))
-    log.info("stable-ground dh NMAD %.3f -> %.3f m, median %.3f -> %.3f m", info.before["nmad_m"],
-             info.after["nmad_m"], info.before["median_m"], info.after["median_m"])
-    return z2.astype(np.float32), info
+    return info

@@ -103,6 +103,20 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     for m in THRESHOLD_METHODS:
         Raster(unc.thresholded(dod, detected[m]), grid).write(out[f"thresholded_{m}"], tags={"units": "m", "threshold": m})
 
+    vg, coreg_sd = uncertainty_model(dod, sigma, stable, grid, params, out, attribution)
+    coreg.offset_sd_m = coreg_sd
+    budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
+    return write_products(budget, coreg, [i1, i2], sigma, n_void, grid, z1, z2, dod, stable, heads_path, sections_path,
+                          params, out, [g.name for g in groups if ":" not in g.name], figure, attribution, t0)
+
+
+def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, grid, params: ChangeParams,
+                      out: Mapping[str, str], attribution: str | None = None) -> tuple[Any, float]:
+    """Variogram of dh/σ on stable ground (table and figure written) and the co-registration offset SD.
+
+    Returns ``(variogram or None, offset SD m)``. Needs the whole site's arrays (the stable
+    cells' median and NMAD, random pairs over the site). O(cells · log 64 + samples²).
+    """
     zs = dod / sigma
     ok = stable & np.isfinite(zs)
     med, sd = float(np.median(zs[ok])), nmad(zs[ok])
@@ -125,11 +139,21 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         rho = bg.mean_correlation(rr, cc, grid.cell, vg, params.variogram_samples, params.seed)
         coreg_sd = float(np.nanmean(sigma[ok]) * np.sqrt(rho))
         log.info("co-registration offset SD %.4f m (mean correlation of stable pairs %.4f)", coreg_sd, rho)
-    coreg.offset_sd_m = coreg_sd
-    budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
+    return vg, coreg_sd
+
+
+def write_products(budget: pd.DataFrame, coreg, sigma_rows: list, sigma: np.ndarray, n_void: int, grid, z1: np.ndarray,
+                   z2: np.ndarray, dod: np.ndarray, stable: np.ndarray, heads_path: str | None, sections_path: str | None,
+                   params: ChangeParams, out: Mapping[str, str], top_masks: list[str], figure: Mapping[str, Any] | None,
+                   attribution: str | None, t0: float) -> dict[str, Any]:
+    """The stage's tables (budget, co-registration, σ, thresholds, headcuts, widening) and figures; the summary.
+
+    ``budget`` is :func:`kitegully.change.budget.compute_budgets`'s table; ``top_masks`` the
+    budget masks without their ``:value`` rows (the bar figure's groups).
+    """
     write_table(budget, out["budget"])
     write_table(coreg.table(), out["coregistration"])
-    sig_tab = unc.sigma_table([i1, i2], sigma)
+    sig_tab = unc.sigma_table(sigma_rows, sigma)
     sig_tab["void_area_m2"] = np.where(sig_tab["epoch"] == "DoD", n_void * grid.cell**2, np.nan)  # low-NCC cells left out
     write_table(sig_tab, out["sigma"])
     write_table(unc.threshold_table(params, sigma), out["thresholds"])
@@ -148,8 +172,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
 
     fig = {"limit_m": 1.0, "max_px": 1500, **(figure or {})}
     plots.plot_dod_map(dod, grid, out["dod_map"], fig["limit_m"], fig["max_px"], attribution=attribution)
-    top = [g.name for g in groups if ":" not in g.name]
-    plots.plot_budget_bars(budget, out["budget_bars"], masks=top, attribution=attribution)
+    plots.plot_budget_bars(budget, out["budget_bars"], masks=top_masks, attribution=attribution)
     lod95 = unc.z_of_confidence(params.confidence) * float(np.nanmedian(sigma))
     plots.plot_histogram(dod, stable, out["histogram"], fig["limit_m"], lod95, attribution=attribution)
     site = budget[(budget["mask"] == "site") & (budget["method"] == "raw")].iloc[0]

@@ -16,8 +16,9 @@ Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T ce
 from __future__ import annotations
 
 import logging
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
+from typing import Any, Iterator
 
 import numpy as np
 import rasterio
@@ -106,6 +107,106 @@ def _check_nir(ortho, nir, ortho_path, nir_path) -> None:
                          f"RGB orthophoto's ({ortho.crs}, {ortho.shape}, {tuple(ortho.transform)[:6]}, {ortho_path})")
 
 
+@contextmanager
+def open_kite_inputs(ortho_path: str | Path, dsm_path: str | Path, nir_path: str | Path | None, params: ObiaParams,
+                     tile_cells: int) -> Iterator[tuple[Any, Any, Any, Any, int]]:
+    """Open and check the kite map's inputs: yields ``(ortho, dsm, nir or None, grid, halo)``.
+
+    ``halo`` is the cells each block reads beyond its core (index blur plus slope window).
+
+    Raises
+    ------
+    InputError
+        Unreadable files, grids that do not fit, ``index: ndvi`` without ``nir_path``.
+    """
+    if params.index == "ndvi" and nir_path is None:
+        raise InputError(f"{ortho_path}: obia.classification.index is ndvi but the survey has no NIR orthophoto")
+    try:
+        ortho = rasterio.open(ortho_path)
+        dsm = rasterio.open(dsm_path)
+        nir = None if nir_path is None else rasterio.open(nir_path)
+    except rasterio.errors.RasterioIOError as exc:
+        raise InputError(f"{ortho_path} / {dsm_path} / {nir_path}: cannot open ({exc})") from None
+    with ExitStack() as stack:
+        for ds in (ortho, dsm, nir):
+            if ds is not None:
+                stack.enter_context(ds)
+        if ortho.count < 3:
+            raise InputError(f"{ortho_path}: orthophoto needs at least 3 bands (R, G, B), has {ortho.count}")
+        _check_grids(ortho, dsm, ortho_path, dsm_path)
+        if nir is not None:
+            _check_nir(ortho, nir, ortho_path, nir_path)
+        if tile_cells < 4 * params.seed_bandwidth_cells:
+            raise ValueError(f"tile_cells {tile_cells} must be at least 4 seed band widths ({4 * params.seed_bandwidth_cells} cells)")
+        yield ortho, dsm, nir, grid_of(ortho, ortho_path), params.blur_radius_cells + params.slope_window_cells
+
+
+def histogram_edges(params: ObiaParams) -> np.ndarray:
+    """Edges of the global fine histogram: ``FINE_BINS_PER_BIN`` x ``hist_bins`` bins over the index range."""
+    return np.linspace(*params.index_range, params.hist_bins * FINE_BINS_PER_BIN + 1)
+
+
+def global_threshold(counts: np.ndarray, params: ObiaParams) -> ThresholdResult:
+    """The valley threshold of the whole site's fine histogram ``counts`` (:func:`find_bare_threshold`)."""
+    thr = find_bare_threshold(counts, histogram_edges(params), params.hist_bins, params.min_class_fraction,
+                              params.max_valley_ratio)
+    log.info("global %s threshold: valley %s (valleys %s), Otsu %s (%s)", params.index, thr.valley, thr.valleys,
+             thr.otsu, thr.reason)
+    return thr
+
+
+def unimodal_code(params: ObiaParams) -> int:
+    """Class of every cell when the histogram is not bimodal (0 vegetated, 1 bare)."""
+    return 0 if params.unimodal_class == "grass" else 1
+
+
+def block_histogram(ortho, dsm, nir, read, core, params: ObiaParams, src: str, edges: np.ndarray) -> np.ndarray:
+    """Fine-histogram counts of the blurred index over one block's core (``read`` = core + halo).
+
+    Open datasets ``ortho``, ``dsm`` (and ``nir`` or None); cells whose blue band is the
+    brightest are left out (:func:`kitegully.obia.indices.blue_dominant`). The counts of all
+    blocks sum to the global histogram whatever the order (integers). O(block cells).
+    """
+    rgb, dem, valid = _read_tile(ortho, dsm, read)
+    nir_band = _read_nir(nir, read, valid)
+    _, blur, _ = _tile_index(rgb, nir_band, valid, params, src)
+    r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
+    inner = blur[r0:r0 + core.height, c0:c0 + core.width]
+    land = ~blue_dominant(*(b[r0:r0 + core.height, c0:c0 + core.width] for b in rgb))
+    return np.histogram(inner[np.isfinite(inner) & land], bins=edges)[0]
+
+
+def classify_block(ortho, dsm, nir, read, core, params: ObiaParams, src: str, cell: float, valley: float | None,
+                   unimodal: int) -> tuple[np.ndarray, int]:
+    """Segment and classify one block (``read`` = core + halo); the core's classes and its water cells.
+
+    Segments do not cross the block's read window [I]; the result depends only on the block
+    and the global threshold ``valley``, so any grouping of blocks into jobs gives the same map.
+    O(block cells · log).
+    """
+    rgb, dem, valid = _read_tile(ortho, dsm, read)
+    nir_band = _read_nir(nir, read, valid)
+    # water is masked per segment here (segment mean of the blurred index below
+    # the water value), so that single cells of land whose NDVI dips below it
+    # (texture, NIR/RGB co-registration) stay land; the histogram masks cells
+    raw, blur = blurred_index(*rgb, valid, params, nir_band, src)
+    out = np.full(valid.shape, NODATA, dtype=np.uint8)
+    wet = np.zeros(valid.shape, dtype=bool)
+    if valid.any():
+        seg = segment(rgb[0], rgb[1], rgb[2], dem, cell, valid, params, nir=nir_band)
+        segments, nseg = seg.segments, seg.n_segments
+        feature = blur if params.segment_feature == "blurred" else raw
+        means = segment_means(feature, segments, nseg)
+        out = classify_segments(means, segments, valley, unimodal)
+        if params.water_ndvi_below is not None:
+            wet = (segment_means(blur, segments, nseg) < params.water_ndvi_below)[segments] & (segments > 0)
+            out[wet] = NODATA
+        out = remove_small_eroded(out, cell, params.min_area_m2)
+        out[~valid] = NODATA
+    r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
+    return out[r0:r0 + core.height, c0:c0 + core.width], int(wet[r0:r0 + core.height, c0:c0 + core.width].sum())
+
+
 def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | Path, params: ObiaParams, tile_cells: int,
                   nir_path: str | Path | None = None) -> ThresholdResult:
     """Classify a site orthophoto into grass/vegetated (0) and bare (1); 255 = no data.
@@ -133,71 +234,24 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
     InputError
         Unreadable files, grids that do not fit, ``index: ndvi`` without ``nir_path``.
     """
-    if params.index == "ndvi" and nir_path is None:
-        raise InputError(f"{ortho_path}: obia.classification.index is ndvi but the survey has no NIR orthophoto")
-    try:
-        ortho = rasterio.open(ortho_path)
-        dsm = rasterio.open(dsm_path)
-        nir = None if nir_path is None else rasterio.open(nir_path)
-    except rasterio.errors.RasterioIOError as exc:
-        raise InputError(f"{ortho_path} / {dsm_path} / {nir_path}: cannot open ({exc})") from None
-    with ExitStack() as stack:
-        for ds in (ortho, dsm, nir):
-            if ds is not None:
-                stack.enter_context(ds)
-        if ortho.count < 3:
-            raise InputError(f"{ortho_path}: orthophoto needs at least 3 bands (R, G, B), has {ortho.count}")
-        _check_grids(ortho, dsm, ortho_path, dsm_path)
-        if nir is not None:
-            _check_nir(ortho, nir, ortho_path, nir_path)
+    with open_kite_inputs(ortho_path, dsm_path, nir_path, params, tile_cells) as (ortho, dsm, nir, grid, halo):
         src = str(ortho_path)
-        if tile_cells < 4 * params.seed_bandwidth_cells:
-            raise ValueError(f"tile_cells {tile_cells} must be at least 4 seed band widths ({4 * params.seed_bandwidth_cells} cells)")
-        grid = grid_of(ortho, ortho_path)
-        halo = params.blur_radius_cells + params.slope_window_cells
         counts = np.zeros(params.hist_bins * FINE_BINS_PER_BIN, dtype=np.int64)
-        edges = np.linspace(*params.index_range, params.hist_bins * FINE_BINS_PER_BIN + 1)
+        edges = histogram_edges(params)
         tiles = list(iter_tiles(grid, tile_cells, halo))
         water_cells = 0
         for i, (read, core) in enumerate(tiles):
-            rgb, dem, valid = _read_tile(ortho, dsm, read)
-            nir_band = _read_nir(nir, read, valid)
-            _, blur, _ = _tile_index(rgb, nir_band, valid, params, src)
-            r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
-            inner = blur[r0:r0 + core.height, c0:c0 + core.width]
-            land = ~blue_dominant(*(b[r0:r0 + core.height, c0:c0 + core.width] for b in rgb))
-            counts += np.histogram(inner[np.isfinite(inner) & land], bins=edges)[0]
+            counts += block_histogram(ortho, dsm, nir, read, core, params, src, edges)
             log.info("histogram: tile %d/%d", i + 1, len(tiles))
-        thr = find_bare_threshold(counts, edges, params.hist_bins, params.min_class_fraction, params.max_valley_ratio)
-        log.info("global %s threshold: valley %s (valleys %s), Otsu %s (%s)", params.index, thr.valley, thr.valleys,
-                 thr.otsu, thr.reason)
-        unimodal = 0 if params.unimodal_class == "grass" else 1
+        thr = global_threshold(counts, params)
+        unimodal = unimodal_code(params)
         profile = _profile(grid, 1, "uint8", NODATA, cog=True)
         Path(out_path).parent.mkdir(parents=True, exist_ok=True)
         with rasterio.open(out_path, "w", **profile) as dst:
             for i, (read, core) in enumerate(tiles):
-                rgb, dem, valid = _read_tile(ortho, dsm, read)
-                nir_band = _read_nir(nir, read, valid)
-                # water is masked per segment here (segment mean of the blurred index below
-                # the water value), so that single cells of land whose NDVI dips below it
-                # (texture, NIR/RGB co-registration) stay land; the histogram above masks cells
-                raw, blur = blurred_index(*rgb, valid, params, nir_band, src)
-                out = np.full(valid.shape, NODATA, dtype=np.uint8)
-                wet = np.zeros(valid.shape, dtype=bool)
-                if valid.any():
-                    seg = segment(rgb[0], rgb[1], rgb[2], dem, grid.cell, valid, params, nir=nir_band)
-                    segments, nseg = seg.segments, seg.n_segments
-                    feature = blur if params.segment_feature == "blurred" else raw
-                    means = segment_means(feature, segments, nseg)
-                    out = classify_segments(means, segments, thr.valley, unimodal)
-                    if params.water_ndvi_below is not None:
-                        wet = (segment_means(blur, segments, nseg) < params.water_ndvi_below)[segments] & (segments > 0)
-                        out[wet] = NODATA
-                    out = remove_small_eroded(out, grid.cell, params.min_area_m2)
-                    out[~valid] = NODATA
-                r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
-                water_cells += int(wet[r0:r0 + core.height, c0:c0 + core.width].sum())
-                dst.write(out[r0:r0 + core.height, c0:c0 + core.width], 1, window=core)
+                out, wet = classify_block(ortho, dsm, nir, read, core, params, src, grid.cell, thr.valley, unimodal)
+                water_cells += wet
+                dst.write(out, 1, window=core)
                 log.info("classification: tile %d/%d", i + 1, len(tiles))
             dst.descriptions = ("bare_soil (0 vegetated, 1 bare, 255 no data)",)
     if params.water_ndvi_below is not None:
