@@ -21,7 +21,7 @@ from kitegully.polygons.dem_prep import prepare_dem
 from kitegully.polygons.morphometry import BRANCHES, REFERENCES, measure_sections
 from kitegully.polygons.skeleton import skeleton_paths
 from kitegully.polygons.thalweg import thalweg_lines, topographic_convergence_index
-from kitegully.polygons.transects import clip_transects, make_transects, transect_stations
+from kitegully.polygons.transects import clip_transects, make_transects, station_floor, transect_stations
 
 log = logging.getLogger(__name__)
 
@@ -303,8 +303,9 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
 
     t = time.perf_counter()
     tr_all, line_id = [], []
+    floor = station_floor(dem) if p.transect_max_drop_m is not None else None
     for i, ln in enumerate(th_lines):
-        st = transect_stations(ln, p.transect_spacing_m, dem, grid, p.transect_max_drop_m, p.transect_min_spacing_m)
+        st = transect_stations(ln, p.transect_spacing_m, dem, grid, p.transect_max_drop_m, p.transect_min_spacing_m, floor)
         tr = make_transects(ln, st, p.transect_half_length_m, p.transect_tangent_half_window_m)
         tr_all += tr
         line_id += [i] * len(tr)
