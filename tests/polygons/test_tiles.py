@@ -10,7 +10,7 @@ import shapely
 from kitegully.config import load_yaml
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.stage import PolygonParams, measure_polygons
-from kitegully.polygons.tiles import margin_cells, measure_tile, merge_morphometry, merged_summary, owners, polygons_window
+from kitegully.polygons.tiles import WindowGrid, margin_cells, measure_tile, merge_morphometry, merged_summary, owners, polygons_window
 from kitegully.terrain.tiling import split_grid
 
 from .polygon_synthetic import CRS
@@ -18,7 +18,7 @@ from .polygon_synthetic import CRS
 
 def two_gullies() -> tuple[np.ndarray, GridSpec]:
     """A plane falling south with a straight U gully and a slanting V gully, 120 x 100 m at 0.5 m."""
-    grid = GridSpec(500000.0, 4000000.0, 0.5, 200, 240, CRS)
+    grid = GridSpec(578600.0, 4081600.0, 0.5, 200, 240, CRS)  # the default site's origin
     xs, ys = grid.cell_centres()
     x, y = np.meshgrid(xs - xs[0], ys - ys[-1])
     z = 100.0 + 0.03 * y
@@ -48,6 +48,7 @@ def test_every_polygon_has_one_owner_and_polygons_cross_the_borders(site_run):
     assert any(g.intersects(shapely.LineString([(xb, yb - 500), (xb, yb + 500)])) for g in polys.geometry)
     assert any(g.intersects(shapely.LineString([(xb - 500, yb), (xb + 500, yb)])) for g in polys.geometry)
     win = polygons_window(polys.iloc[:1], res.grid, margin_cells(p, res.grid.cell))
+    assert win[0] % 2 == 0 and win[1] % 2 == 0  # numpy rounds halves to even: odd offsets would move rim samples
     assert win[0] >= 0 and win[0] + win[2] <= res.grid.height and margin_cells(p, 0.5) == 20  # (4.5 + 4.0 + 0.5) / 0.5 + 2
 
 
@@ -73,3 +74,17 @@ def test_tile_jobs_merge_to_the_whole_grid_morphometry(site_run):
     summary = merged_summary(part.summary, axes, sections, morph, p, 1.0, len(tiles))
     untimed = lambda s: s[~s["quantity"].str.startswith("time ")].reset_index(drop=True)  # noqa: E731
     pd.testing.assert_frame_equal(untimed(summary), untimed(res.summary))
+
+
+def test_window_grid_maps_points_to_cells_exactly_as_the_whole_grid():
+    grid = GridSpec(578600.0, 4081600.0, 0.5, 1200, 800, CRS)
+    rng = np.random.default_rng(0)
+    x = 578600.0 + np.round(rng.uniform(0, 600, 10000) * 8) / 8  # on the rim search's quarter-cell lattice too
+    y = 4081600.0 - np.round(rng.uniform(0, 400, 10000) * 8) / 8
+    r, c = grid.rowcol(x, y)
+    for r0, c0 in ((204, 70), (339, 317)):
+        wr, wc = WindowGrid.of(grid, r0, c0, 100, 100).rowcol(x, y)
+        assert np.array_equal(wr + r0, r) and np.array_equal(wc + c0, c)
+        assert np.array_equal(np.round(wr) + r0, np.round(r)) == (r0 % 2 == 0 and c0 % 2 == 0)
+        xs, ys = WindowGrid.of(grid, r0, c0, 100, 100).xy(np.arange(5), np.arange(5))
+        assert np.array_equal(xs, grid.xy(np.arange(5) + r0, np.arange(5) + c0)[0])

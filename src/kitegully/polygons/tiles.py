@@ -10,10 +10,15 @@ A tile job reads only a window: the union of its polygons' bounding boxes plus
 :func:`margin_cells` (a section reaches ``rim_search_m`` beyond the polygon for its rim and
 ``ground_segment_m`` beyond that for its ground profile, plus the bilinear drape's cell).
 Every polygon is measured on its own (:func:`kitegully.polygons.morphometry.measure_sections`
-uses only its label, its outline and the rasters along its sections), so the merged
-products equal the whole-grid morphometry: the same polygons, axes and sections, values
-equal up to the rounding of map-to-cell coordinates on the window's origin (< 1e-9 m; bit
-for bit where the origin and cell are binary fractions, as 0.5 m cells on whole metres).
+uses only its label, its outline and the rasters along its sections), and the window maps
+map coordinates to cells exactly as the whole grid does (:class:`WindowGrid`: the whole
+grid's fractional row and column minus a whole number, an exact float subtraction), so the
+merged products equal the whole-grid morphometry bit for bit. (A grid with its origin
+moved to the window's corner is not enough: its rounding differs in the last bit; and the
+window starts on an even row and column, because the rim search rounds sample positions
+to cells, halves to even, so a sample exactly between two cells would go to the other
+cell in a window at an odd offset, and its section's depth change by centimetres: found
+on the default site, 8 of 51 polygons.)
 
 Measured at the full Kamech size (12.7 M cells at 0.5 m, 577 polygons at t = 0.5 m;
 ``benchmarks/polygons_scale.py``): step 6 is 45 s of the stage's ~100 s, the step that
@@ -24,6 +29,7 @@ job (see README "Stage 6b").
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from math import ceil
 from pathlib import Path
 from typing import Callable, Iterable
@@ -40,6 +46,37 @@ log = logging.getLogger(__name__)
 
 #: The rasters a tile job reads (written by ``polygons_map`` on tiled sites).
 WINDOW_RASTERS = ("labels", "dem", "level", "rims")
+
+
+@dataclass(frozen=True)
+class WindowGrid(GridSpec):
+    """A window of a grid (``GridSpec`` of the window) whose cell arithmetic is the parent's.
+
+    :meth:`rowcol` is the parent grid's fractional (row, col) minus the window's whole
+    offset, and :meth:`xy` the parent's at the offset cell: bit for bit the numbers the
+    whole grid gives, shifted.
+    """
+
+    parent_x0: float = 0.0
+    parent_y0: float = 0.0
+    row0: int = 0
+    col0: int = 0
+
+    @classmethod
+    def of(cls, grid: GridSpec, r0: int, c0: int, h: int, w: int) -> "WindowGrid":
+        """The window ``rows r0:r0+h, cols c0:c0+w`` of ``grid``."""
+        g = grid.window(r0, c0, h, w)
+        return cls(g.x0, g.y0, g.cell, g.width, g.height, g.crs, grid.x0, grid.y0, int(r0), int(c0))
+
+    def rowcol(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        col = (np.asarray(x) - self.parent_x0) / self.cell - 0.5
+        row = (self.parent_y0 - np.asarray(y)) / self.cell - 0.5
+        return row - self.row0, col - self.col0
+
+    def xy(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x = self.parent_x0 + (np.asarray(col) + self.col0 + 0.5) * self.cell
+        y = self.parent_y0 - (np.asarray(row) + self.row0 + 0.5) * self.cell
+        return x, y
 
 
 def owners(polygons: gpd.GeoDataFrame, grid: GridSpec, tiles: Iterable[Tile]) -> np.ndarray:
@@ -84,7 +121,10 @@ def margin_cells(params: PolygonParams, cell: float) -> int:
 
 
 def polygons_window(polygons: gpd.GeoDataFrame, grid: GridSpec, margin: int) -> tuple[int, int, int, int] | None:
-    """(row0, col0, rows, cols) of the union of the polygons' bounds plus ``margin`` cells, clipped to the grid."""
+    """(row0, col0, rows, cols) of the union of the polygons' bounds plus ``margin`` cells, clipped to the grid.
+
+    ``row0`` and ``col0`` are even (see the code).
+    """
     if not len(polygons):
         return None
     x0, y0, x1, y1 = polygons.total_bounds
@@ -92,7 +132,9 @@ def polygons_window(polygons: gpd.GeoDataFrame, grid: GridSpec, margin: int) -> 
     c1 = int(np.ceil((x1 - grid.x0) / grid.cell)) + margin
     r0 = int(np.floor((grid.y0 - y1) / grid.cell)) - margin
     r1 = int(np.ceil((grid.y0 - y0) / grid.cell)) + margin
-    r0, c0 = max(r0, 0), max(c0, 0)
+    # even offsets: numpy rounds halves to even, so a sample exactly between two cells (the rim
+    # search rounds positions to cells) goes to the same cell in the window as in the grid
+    r0, c0 = max(r0 - r0 % 2, 0), max(c0 - c0 % 2, 0)
     r1, c1 = min(r1, grid.height), min(c1, grid.width)
     return r0, c0, r1 - r0, c1 - c0
 
@@ -148,7 +190,7 @@ def measure_tile(polygons: gpd.GeoDataFrame, grid: GridSpec, tile: Tile, read: C
     a = {k: read(k, r0, c0, h, w) for k in WINDOW_RASTERS}
     log.info("tile %s: %d polygons, window rows %d+%d, cols %d+%d", tile.name, len(own), r0, h, c0, w)
     return measure_morphometry(a["labels"].astype(np.int32), own, a["dem"], a["level"], a["rims"].astype(bool),
-                               grid.window(r0, c0, h, w), params)
+                               WindowGrid.of(grid, r0, c0, h, w), params)
 
 
 def merge_morphometry(parts: Iterable[tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]], crs: str
