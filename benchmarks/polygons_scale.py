@@ -6,8 +6,8 @@ twin (``--dsm``, e.g. a copy of ``results/kamech_twin/dense/dsm.tif``) over that
 runs :func:`kitegully.polygons.stage.measure_polygons` on it with the full site's
 parameters. Every phase function the stage calls is wrapped so that its wall time and the
 process's peak resident memory while it ran are recorded (a thread samples
-``/proc/self/statm`` every 20 ms). Writes ``--out`` (CSV: step, calls, seconds, peak RSS
-MB) and prints it.
+``/proc/self/statm`` every 20 ms). Writes ``--out`` (CSV: step, calls, wall and CPU seconds,
+peak RSS MB; on a shared machine the CPU seconds are the load-independent measure) and prints it.
 
     nice -n 15 .venv/bin/python benchmarks/polygons_scale.py --dsm results/kamech_twin/dense/dsm.tif \
         [--scale 1.0] [--out results/polygons_scale.csv]
@@ -69,15 +69,16 @@ def wrap(module, name: str, label: str | None = None) -> None:
     def inner(*a, **k):
         before = SAMPLER.peak
         SAMPLER.peak = SAMPLER.rss()
-        t = time.perf_counter()
+        t, tc = time.perf_counter(), time.process_time()
         try:
             return fn(*a, **k)
         finally:
-            dt = time.perf_counter() - t
-            row = ROWS.setdefault(label, [0, 0.0, 0.0])
+            dt, dc = time.perf_counter() - t, time.process_time() - tc
+            row = ROWS.setdefault(label, [0, 0.0, 0.0, 0.0])
             row[0] += 1
             row[1] += dt
-            row[2] = max(row[2], SAMPLER.peak, SAMPLER.rss())
+            row[2] += dc
+            row[3] = max(row[3], SAMPLER.peak, SAMPLER.rss())
             SAMPLER.peak = max(before, SAMPLER.peak)
 
     setattr(module, name, inner)
@@ -117,13 +118,13 @@ def main() -> int:
                  "low_sides", "gully_mask", "polygons_from_labels", "measure_sections"):
         wrap(stage, name)
     params = stage.PolygonParams.from_config(full["polygons"])
-    t = time.perf_counter()
+    t, tc = time.perf_counter(), time.process_time()
     rss0 = Sampler.rss()
     res = stage.measure_polygons(z, grid, params)
-    total = time.perf_counter() - t
-    rows = [(k, v[0], round(v[1], 2), round(v[2])) for k, v in ROWS.items()]
-    rows.append(("measure_polygons (total)", 1, round(total, 2), round(max(r[3] for r in rows))))
-    df = pd.DataFrame(rows, columns=["step", "calls", "seconds", "peak_rss_MB"])
+    total, total_cpu = time.perf_counter() - t, time.process_time() - tc
+    rows = [(k, v[0], round(v[1], 2), round(v[2], 2), round(v[3])) for k, v in ROWS.items()]
+    rows.append(("measure_polygons (total)", 1, round(total, 2), round(total_cpu, 2), round(max(r[4] for r in rows))))
+    df = pd.DataFrame(rows, columns=["step", "calls", "seconds", "cpu_seconds", "peak_rss_MB"])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     df.to_csv(args.out, index=False)
     print(f"stage grid {res.grid.height} x {res.grid.width} = {res.grid.height * res.grid.width / 1e6:.2f} M cells; "
