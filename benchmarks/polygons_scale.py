@@ -89,6 +89,8 @@ def main() -> int:
     ap.add_argument("--dsm", type=Path, required=True, help="a default-twin DSM (0.2 m) to mirror over the full extent")
     ap.add_argument("--scale", type=float, default=1.0, help="area fraction of the full site")
     ap.add_argument("--out", type=Path, default=REPO / "results/polygons_scale.csv")
+    ap.add_argument("--tiles", action="store_true", help="then measure the polygons again per tile of kamech_full's tiling "
+                    "(kitegully.polygons.tiles, in this process) and compare with the whole-grid morphometry")
     args = ap.parse_args()
     full = load_yaml(REPO / "config/sites/kamech_full.yaml")
     ext = full["twin"]["extent"]
@@ -132,6 +134,25 @@ def main() -> int:
     print(df.to_string(index=False))
     print("phase timings of the stage:", {k: round(v, 1) for k, v in res.timings_s.items()})
     print(f"polygons t=0.5: {len(res.polygons[params.morph_threshold_m])}, sections {len(res.sections)}")
+    if args.tiles:
+        from kitegully.polygons.tiles import measure_tile, merge_morphometry
+        from kitegully.terrain.tiling import TilingParams
+
+        tiling = TilingParams(float(full["tiling"]["tile_m"]), w * g0.cell, h * g0.cell)
+        tiles = tiling.tiles(res.grid.shape)
+        arrays = {"labels": res.labels[params.morph_threshold_m], "dem": res.dem, "level": res.level, "rims": res.rims}
+        parts, cpu = [], []
+        for t in tiles:
+            tc = time.process_time()
+            parts.append(measure_tile(res.polygons[params.morph_threshold_m], res.grid, t,
+                                      lambda k, r0, c0, hh, ww: arrays[k][r0:r0 + hh, c0:c0 + ww], params, tiles))
+            cpu.append(time.process_time() - tc)
+        axes, sections, morph = merge_morphometry(parts, res.grid.crs)
+        same = (morph.equals(res.morphometry) and sections.drop(columns="geometry").equals(res.sections.drop(columns="geometry"))
+                and all(a.equals_exact(b, 0.0) for a, b in zip(sections.geometry, res.sections.geometry))
+                and all(a.equals_exact(b, 0.0) for a, b in zip(axes.geometry, res.axes.geometry)))
+        print(f"tiled morphometry, {len(tiles)} tiles: CPU sum {sum(cpu):.1f} s, largest tile {max(cpu):.1f} s, "
+              f"per tile {[round(c, 1) for c in cpu]}; identical to the whole grid: {same}")
     return 0
 
 
