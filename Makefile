@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks speed-benchmarks
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -71,6 +71,12 @@ kamech-full: $(STAMP)
 # Tiny twin's gully map untiled and with the tiled fill rules: products must be identical (~1-5 min).
 tiles-check: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/tiled_rules_check.py --cores $(CORES)
+
+# The default site's polygons untiled and with the tiled morphometry rules: identical products
+# (~2-4 min; on the DSM of a default run, or POLY_DSM=path).
+POLY_DSM ?= results/kamech_twin/dense/dsm.tif
+polygons-tiles-check: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_tiles_check.py --dsm $(POLY_DSM) --cores $(CORES)
 
 # The low-cost RGB + NIR kite survey of paper 004 (issue 18) on its own twin; not part of
 # the default run (about 10 min on 2 idle cores).

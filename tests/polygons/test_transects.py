@@ -33,3 +33,17 @@ def test_clipped_between_nearest_crossings_only_when_both_sides_cross():
     xs = sorted(x for x, _ in out[0].coords)
     assert xs == pytest.approx([-3.0, 4.0])
     assert out[1].length == pytest.approx(80.0)
+
+
+def test_stations_with_the_floor_computed_once_are_the_same():
+    from kitegully.io.raster import GridSpec
+    from kitegully.polygons.transects import station_floor
+
+    grid = GridSpec(0.0, 100.0, 0.5, 40, 200, "EPSG:32632")
+    r, _ = np.mgrid[0:200, 0:40]
+    dem = (10.0 - 0.2 * r + 0.05 * np.sin(r)).astype(np.float32)  # falls 0.1 m per metre southwards
+    dem[5, 5] = np.nan
+    line = shapely.LineString([(10.0, 99.0), (10.0, 2.0)])
+    a = transect_stations(line, 50.0, dem, grid, max_drop=0.5, min_spacing=3.0)
+    b = transect_stations(line, 50.0, dem, grid, max_drop=0.5, min_spacing=3.0, floor=station_floor(dem))
+    assert len(a) > 4 and np.array_equal(a, b)  # the drop, not the spacing, places them

@@ -14,6 +14,23 @@ if "polygons" in config:
     def poly_set(t):
         return result("polygons", f"gully_polygons_t{t:g}.gpkg")
 
+    # Large sites (config section tiling, issue 21): step 6 (medial axes, cross-sections,
+    # morphometry; 45 % of the stage at the full Kamech size) runs as one job per tile on the
+    # polygons whose centroid the tile holds, then one merge; polygons_map writes the rasters
+    # those jobs read in windows. Steps 1-5 stay in polygons_map (measured: README Stage 6b).
+    POLY_TILED = "tiling" in config
+    POLY_PRODUCTS = {k: result("polygons", f) for k, f in (("axes", "medial_axes.gpkg"), ("sections", "cross_sections.gpkg"),
+                                                           ("morphometry", "morphometry.csv"), ("summary", "polygons_summary.csv"))}
+    POLY_MORPH_OUT = {
+        "axes": POLY_PRODUCTS["axes"],
+        "sections": POLY_PRODUCTS["sections"],
+        "morphometry": report(POLY_PRODUCTS["morphometry"], caption=caption("polygons_morphometry"), category=POLY_CAT),
+        "summary": report(POLY_PRODUCTS["summary"], caption=caption("polygons_summary"), category=POLY_CAT),
+    }
+    POLY_WINDOWS = {k: result("polygons", f"tiles/{k}.tif") for k in ("labels", "level", "rims")}
+    POLY_MAP_OUT = {**POLY_WINDOWS, "summary": result("polygons", "tiles/summary_map.csv")} if POLY_TILED else POLY_MORPH_OUT
+    POLY_MORPH_RULE = "polygons_morph_merge" if POLY_TILED else "polygons_map"  # the rule that writes POLY_MORPH_OUT
+
     rule polygons_map:
         input:
             dem=POLY_DEM,
@@ -25,13 +42,11 @@ if "polygons" in config:
             breaklines=result("polygons", "breaklines.gpkg"),
             thalweg=result("polygons", "thalweg.gpkg"),
             transects=result("polygons", "transects.gpkg"),
-            axes=result("polygons", "medial_axes.gpkg"),
-            sections=result("polygons", "cross_sections.gpkg"),
-            morphometry=report(result("polygons", "morphometry.csv"), caption=caption("polygons_morphometry"), category=POLY_CAT),
-            summary=report(result("polygons", "polygons_summary.csv"), caption=caption("polygons_summary"), category=POLY_CAT),
+            **POLY_MAP_OUT,
         params:
             cfg=POLY_METHOD,
             crs=config["site"]["crs"],
+            morphometry=not POLY_TILED,
         log:
             logfile("polygons", "map"),
         benchmark:
@@ -46,9 +61,9 @@ if "polygons" in config:
             polygons=rules.polygons_map.output.polygons,
             thalweg=rules.polygons_map.output.thalweg,
             transects=rules.polygons_map.output.transects,
-            axes=rules.polygons_map.output.axes,
-            sections=rules.polygons_map.output.sections,
-            morphometry=rules.polygons_map.output.morphometry,
+            axes=POLY_PRODUCTS["axes"],
+            sections=POLY_PRODUCTS["sections"],
+            morphometry=POLY_PRODUCTS["morphometry"],
         output:
             figure=report(result("polygons", "gully_polygons.png"), caption=caption("polygons_map"), category=POLY_CAT),
         params:
@@ -61,7 +76,50 @@ if "polygons" in config:
         script:
             "../scripts/polygons_figure.py"
 
-    POLY_TARGETS = [rules.polygons_map.output, rules.polygons_figure.output.figure]
+    POLY_TARGETS = [rules.polygons_map.output, *POLY_PRODUCTS.values(), rules.polygons_figure.output.figure]
+
+    if POLY_TILED:
+        from kitegully.terrain.tiling import TilingParams as _PolyTilingParams
+
+        _POLY_TILING = _PolyTilingParams.from_config(config)
+        # the tile names follow from the config alone (site extent, tiling.tile_m): no checkpoint
+        POLY_TILE_NAMES = _POLY_TILING.names()
+
+        wildcard_constraints:
+            tile=r"r\d{3}_c\d{3}",
+
+        rule polygons_morph_tile:
+            input:
+                **POLY_WINDOWS,
+                polygons=poly_set(POLY["morphometry"]["threshold_m"]),
+                dem=rules.polygons_map.output.dem,
+            output:
+                part=temp(result("polygons", "tiles/morph/{tile}.pkl")),
+            params:
+                cfg=POLY_METHOD,
+                tiling={"tile_m": _POLY_TILING.tile_m, "width_m": _POLY_TILING.width_m, "height_m": _POLY_TILING.height_m},
+            log:
+                logfile("polygons", "morph_tile_{tile}"),
+            benchmark:
+                benchfile("polygons", "morph_tile_{tile}")
+            script:
+                "../scripts/polygons_morph_tile.py"
+
+        rule polygons_morph_merge:
+            input:
+                parts=expand(result("polygons", "tiles/morph/{tile}.pkl"), tile=POLY_TILE_NAMES),
+                summary=POLY_MAP_OUT["summary"],
+            output:
+                **POLY_MORPH_OUT,
+            params:
+                cfg=POLY_METHOD,
+                crs=config["site"]["crs"],
+            log:
+                logfile("polygons", "morph_merge"),
+            benchmark:
+                benchfile("polygons", "morph_merge")
+            script:
+                "../scripts/polygons_morph_merge.py"
 
     if IS_TWIN:
         # U profile exponent of the true gullies: the photographed twin's or the DEM twin's (issue 16)
@@ -97,7 +155,7 @@ if "polygons" in config:
                 **POLY_TRUTH,
                 dem=rules.polygons_map.output.dem,
                 polygons=poly_set(POLY["morphometry"]["threshold_m"]),
-                sections=rules.polygons_map.output.sections,
+                sections=POLY_PRODUCTS["sections"],
             output:
                 scores=report(result("polygons", "polygon_scores.csv"), caption=caption("polygons_scores"), category=POLY_CAT),
                 errors=report(result("polygons", "morphometry_errors.csv"), caption=caption("polygons_morphometry_errors"), category=POLY_CAT),

@@ -38,9 +38,11 @@ def _qgis_products():
         for path in rules.polygons_map.output.polygons:
             out["hoefle_polygons_t" + Path(path).stem.removeprefix("gully_polygons_t")] = path
         for key, name in (("hoefle_dem", "dem"), ("tci", "tci"), ("fill_depth", "fill_depth"), ("breaklines", "breaklines"),
-                          ("thalweg", "thalweg"), ("transects", "transects"), ("medial_axes", "axes"),
-                          ("cross_sections", "sections")):
+                          ("thalweg", "thalweg"), ("transects", "transects")):
             add(key, "polygons_map", name)
+        morph_rule = globals().get("POLY_MORPH_RULE", "polygons_map")  # tiled sites (issue 21): polygons_morph_merge
+        add("medial_axes", morph_rule, "axes")
+        add("cross_sections", morph_rule, "sections")
     if "change_detect" in _DEFINED_RULES:
         for key, name in (("dod", "dod"), ("sigma_dod", "sigma_dod"), ("stable_ground", "stable")):
             add(key, "change_detect", name)

@@ -21,7 +21,7 @@ from kitegully.polygons.dem_prep import prepare_dem
 from kitegully.polygons.morphometry import BRANCHES, REFERENCES, measure_sections
 from kitegully.polygons.skeleton import skeleton_paths
 from kitegully.polygons.thalweg import thalweg_lines, topographic_convergence_index
-from kitegully.polygons.transects import clip_transects, make_transects, transect_stations
+from kitegully.polygons.transects import clip_transects, make_transects, station_floor, transect_stations
 
 log = logging.getLogger(__name__)
 
@@ -243,6 +243,45 @@ class PolygonResult:
     morphometry: pd.DataFrame
     summary: pd.DataFrame
     timings_s: dict[str, float] = field(default_factory=dict)
+    level: np.ndarray | None = None
+    rims: np.ndarray | None = None
+
+
+def measure_morphometry(labels: np.ndarray, polygons: gpd.GeoDataFrame, dem: np.ndarray, level: np.ndarray, rims: np.ndarray,
+                        grid: GridSpec, params: PolygonParams) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
+    """Medial axes, cross-sections and morphometry of ``polygons`` (step 6 of :func:`measure_polygons`).
+
+    Parameters
+    ----------
+    labels : ndarray int
+        Labels of the polygons at ``params.morph_threshold_m`` (their ``polygon_id``).
+    polygons : GeoDataFrame
+        The polygons to measure (any subset of the labels: each is measured on its own).
+    dem, level : ndarray
+        Stage DEM and pool level (conditioned DEM + fill depth), m.
+    rims : ndarray bool
+        Breakline cells grown by ``params.grow_cells`` (the rim band).
+    grid : GridSpec
+        Grid of the arrays (the stage grid or a window of it).
+    params : PolygonParams
+
+    Returns
+    -------
+    axes, sections, morphometry
+        As :func:`kitegully.polygons.morphometry.measure_sections`.
+    """
+    p = params
+    return measure_sections(labels, polygons, dem, level, grid, p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha,
+                            p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m)
+
+
+def morphometry_rows(axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: pd.DataFrame, params: PolygonParams) -> list[tuple]:
+    """Rows of the summary table that describe the morphometry."""
+    p = params
+    return [("medial axes", len(axes)), ("cross-sections", len(sections)), ("volume (m3)", round(float(morph["volume_m3"].sum()), 1)),
+            ("depth reference", p.reference), ("section branches", p.branches),
+            ("rim search beyond the polygon (m)", p.rim_search_m), ("axes prolonged to the outline", p.prolong_axes),
+            ("ground segment across sections (m)", p.ground_segment_m)]
 
 
 def _lines_gdf(paths, grid: GridSpec) -> list[shapely.LineString]:
@@ -250,7 +289,8 @@ def _lines_gdf(paths, grid: GridSpec) -> list[shapely.LineString]:
     return [shapely.LineString(np.column_stack([xs[c], ys[r]])) for r, c in paths]
 
 
-def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParams, dem_name: str = "DEM") -> PolygonResult:
+def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParams, dem_name: str = "DEM",
+                     morphometry: bool = True) -> PolygonResult:
     """Run the method: DEM prep, breaklines, thalweg, transects, conditioning, polygons, morphometry.
 
     Parameters
@@ -263,6 +303,10 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         Method parameters.
     dem_name : str
         Name of the input for error messages.
+    morphometry : bool
+        Measure the polygons (step 6). False on tiled sites, whose tile jobs measure the
+        polygons they own (:mod:`kitegully.polygons.tiles`): ``axes``, ``sections`` and
+        ``morphometry`` are then empty and the summary has no morphometry rows.
 
     Returns
     -------
@@ -303,8 +347,9 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
 
     t = time.perf_counter()
     tr_all, line_id = [], []
+    floor = station_floor(dem) if p.transect_max_drop_m is not None else None
     for i, ln in enumerate(th_lines):
-        st = transect_stations(ln, p.transect_spacing_m, dem, grid, p.transect_max_drop_m, p.transect_min_spacing_m)
+        st = transect_stations(ln, p.transect_spacing_m, dem, grid, p.transect_max_drop_m, p.transect_min_spacing_m, floor)
         tr = make_transects(ln, st, p.transect_half_length_m, p.transect_tangent_half_window_m)
         tr_all += tr
         line_id += [i] * len(tr)
@@ -333,10 +378,12 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     T["conditioning_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    axes, sections, morph = measure_sections(labels[p.morph_threshold_m], polys[p.morph_threshold_m], dem, level, grid,
-                                             p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
-                                             p.branches, barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells), p.rim_search_m,
-                                             p.prolong_axes, p.ground_segment_m)
+    rim_band = barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells)
+    if morphometry:
+        axes, sections, morph = measure_morphometry(labels[p.morph_threshold_m], polys[p.morph_threshold_m], dem, level, rim_band, grid, p)
+    else:
+        axes, sections, morph = measure_morphometry(np.zeros((1, 1), np.int32), polys[p.morph_threshold_m].iloc[:0], dem[:1, :1],
+                                                    level[:1, :1], rim_band[:1, :1], grid, p)
     T["morphometry_s"] = time.perf_counter() - t
     T["total_s"] = time.perf_counter() - t0
 
@@ -362,11 +409,9 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         ("barrier cells", int(barriers.sum())),
     ]
     rows += [(f"polygons t = {thr} m (count / m2)", f"{len(polys[thr])} / {polys[thr]['area_m2'].sum():.1f}") for thr in p.thresholds_m]
-    rows += [("medial axes", len(axes)), ("cross-sections", len(sections)), ("volume (m3)", round(float(morph["volume_m3"].sum()), 1)),
-             ("depth reference", p.reference), ("section branches", p.branches),
-             ("rim search beyond the polygon (m)", p.rim_search_m), ("axes prolonged to the outline", p.prolong_axes),
-             ("ground segment across sections (m)", p.ground_segment_m)]
+    if morphometry:
+        rows += morphometry_rows(axes, sections, morph, p)
     rows += [(f"time {k[:-2]} (s)", round(v, 2)) for k, v in T.items()]
     summary = pd.DataFrame(rows, columns=["quantity", "value"]).astype({"value": str})
     log.info("polygons done in %.1f s (%s)", T["total_s"], ", ".join(f"{k} {v:.1f}" for k, v in T.items()))
-    return PolygonResult(grid, dem, curv, bl_cells, breaklines, tci, thalweg, transects, fd, labels, polys, axes, sections, morph, summary, T)
+    return PolygonResult(grid, dem, curv, bl_cells, breaklines, tci, thalweg, transects, fd, labels, polys, axes, sections, morph, summary, T, level, rim_band)
