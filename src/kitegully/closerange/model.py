@@ -177,6 +177,61 @@ def triangulate_spheres(
     return found
 
 
+def verify_spheres(
+    found: list[tuple[np.ndarray, np.ndarray]], O: np.ndarray, alpha: np.ndarray, points: np.ndarray,
+    max_radius_spread: float = 0.15, height_tolerance: float = 0.5, ground_reach: float = 6.0, min_ground_points: int = 6,
+) -> list[dict]:
+    """Test triangulated sphere candidates with what a sphere is in 3-D; one record per candidate.
+
+    * **Radius.** Each ray of a candidate saw the sphere under the angular radius ``alpha``;
+      at its distance ``D`` from the centre that is a radius ``D·sin(alpha)`` in model units.
+      A sphere gives the same radius from every side (their median is ``radius``; their
+      median relative deviation ``radius_spread`` must stay within ``max_radius_spread``);
+      a flat bright patch on the ground seen from different sides and distances does not.
+    * **Above the ground.** A sphere resting on the ground has its centre one radius above
+      it: the tie points (``points``) within ``ground_reach`` radii of the centre (those
+      within 1.5 radii, on the sphere or under it, left out) give a least-squares plane,
+      and the centre's distance from it (``height``) must be ``radius`` within
+      ``height_tolerance`` of it; a patch in the ground's texture lies on the plane.
+      With fewer than ``min_ground_points`` tie points around, the test is not made.
+
+    Parameters
+    ----------
+    found : :func:`triangulate_spheres` output (centre, ray indices).
+    O : (R, 3) ray origins; alpha : (R,) angular radius of each ray's detection (rad).
+    points : (N, 3) tie points of the model.
+    max_radius_spread, height_tolerance : relative tolerances. [I] a 6 px image radius measured
+        to ~0.3 px is 5 %: 3σ is 15 %; the ground within 0.6 m of a sphere departs from a
+        plane by centimetres, the height is a decimetre: half the radius separates.
+    ground_reach : radii around the centre that count as its ground. min_ground_points : fewest for a plane.
+
+    Returns
+    -------
+    list of dict: ``radius, radius_spread, height, n_ground_points, sphere`` (bool) per candidate.
+
+    Notes
+    -----
+    O(K · N) for K candidates and N tie points.
+    """
+    out = []
+    pts = np.asarray(points, float).reshape(-1, 3)
+    for X, members in found:
+        D = np.linalg.norm(O[members] - X, axis=1)
+        r_i = D * np.sin(np.asarray(alpha)[members])
+        r = float(np.median(r_i))
+        spread = float(np.median(np.abs(r_i - r)) / r) if r > 0 else np.inf
+        d = np.linalg.norm(pts - X, axis=1)
+        g = pts[(d > 1.5 * r) & (d < ground_reach * r)]
+        height = np.nan
+        if len(g) >= min_ground_points:
+            c = g.mean(axis=0)
+            normal = np.linalg.svd(g - c, full_matrices=False)[2][-1]
+            height = float(abs((X - c) @ normal))
+        ok = spread <= max_radius_spread and (not np.isfinite(height) or abs(height - r) <= height_tolerance * r)
+        out.append({"radius": r, "radius_spread": spread, "height": height, "n_ground_points": int(len(g)), "sphere": bool(ok)})
+    return out
+
+
 def _pairwise(X: np.ndarray) -> np.ndarray:
     return np.linalg.norm(X[:, None] - X[None], axis=2)
 
