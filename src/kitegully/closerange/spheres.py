@@ -26,10 +26,8 @@ sunlit soil and dry grass are as white as the spheres):
    with a circle in a virtual image plane perpendicular to the current centre estimate,
    where the outline of a sphere is exactly a circle of radius ``tan(alpha)`` around the
    centre's image; two iterations move the plane onto the centre.  So the centre is exact
-   from a partial arc (no ellipse-centre correction is needed), and the radius is tied
-   weakly (1 px) to the neutral disc's radius, which includes the shaded limb, for short
-   arcs.  Points beyond 3 MAD are dropped and the fit repeated; the fit's RMS must stay
-   below ``max_fit_rms_px``.
+   from a partial arc (no ellipse-centre correction is needed).  Points beyond 3 MAD are
+   dropped and the fit repeated; the fit's RMS must stay below ``max_fit_rms_px``.
 
 Each detection also returns the angular radius ``alpha``: with the ray's distance ``D`` in
 a model, ``D·sin(alpha)`` is the sphere's radius in model units, the same for every photo of
@@ -93,9 +91,11 @@ class SphereDetection:
         on the spheres (scene 05); 1.3 separates them. On a real site grass blades are
         sharp too; the test then rests on the other criteria.
     min_arc_deg : float
-        Least angular span (deg) of the outline points used. [I] a circle fit to an arc
-        below a third of the circle trades its radius against its centre; with the weak
-        radius tie of the neutral disc 120° keeps the centre within 0.1 px at 0.2 px noise.
+        Least angular span (deg) of the outline points used, and least share of the rays
+        (``min_arc_deg / 360``) that must give such points. [I] a circle fit to an arc below
+        a third of the circle trades its radius against its centre (the centre's error grows
+        as 1/(1 − cos(arc/2)) times the edge noise); over 120° it stays within ~3× the
+        0.1–0.2 px edge noise.
     max_fit_rms_px : float
         Largest RMS distance of the used outline points from the fitted cone (px). [I] a
         sphere's outline is an exact circle on the cone (measured 0.1–0.2 px with noise);
@@ -216,21 +216,22 @@ def _rays_to_axis(axis: np.ndarray) -> np.ndarray:
     return np.vstack([x, np.cross(z, x), z])
 
 
-def fit_sphere_outline(rays: np.ndarray, f: float, radius_prior: float | None = None, prior_sd_px: float = 1.0,
-                       iterations: int = 2) -> tuple[np.ndarray, float, np.ndarray]:
+def fit_sphere_outline(rays: np.ndarray, f: float, iterations: int = 3) -> tuple[np.ndarray, float, np.ndarray]:
     """Fit the tangent cone of a sphere to rays through its outline (a partial arc suffices).
 
     In a virtual image plane (focal length ``f``) perpendicular to the cone's axis the
     outline is a circle of radius ``f·tan(alpha)`` centred on the axis; the circle is fitted
-    (Gauss–Newton on geometric distances, radius tied to ``f·tan(radius_prior)`` with
-    ``prior_sd_px`` when given) and the plane re-aimed at its centre, ``iterations`` times.
+    (Gauss–Newton on geometric distances, centre and radius free) and the plane re-aimed at
+    its centre, ``iterations`` times.  The radius is left free on purpose: a Lambertian
+    sphere lit from beside or behind the camera is darker in a sub-pixel band at its limb,
+    so the steepest step lies 0.1–0.4 px inside the outline all along the lit arc; a free
+    radius absorbs that uniform shift, a radius tied to the disc's would turn it into a
+    centre shift towards the shade.
 
     Parameters
     ----------
-    rays : (N, 3) directions (camera frame) through the outline points.
+    rays : (N, 3) directions (camera frame) through the outline points (N >= 3).
     f : focal length (px) that expresses the residuals in pixels.
-    radius_prior : angular radius (rad) the fit is weakly tied to, or None.
-    prior_sd_px : standard deviation of that tie (px).
     iterations : re-aiming steps.
 
     Returns
@@ -241,31 +242,27 @@ def fit_sphere_outline(rays: np.ndarray, f: float, radius_prior: float | None = 
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     axis = d.mean(axis=0)
     axis /= np.linalg.norm(axis)
-    rho_prior = None if radius_prior is None else f * np.tan(radius_prior)
+    rho = 0.0
     for _ in range(iterations):
         R = _rays_to_axis(axis)
         p = d @ R.T
         x, y = f * p[:, 0] / p[:, 2], f * p[:, 1] / p[:, 2]
-        a, b = x.mean(), y.mean()
-        rho = float(np.mean(np.hypot(x - a, y - b))) if rho_prior is None else rho_prior
+        # algebraic (Kåsa) start, then Gauss–Newton on the geometric distances
+        A = np.column_stack([2 * x, 2 * y, np.ones_like(x)])
+        a, b, c = np.linalg.lstsq(A, x * x + y * y, rcond=None)[0]
+        rho = float(np.sqrt(max(c + a * a + b * b, 1e-12)))
         for _ in range(6):
             dx, dy = x - a, y - b
             dist = np.maximum(np.hypot(dx, dy), 1e-12)
             r = dist - rho
             J = np.column_stack([-dx / dist, -dy / dist, -np.ones_like(dist)])
-            if rho_prior is not None:
-                w = 1.0 / prior_sd_px
-                J = np.vstack([J, [0.0, 0.0, w]])
-                r = np.append(r, w * (rho - rho_prior))
             delta = np.linalg.solve(J.T @ J + 1e-12 * np.eye(3), -(J.T @ r))
             a, b, rho = a + delta[0], b + delta[1], rho + delta[2]
-            if np.abs(delta).max() < 1e-3:
+            if np.abs(delta).max() < 1e-4:
                 break
         axis = R.T @ np.array([a / f, b / f, 1.0])
         axis /= np.linalg.norm(axis)
-    R = _rays_to_axis(axis)
-    p = d @ R.T
-    res = f * np.hypot(p[:, 0], p[:, 1]) / p[:, 2] - rho
+    res = fit_sphere_outline_residuals(d, axis, float(np.arctan(rho / f)), f)
     return axis, float(np.arctan(rho / f)), res
 
 
@@ -340,16 +337,13 @@ def detect_spheres(image: np.ndarray, camera: Camera, params: SphereDetection = 
         if use.sum() < max(6, params.min_arc_deg / 360.0 * params.n_rays) or _arc_span_deg(ang[use]) < params.min_arc_deg:
             continue
         rays = camera.rays_camera(pts[use, 0], pts[use, 1])
-        # the neutral disc's angular radius (shaded limb included) about its centre's ray: the weak radius tie
-        d_ex = camera.rays_camera(e[on_circle, 0], e[on_circle, 1])
-        prior = float(np.median(np.arccos(np.clip(d_ex @ camera.rays_camera(*centre), -1.0, 1.0))))
-        axis, alpha, res = fit_sphere_outline(rays, camera.f, prior)
+        axis, alpha, res = fit_sphere_outline(rays, camera.f)
         mad = 1.4826 * np.median(np.abs(res - np.median(res)))
         keep = np.abs(res) <= max(3.0 * mad, 0.1)  # a grass blade across the limb, a leftover texture edge
         if keep.sum() < 6:
             continue
         if not keep.all():
-            axis, alpha, res = fit_sphere_outline(rays[keep], camera.f, prior)
+            axis, alpha, res = fit_sphere_outline(rays[keep], camera.f)
         rms = float(np.sqrt(np.mean(res ** 2)))
         r_px = camera.f * np.tan(alpha)
         if rms > params.max_fit_rms_px or not (rmin <= r_px <= rmax) or _arc_span_deg(ang[use][keep]) < params.min_arc_deg:
