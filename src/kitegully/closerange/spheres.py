@@ -327,6 +327,7 @@ def detect_spheres(image: np.ndarray, camera: Camera, params: SphereDetection = 
     found = []
     for cand, exits, on_circle, med in rows_out:
         # re-centre on the exit points of the rays on the circle (the inscribed circle's centre is integer)
+        exits = np.where(np.isfinite(exits), exits, med)  # rays that never leave the mask are off the circle anyway
         e = np.column_stack([cand[0] + dirs[:, 0] * exits, cand[1] + dirs[:, 1] * exits])
         centre = e[on_circle].mean(axis=0)
         ex = np.where(on_circle, np.einsum("ij,ij->i", e - centre, dirs), med)  # exits seen from the new centre
