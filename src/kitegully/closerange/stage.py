@@ -74,9 +74,10 @@ class CloseRangeParams:
         Ray–point distance that still counts as one sphere, in the model's scale expressed
         at the walk's size (scaled by the camera ring radius / 5 m). [I] a tenth of the 0.1 m
         sphere radius: 0.3 px at 5 m is 2 mm, so 1 cm is lenient yet spheres are metres apart.
-        Known to be too tight for sunlit spheres: the shaded limb biases each photo's centre
-        towards the sun, rays from opposite sides then miss by 2–4 cm, and a sphere is split
-        into two candidates or not triangulated (README, closerange); not changed here.
+        Session 6 found it too tight for sunlit spheres (the shaded limb biased each photo's
+        centre towards the sun; rays from opposite sides missed by 2–4 cm); the detector now
+        fits only the lit limb, and scene 10 triangulates all 4 spheres. A sphere can still be
+        split in two candidates (scene 05's S2); the pairing treats copies correctly.
     marker_budget_m : float
         Largest residual of a sphere after the similarity; an assignment of triangulated
         spheres to the survey is accepted only within it (and the inter-sphere distances must
