@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kitegully import InputError
-from kitegully.closerange.model import match_markers, triangulate_spheres
+from kitegully.closerange.model import match_markers, triangulate_spheres, verify_spheres
 
 
 def _ring_rays(S, n_cams=12, noise_rad=2e-4, seed=0):
@@ -121,3 +121,36 @@ def test_a_sphere_triangulated_twice_is_not_an_ambiguity():
     cands = np.vstack([model, model[2] + np.array([0.02, 0.0, 0.0]) / 1.7])  # sphere 2 split into two copies 2 cm apart
     sim, rows, perm, res = match_markers(cands, survey, ["S1", "S2", "S3", "S4"], 0.05)
     assert len(rows) == 4 and sorted(perm) == [0, 1, 2, 3]
+
+
+def test_a_sphere_has_one_radius_from_every_side_and_a_flat_patch_does_not():
+    """Rays with the angular radius a 10 cm sphere shows at each camera's distance give radius 0.1; a flat
+    white patch (10 cm across) on the ground shows a radius that changes with the viewing angle."""
+    O, D, pid = _ring_rays(S_TRUE, noise_rad=1e-4)
+    found = triangulate_spheres(O, D, pid, tolerance=0.01)
+    label = np.tile(np.arange(len(S_TRUE) + 1), 12)  # per camera: the spheres in order, then the stray ray
+    alpha = np.where(label < len(S_TRUE), np.arcsin(0.1 / np.linalg.norm(S_TRUE[label % len(S_TRUE)] - O, axis=1)), 0.01)
+    ground = np.column_stack([np.random.default_rng(2).uniform(-4, 4, (400, 2)), np.zeros(400)])
+    checks = verify_spheres(found, O, alpha, ground)
+    assert all(c["sphere"] for c in checks)
+    assert all(abs(c["radius"] - 0.1) < 0.003 for c in checks)
+    # the flat patch: apparent angular radius ∝ sin(elevation of the view) / distance
+    P = np.array([0.0, 0.0, 0.0])
+    Ocams = np.array([[6 * np.cos(a), 6 * np.sin(a), 3.0] for a in np.linspace(0, 2 * np.pi, 12, endpoint=False)])
+    Ocams[::2, :2] *= 2.5  # near and far sides of the ring (3-13 m in scene 05): the patch seen at 27° and 11° elevation
+    dist = np.linalg.norm(Ocams - P, axis=1)
+    a_patch = 0.1 * np.sqrt(Ocams[:, 2] / dist) / dist  # geometric mean of the ellipse's axes
+    flat = verify_spheres([(P, np.arange(12))], Ocams, a_patch, ground)[0]
+    assert not flat["sphere"] and flat["radius_spread"] > 0.15
+
+
+def test_candidates_of_the_wrong_size_are_not_paired():
+    """Three false candidates placed like three spheres but a third of their size do not pair (scene 05's chance fits)."""
+    rng = np.random.default_rng(8)
+    model = S_TRUE / 1.7
+    survey = _world(model) + rng.normal(0, 0.01, (4, 3))
+    cands = model[[0, 1, 2]]
+    with pytest.raises(InputError, match="no assignment"):
+        match_markers(cands, survey, ["S1", "S2", "S3", "S4"], 0.05, radii=np.full(3, 0.033 / 1.7), radius_m=0.1)
+    sim, rows, perm, res = match_markers(cands, survey, ["S1", "S2", "S3", "S4"], 0.05, radii=np.full(3, 0.1 / 1.7), radius_m=0.1)
+    assert sorted(rows) == [0, 1, 2]

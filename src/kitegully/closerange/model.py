@@ -177,13 +177,68 @@ def triangulate_spheres(
     return found
 
 
+def verify_spheres(
+    found: list[tuple[np.ndarray, np.ndarray]], O: np.ndarray, alpha: np.ndarray, points: np.ndarray,
+    max_radius_spread: float = 0.15, ground_reach: float = 6.0, min_ground_points: int = 6,
+) -> list[dict]:
+    """Test triangulated sphere candidates with what a sphere is in 3-D; one record per candidate.
+
+    * **Radius.** Each ray of a candidate saw the sphere under the angular radius ``alpha``;
+      at its distance ``D`` from the centre that is a radius ``D·sin(alpha)`` in model units.
+      A sphere gives the same radius from every side (their median is ``radius``; their
+      median relative deviation ``radius_spread`` must stay within ``max_radius_spread``);
+      a flat bright patch on the ground seen from different sides and distances does not.
+    * **Above the ground** (reported, not decisive). A sphere resting on the ground has its
+      centre one radius above it: the tie points (``points``) within ``ground_reach`` radii
+      of the centre (those within 1.5 radii left out) give a least-squares plane and the
+      centre's distance from it is ``height`` (NaN with fewer than ``min_ground_points``).
+      Measured in scene 05: 0.5–1.1 radii for the spheres, but 0–1 of their own radius
+      for the false candidates too (small white clods), so it does not separate them.
+
+    Parameters
+    ----------
+    found : :func:`triangulate_spheres` output (centre, ray indices).
+    O : (R, 3) ray origins; alpha : (R,) angular radius of each ray's detection (rad).
+    points : (N, 3) tie points of the model.
+    max_radius_spread : relative tolerance. [I] a 6 px image radius measured to ~0.3 px is
+        5 %: 3σ is 15 %.
+    ground_reach : radii around the centre that count as its ground. min_ground_points : fewest for a plane.
+
+    Returns
+    -------
+    list of dict: ``radius, radius_spread, height, n_ground_points, sphere`` (bool) per candidate.
+
+    Notes
+    -----
+    O(K · N) for K candidates and N tie points.
+    """
+    out = []
+    pts = np.asarray(points, float).reshape(-1, 3)
+    for X, members in found:
+        D = np.linalg.norm(O[members] - X, axis=1)
+        r_i = D * np.sin(np.asarray(alpha)[members])
+        r = float(np.median(r_i))
+        spread = float(np.median(np.abs(r_i - r)) / r) if r > 0 else np.inf
+        d = np.linalg.norm(pts - X, axis=1)
+        g = pts[(d > 1.5 * r) & (d < ground_reach * r)]
+        height = np.nan
+        if len(g) >= min_ground_points:
+            c = g.mean(axis=0)
+            normal = np.linalg.svd(g - c, full_matrices=False)[2][-1]
+            height = float(abs((X - c) @ normal))
+        ok = spread <= max_radius_spread
+        out.append({"radius": r, "radius_spread": spread, "height": height, "n_ground_points": int(len(g)), "sphere": bool(ok)})
+    return out
+
+
 def _pairwise(X: np.ndarray) -> np.ndarray:
     return np.linalg.norm(X[:, None] - X[None], axis=2)
 
 
 def match_markers(
     model_xyz: np.ndarray, survey_xyz: np.ndarray, survey_ids: list[str], budget_m: float = 0.10, max_candidates: int = 12,
-    plausible: Callable[[Similarity], bool] | None = None,
+    plausible: Callable[[Similarity], bool] | None = None, radii: np.ndarray | None = None, radius_m: float = 0.10,
+    radius_tolerance: float = 0.25,
 ) -> tuple[Similarity, list[int], list[int], np.ndarray]:
     """Pair model sphere centres with surveyed ones and fit the similarity model → survey (robust, with a plausibility check).
 
@@ -210,6 +265,12 @@ def match_markers(
     (3.4 σ of its 1.5 cm survey), scene 05's 22 false candidates gave a unique, plausible
     3-sphere chance fit 6 m off (residuals 2–9.5 cm).
 
+    With ``radii`` (each candidate's radius in model units, :func:`verify_spheres`) a
+    candidate can pair only with a similarity whose scale makes it a sphere of ``radius_m``
+    within ``radius_tolerance`` (relative): a false white patch fits the survey's geometry
+    by chance but not also the spheres' size. [I] 25 %: image radii of 5–25 px measured
+    to ~0.3 px (≤ 6 %) and their spread over the photos (≤ 15 %).
+
     ``budget_m`` is the survey's accuracy ([P] RTK ±10 cm effective in 001).  The first
     ``max_candidates`` candidates (in the order given: most rays first) are used.
     Cost: O(C(k,3) · m!/(m−3)! · k·m) for k candidates and m surveyed spheres
@@ -228,6 +289,12 @@ def match_markers(
     from scipy.optimize import linear_sum_assignment
 
     model_xyz = np.asarray(model_xyz, float).reshape(-1, 3)[:max_candidates]
+    rad = None if radii is None else np.asarray(radii, float)[:max_candidates]
+
+    def sized(sim_: Similarity, rows_) -> np.ndarray:
+        if rad is None:
+            return np.ones(len(rows_), dtype=bool)
+        return np.abs(sim_.scale * rad[rows_] - radius_m) <= radius_tolerance * radius_m
     survey_xyz = np.asarray(survey_xyz, float).reshape(-1, 3)
     k, m = len(model_xyz), len(survey_xyz)
     if min(k, m) < 3:
@@ -251,7 +318,10 @@ def match_markers(
                 sim = umeyama(model_xyz[r], survey_xyz[p])
             except InputError:
                 continue
+            if not sized(sim, r).all():
+                continue
             cost = np.linalg.norm(survey_xyz[:, None] - sim.apply(model_xyz)[None], axis=2)  # (m, k)
+            cost[:, ~sized(sim, np.arange(k))] = 1e9  # not a sphere of the surveyed size at this scale
             si, mi = linear_sum_assignment(cost)
             ok = cost[si, mi] <= budget_m
             si, mi = si[ok], mi[ok]
@@ -260,6 +330,8 @@ def match_markers(
             try:
                 sim2 = umeyama(model_xyz[mi], survey_xyz[si])
             except InputError:
+                continue
+            if not sized(sim2, mi).all():
                 continue
             res = survey_xyz[si] - sim2.apply(model_xyz[mi])
             rms = float(np.sqrt(np.mean(np.sum(res ** 2, axis=1))))

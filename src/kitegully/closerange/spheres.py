@@ -1,31 +1,41 @@
 """Automatic measurement of white marker spheres (GCPs) in close-range photos (001 sect. 2.2).
 
-A sphere seen by a pinhole camera has an ellipse as its outline (the tangent cone cut by
-the image plane).  The pipeline per image:
+A sphere seen by a pinhole camera is bounded by its tangent cone: a circular cone of
+half-angle ``alpha = asin(r / D)`` around the ray to its centre.  What makes a sphere a
+sphere in a photo, and what the detector uses (brightness alone does not: in scene 05 the
+sunlit soil and dry grass are as white as the spheres):
 
-1. **Blobs.** Whiteness ``w = min(R, G, B)`` (white is bright in all three channels; grass
-   is dark in B and R, soil in B); pixels with ``w >= white_min_dn`` are grouped into
-   8-connected blobs; a blob is a candidate when its area fits the expected radius range
-   and it is round (area / area of its moment ellipse >= ``min_fill``).
-2. **Sub-pixel edge.** Along ``n_rays`` rays from the blob centroid, the whiteness profile
-   is sampled bilinearly at 0.25 px steps (after a Gaussian of ``edge_sigma_px``); the edge
-   is the position of the steepest descent, refined by a parabola through the three
-   samples around it (gradient-maximum edge, unbiased for a blurred step).
-3. **Ellipse.** The edge points (distortion removed with the camera model) are fitted with
-   the direct least-squares ellipse (Fitzgibbon, ``cv2.fitEllipseDirect``); points further
-   than 3 MAD from it (a grass blade in front, a shaded limb) are dropped and the fit repeated.
-4. **Centre.** The ellipse centre is *not* the image of the sphere centre.  The major
-   axis is radial (it lies in the plane through the optical axis and the sphere centre);
-   its end points are the images of the two tangent rays in that plane, at angles
-   ``θ − α`` and ``θ + α`` from the axis, so the sphere centre direction ``θ`` is their
-   bisector (exact, needs no distance):
-   ``d = normalize(d1/|d1| + d2/|d2|)`` with ``d1,2 = (x1,2, y1,2, 1)`` normalised image
-   coordinates.  To first order the shift from ellipse centre to projected centre is
-   ``f·α²·tanθ·sec²θ`` (α = r/D angular radius): for a 10 cm sphere at 4 m in a 24 mm
-   full-frame view (f = 800 px at 1200 px width) it reaches 0.8 px in the image corners,
-   above the 0.5 px target, so the correction is applied.
+1. **Neutral colour.** White polystyrene reflects all bands alike, lit by the sun or only
+   by the sky, so the whole visible disc, its shaded limb included, is grey:
+   ``chroma = (max − min) / max`` of the 3 × 3-mean RGB below ``max_chroma`` and the level
+   above ``min_level_dn``.  Grass (green, yellow) and sky (blue) are not; bare soil and
+   clipped highlights can be.
+2. **A disc of the expected size.** Candidate centres are the local maxima of the distance
+   transform of the neutral mask (the centre of the largest inscribed circle, robust to a
+   neutral neighbour touching the disc).  Along ``n_rays`` rays the mask's exit must lie on
+   one circle (within ``max(1.5 px, 15 %)`` of the median) for at least ``min_edge_share``
+   of the rays, with the median in ``radius_px``.
+3. **The lit, high-contrast arc.** A sunlit sphere's shaded limb is often as dark as the
+   grass behind it: an edge found there is noise, and an outline that loses it moves
+   the centre towards the sun (the *sun-side bias*: 2–4 cm between rays from opposite sides
+   of the ring, DEMs 0–5 cm low).  Along each ray the outline is the steepest whiteness
+   step (``min(R, G, B)`` after a Gaussian of ``edge_sigma_px``; parabola peak, sub-pixel)
+   within 2.5 px of the mask's exit; it is used only where that step is at least
+   ``min_contrast_dn``.  The used rays must span at least ``min_arc_deg``.
+4. **The cone fit.** The arc's points become unit rays (distortion removed) and are fitted
+   with a circle in a virtual image plane perpendicular to the current centre estimate,
+   where the outline of a sphere is exactly a circle of radius ``tan(alpha)`` around the
+   centre's image; two iterations move the plane onto the centre.  So the centre is exact
+   from a partial arc (no ellipse-centre correction is needed).  Points beyond 3 MAD are
+   dropped and the fit repeated; the fit's RMS must stay below ``max_fit_rms_px``.
 
-Cost: O(pixels) for the blob labelling plus O(n_rays · ray length) per blob.
+Each detection also returns the angular radius ``alpha``: with the ray's distance ``D`` in
+a model, ``D·sin(alpha)`` is the sphere's radius in model units, the same for every photo of
+one sphere and for all spheres (used in :mod:`kitegully.closerange.model` to test 3-D
+candidates and the similarity's scale).
+
+Cost: O(pixels) for the mask and its distance transform, plus O(n_rays · ray length) per
+candidate (a few hundred candidates per photo in a bright scene).
 """
 
 from __future__ import annotations
@@ -49,42 +59,63 @@ class SphereDetection:
 
     Attributes
     ----------
-    white_min_dn : float
-        Whiteness ``min(R, G, B)`` (8-bit DN) a sphere pixel reaches. [I] the polystyrene
-        (reflectance ~0.9) is far above soil (~0.3) and grass (B ~0.1); between them on the
-        tone curve; seeds only, the blob then grows to the midpoint of its bright level
-        and the local background (hysteresis), so shaded sides and vignetted corners count.
+    max_chroma : float
+        Largest ``(max − min) / max`` of the 3 × 3-mean RGB of a sphere pixel. [I] white
+        polystyrene is neutral under sun and sky alike; the noise of a 3 × 3 mean at
+        ~130 DN (read 1 DN, shot 0.05 DN²/DN: σ ≈ 0.9 DN) moves it by ~0.02, JPEG's
+        halved chroma resolution mixes the grass's 0.13–0.3 into the rim pixel; 0.06 keeps
+        the disc and excludes green and yellow grass and the blue sky.
+    min_level_dn : float
+        Least ``max(R, G, B)`` of a sphere pixel. [I] a sphere's shaded side gets the
+        diffuse light only (25–30 %, about 125 DN after the tone curve); half of it allows
+        for exposure and vignetting, darker grey pixels (deep shadow, where the chroma of
+        noise is large) are not sphere.
     radius_px : tuple of float
         Smallest and largest expected image radius (px): ``f·r/D`` over the walk's distances.
-    min_fill : float
-        Blob area / area of its moment ellipse; a disc gives 1, a folding-rule leg or a
-        stone's highlight much less.
     n_rays : int
-        Rays from the blob centre along which the edge is located.
+        Rays from the candidate centre along which the outline is located.
     edge_sigma_px : float
-        Gaussian smoothing before the edge search (px).
+        Gaussian smoothing of the whiteness before the edge search (px).
     min_contrast_dn : float
-        Bright level (90th percentile of the seed) minus the median of the surrounding ring.
-        [I] the spheres stand on grass (whiteness ~30 DN) and reach ~200 DN; pebbles and
-        sunlit soil grains on bright soil stay below ~60 DN of contrast.
+        Least whiteness step across the outline (mean 1.5–3 px inside minus outside, either
+        sign) for an outline point to be used. [I] the lit limb against grass; where the
+        shaded limb meets grass as dark as itself the step falls to the texture's scatter
+        and the point would pull the centre: such rays are left out (the sun-side bias).
+    max_edge_width_px : float
+        Largest Gaussian width (px) of the step at an outline point, measured as
+        ``|step| / (√(2π) · largest slope)`` after the ``edge_sigma_px`` smoothing. [I] a
+        sphere's limb is an occlusion: a true step blurred only by the pixel (σ 0.3 px),
+        the optics and the smoothing, √(1 + 0.3² + 0.5²) ≈ 1.15 px at ``edge_sigma_px`` 1;
+        brightness edges in the ground's texture are blurred in addition by its sampling
+        (a 2 cm orthophoto seen at 3–13 m: 1–3 px), measured 1.2–1.8 px against 0.9–1.25 px
+        on the spheres (scene 05); 1.3 separates them. On a real site grass blades are
+        sharp too; the test then rests on the other criteria.
+    min_arc_deg : float
+        Least angular span (deg) of the outline points used, and least share of the rays
+        (``min_arc_deg / 360``) that must give such points. [I] a circle fit to an arc below
+        a third of the circle trades its radius against its centre (the centre's error grows
+        as 1/(1 − cos(arc/2)) times the edge noise); over 120° it stays within ~3× the
+        0.1–0.2 px edge noise.
     max_fit_rms_px : float
-        Largest RMS distance of the edge points from the fitted ellipse. [I] a sphere's
-        outline is an exact ellipse (measured 0.1–0.2 px with noise); irregular bright
-        patches fit to 0.3–3 px.
+        Largest RMS distance of the used outline points from the fitted cone (px). [I] a
+        sphere's outline is an exact circle on the cone (measured 0.1–0.2 px with noise);
+        irregular bright patches fit to 0.3–3 px.
     min_edge_share : float
-        Share of the rays whose edge point survives the outlier rejection. [I] a sphere
-        hidden over more than a fifth of its outline (a grass hummock in front, the image
-        border) is not measured: its visible arc biases the centre (0.7 px seen at 80 %).
+        Share of the rays whose neutral-mask exit lies on one circle. [I] a disc gives 1;
+        a sphere partly hidden by a grass hummock or touched by a neutral neighbour (bare
+        soil, a clipped highlight) keeps more than half; irregular neutral patches do not.
     """
 
-    white_min_dn: float = 150.0
+    max_chroma: float = 0.06
+    min_level_dn: float = 60.0
     radius_px: tuple[float, float] = (4.0, 80.0)
-    min_fill: float = 0.8
     n_rays: int = 90
     edge_sigma_px: float = 1.0
-    min_contrast_dn: float = 80.0
+    min_contrast_dn: float = 40.0
+    max_edge_width_px: float = 1.3
+    min_arc_deg: float = 120.0
     max_fit_rms_px: float = 0.3
-    min_edge_share: float = 0.8
+    min_edge_share: float = 0.6
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "SphereDetection":
@@ -94,8 +125,9 @@ class SphereDetection:
         p = cls(**values)
         if not 0 < p.radius_px[0] < p.radius_px[1]:
             raise InputError(f"sphere detection: radius_px must be two increasing positive radii, got {list(p.radius_px)}")
-        if not (0 < p.min_fill <= 1 and 0 < p.min_edge_share <= 1 and p.n_rays >= 12):
-            raise InputError("sphere detection: min_fill and min_edge_share must be in (0, 1] and n_rays at least 12")
+        if not (0 < p.max_chroma < 1 and 0 < p.min_edge_share <= 1 and p.n_rays >= 12 and 0 < p.min_arc_deg <= 360):
+            raise InputError("sphere detection: max_chroma and min_edge_share must be in (0, 1], n_rays at least 12 "
+                             "and min_arc_deg in (0, 360]")
         return p
 
 
@@ -104,88 +136,143 @@ def _whiteness(image: np.ndarray) -> np.ndarray:
     return (im.min(axis=2) if im.ndim == 3 else im).astype(np.float32)
 
 
-def _edge_points(w_smooth: np.ndarray, centre: np.ndarray, r0: float, n_rays: int) -> np.ndarray:
-    """Steepest-descent positions of ``w_smooth`` along rays from ``centre`` (sub-pixel)."""
-    ang = np.linspace(0.0, 2 * np.pi, n_rays, endpoint=False)
-    step = 0.25
-    s = np.arange(0.5 * r0, 1.5 * r0 + 3.0, step)
-    dirs = np.column_stack([np.cos(ang), np.sin(ang)])
-    U = centre[0] + dirs[:, :1] * s[None]
-    V = centre[1] + dirs[:, 1:] * s[None]
-    prof = ndimage.map_coordinates(w_smooth, [V.ravel(), U.ravel()], order=1, mode="nearest").reshape(U.shape)
-    g = -np.diff(prof, axis=1)  # descent between consecutive samples
-    i = np.argmax(g, axis=1)
-    ok = (i > 0) & (i < g.shape[1] - 1)
-    rows = np.arange(n_rays)
-    gm, g0, gp = g[rows, np.clip(i - 1, 0, None)], g[rows, i], g[rows, np.clip(i + 1, None, g.shape[1] - 1)]
+def neutral_mask(image: np.ndarray, max_chroma: float, min_level_dn: float) -> np.ndarray:
+    """Pixels whose 3 × 3-mean colour is grey (chroma below ``max_chroma``) and not dark (max >= ``min_level_dn``)."""
+    im = np.asarray(image, dtype=np.float32)
+    if im.ndim == 2:
+        return ndimage.uniform_filter(im, 3) >= min_level_dn
+    m = ndimage.uniform_filter(im, (3, 3, 1))
+    mx, mn = m.max(axis=2), m.min(axis=2)
+    return (mx >= min_level_dn) & (mx - mn < max_chroma * np.maximum(mx, 1e-6))
+
+
+def _candidate_centres(mask: np.ndarray, rmin: float, rmax: float) -> np.ndarray:
+    """(K, 3) ``u, v, r`` of the largest inscribed circles of the mask with radius in [0.7 rmin, 1.3 rmax] (non-max suppressed)."""
+    dt = ndimage.distance_transform_edt(mask)
+    size = max(3, int(2 * np.floor(0.7 * rmin) + 1))
+    peak = (dt == ndimage.maximum_filter(dt, size=size)) & (dt >= 0.7 * rmin) & (dt <= 1.3 * rmax + 1)
+    vv, uu = np.nonzero(peak)
+    r = dt[vv, uu]
+    order = np.argsort(-r, kind="stable")
+    uu, vv, r = uu[order], vv[order], r[order]
+    keep = np.ones(len(r), dtype=bool)
+    for i in range(len(r)):  # a disc's plateau of maxima → one candidate
+        if keep[i]:
+            near = np.hypot(uu[i + 1:] - uu[i], vv[i + 1:] - vv[i]) < r[i]
+            keep[i + 1:] &= ~near
+    return np.column_stack([uu[keep], vv[keep], r[keep]]).astype(float)
+
+
+def _mask_exits(mask: np.ndarray, cands: np.ndarray, dirs: np.ndarray, step: float = 0.5) -> np.ndarray:
+    """(K, n_rays) distance (px) along each ray at which the mask ends (first sample outside)."""
+    smax = 2.0 * cands[:, 2].max() + 6.0
+    s = np.arange(step, smax, step)
+    U = cands[:, 0, None, None] + dirs[None, :, 0, None] * s[None, None]
+    V = cands[:, 1, None, None] + dirs[None, :, 1, None] * s[None, None]
+    inside = ndimage.map_coordinates(mask.astype(np.uint8), [V.ravel(), U.ravel()], order=0, mode="constant", cval=0)
+    inside = inside.reshape(U.shape).astype(bool)
+    first_out = np.argmax(~inside, axis=2)
+    exits = s[first_out] - 0.5 * step
+    exits[inside.all(axis=2)] = np.inf
+    return exits
+
+
+def _outline_points(ws: np.ndarray, centre: np.ndarray, dirs: np.ndarray, exits: np.ndarray,
+                    halfwidth: float = 2.5, step: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-pixel steepest whiteness step along each ray within ``halfwidth`` of the mask exit; returns (points, contrast)."""
+    o = np.arange(-halfwidth - 3.0, halfwidth + 3.0 + step, step)  # offsets from the exit
+    s = exits[:, None] + o[None]
+    U = centre[0] + dirs[:, :1] * s
+    V = centre[1] + dirs[:, 1:] * s
+    prof = ndimage.map_coordinates(ws, [V.ravel(), U.ravel()], order=1, mode="nearest").reshape(U.shape)
+    g = np.abs(np.diff(prof, axis=1))  # |step| between samples j and j+1, at offset o[j] + step/2
+    mid = o[:-1] + 0.5 * step
+    g_in = np.where((np.abs(mid) <= halfwidth)[None], g, -1.0)
+    i = np.argmax(g_in, axis=1)
+    rows = np.arange(len(dirs))
+    gm, g0, gp = g[rows, i - 1], g[rows, i], g[rows, np.minimum(i + 1, g.shape[1] - 1)]
     den = gm - 2 * g0 + gp
     with np.errstate(invalid="ignore", divide="ignore"):
         off = np.where(np.abs(den) > 1e-9, 0.5 * (gm - gp) / den, 0.0)
-    pos = s[0] + (i + 0.5 + np.clip(off, -0.5, 0.5)) * step  # g[i] sits between samples i and i+1
+    pos = exits + mid[i] + np.clip(off, -0.5, 0.5) * step
+    # contrast: mean whiteness 1.5-3 px inside minus outside the edge (sign: lit limb > 0, dark limb < 0)
+    k = np.arange(int(1.5 / step), int(3.0 / step) + 1)
+    j_in = np.clip(i[:, None] - k[None], 0, prof.shape[1] - 1)
+    j_out = np.clip(i[:, None] + 1 + k[None], 0, prof.shape[1] - 1)
+    contrast = prof[rows[:, None], j_in].mean(axis=1) - prof[rows[:, None], j_out].mean(axis=1)
     pts = np.column_stack([centre[0] + dirs[:, 0] * pos, centre[1] + dirs[:, 1] * pos])
-    h, w = w_smooth.shape
-    inside = (pts[:, 0] >= 2) & (pts[:, 1] >= 2) & (pts[:, 0] <= w - 3) & (pts[:, 1] <= h - 3)
-    return pts[ok & (g0 > 0) & inside]
+    # width of the step: a Gaussian-blurred step of height c has the largest slope c / (σ √(2π))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        width = np.abs(contrast) / (np.sqrt(2 * np.pi) * np.maximum(g0 / step, 1e-9))
+    return pts, contrast, width
 
 
-def _to_normalised(camera: Camera, uv: np.ndarray) -> np.ndarray:
-    xn, yn = camera.undistort((uv[:, 0] - camera.cx) / camera.f, (uv[:, 1] - camera.cy) / camera.f)
-    return np.column_stack([xn, yn])
+def _rays_to_axis(axis: np.ndarray) -> np.ndarray:
+    """Rotation whose third row is ``axis`` (camera frame → virtual camera looking along ``axis``)."""
+    z = axis / np.linalg.norm(axis)
+    ref = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(ref, z)
+    x /= np.linalg.norm(x)
+    return np.vstack([x, np.cross(z, x), z])
 
 
-def fit_ellipse(points_px: np.ndarray) -> tuple[tuple[float, float], tuple[float, float], float, float, int]:
-    """Direct least-squares ellipse with one 3-MAD outlier rejection round.
+def fit_sphere_outline(rays: np.ndarray, f: float, iterations: int = 3) -> tuple[np.ndarray, float, np.ndarray]:
+    """Fit the tangent cone of a sphere to rays through its outline (a partial arc suffices).
+
+    In a virtual image plane (focal length ``f``) perpendicular to the cone's axis the
+    outline is a circle of radius ``f·tan(alpha)`` centred on the axis; the circle is fitted
+    (Gauss–Newton on geometric distances, centre and radius free) and the plane re-aimed at
+    its centre, ``iterations`` times.  The radius is left free on purpose: a Lambertian
+    sphere lit from beside or behind the camera is darker in a sub-pixel band at its limb,
+    so the steepest step lies 0.1–0.4 px inside the outline all along the lit arc; a free
+    radius absorbs that uniform shift, a radius tied to the disc's would turn it into a
+    centre shift towards the shade.
+
+    Parameters
+    ----------
+    rays : (N, 3) directions (camera frame) through the outline points (N >= 3).
+    f : focal length (px) that expresses the residuals in pixels.
+    iterations : re-aiming steps.
 
     Returns
     -------
-    centre (u, v), semi-axes (a >= b), major-axis angle (rad, from +u), RMS distance of the
-    kept points (px), number of kept points
+    unit direction of the sphere centre (camera frame), angular radius (rad), residuals (px).
     """
-    P = np.asarray(points_px, dtype=np.float64)
-    keep = np.ones(len(P), dtype=bool)
-    for _ in range(2):
-        (cu, cv_), (d1, d2), ang = cv2.fitEllipseDirect(P[keep].astype(np.float32))
-        res = _ellipse_residual(P, (cu, cv_), (d1 / 2, d2 / 2), np.radians(ang))
-        mad = np.median(np.abs(res[keep] - np.median(res[keep]))) * 1.4826
-        new = np.abs(res) <= max(3.0 * mad, 0.05)
-        if new.sum() < 6 or np.array_equal(new, keep):
-            break
-        keep = new
-    a, b, theta = d1 / 2, d2 / 2, np.radians(ang)
-    if b > a:
-        a, b, theta = b, a, theta + np.pi / 2
-    rms = float(np.sqrt(np.mean(res[keep] ** 2)))
-    return (float(cu), float(cv_)), (float(a), float(b)), float(theta), rms, int(keep.sum())
+    d = np.asarray(rays, float)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    axis = d.mean(axis=0)
+    axis /= np.linalg.norm(axis)
+    rho = 0.0
+    for _ in range(iterations):
+        R = _rays_to_axis(axis)
+        p = d @ R.T
+        x, y = f * p[:, 0] / p[:, 2], f * p[:, 1] / p[:, 2]
+        # algebraic (Kåsa) start, then Gauss–Newton on the geometric distances
+        A = np.column_stack([2 * x, 2 * y, np.ones_like(x)])
+        a, b, c = np.linalg.lstsq(A, x * x + y * y, rcond=None)[0]
+        rho = float(np.sqrt(max(c + a * a + b * b, 1e-12)))
+        for _ in range(6):
+            dx, dy = x - a, y - b
+            dist = np.maximum(np.hypot(dx, dy), 1e-12)
+            r = dist - rho
+            J = np.column_stack([-dx / dist, -dy / dist, -np.ones_like(dist)])
+            delta = np.linalg.solve(J.T @ J + 1e-12 * np.eye(3), -(J.T @ r))
+            a, b, rho = a + delta[0], b + delta[1], rho + delta[2]
+            if np.abs(delta).max() < 1e-4:
+                break
+        axis = R.T @ np.array([a / f, b / f, 1.0])
+        axis /= np.linalg.norm(axis)
+    res = fit_sphere_outline_residuals(d, axis, float(np.arctan(rho / f)), f)
+    return axis, float(np.arctan(rho / f)), res
 
 
-def _ellipse_residual(P, c, axes, theta):
-    """Approximate geometric distance of points to an ellipse (algebraic, scaled to px)."""
-    ct, st = np.cos(theta), np.sin(theta)
-    x = (P[:, 0] - c[0]) * ct + (P[:, 1] - c[1]) * st
-    y = -(P[:, 0] - c[0]) * st + (P[:, 1] - c[1]) * ct
-    rho = np.sqrt((x / axes[0]) ** 2 + (y / axes[1]) ** 2)
-    return (rho - 1.0) * np.sqrt(axes[0] * axes[1])
-
-
-def sphere_centre_from_ellipse(camera: Camera, centre_n: np.ndarray, a_n: float) -> np.ndarray:
-    """Image (px, distorted) of a sphere's centre from its outline ellipse in normalised coordinates.
-
-    ``centre_n`` and ``a_n`` are the ellipse centre and semi-major axis in undistorted
-    normalised coordinates.  The major axis is taken along the radial direction (exact for
-    a sphere), its end points give the two tangent rays, their bisector the centre ray.
-    """
-    c = np.asarray(centre_n, dtype=float)
-    rad = np.hypot(*c)
-    if rad < 1e-12:
-        d = np.array([c[0], c[1], 1.0])
-    else:
-        e = c / rad
-        p1, p2 = c - a_n * e, c + a_n * e
-        d1 = np.array([p1[0], p1[1], 1.0])
-        d2 = np.array([p2[0], p2[1], 1.0])
-        d = d1 / np.linalg.norm(d1) + d2 / np.linalg.norm(d2)
-    uv = camera.project_camera(d[None])[0]
-    return uv
+def _arc_span_deg(angles: np.ndarray) -> float:
+    """Angular span (deg) covered by directions ``angles`` (rad): 360 minus the largest gap."""
+    if len(angles) < 2:
+        return 0.0
+    a = np.sort(np.mod(angles, 2 * np.pi))
+    gaps = np.diff(np.append(a, a[0] + 2 * np.pi))
+    return float(np.degrees(2 * np.pi - gaps.max()))
 
 
 def detect_spheres(image: np.ndarray, camera: Camera, params: SphereDetection = SphereDetection()) -> pd.DataFrame:
@@ -196,74 +283,88 @@ def detect_spheres(image: np.ndarray, camera: Camera, params: SphereDetection = 
     image
         (rows, cols, 3) uint8 RGB (or a single band).
     camera
-        Intrinsics used to remove distortion and to correct the ellipse centre (nominal
-        EXIF values suffice: the correction is second order in the intrinsics).
+        Intrinsics used to remove distortion (nominal EXIF values suffice for detection;
+        the stage passes the self-calibrated ones).
     params
         Detection parameters.
 
     Returns
     -------
     pandas.DataFrame
-        One row per sphere: ``u_px, v_px`` (image of the sphere centre, pixel centres at
-        integers), ``ellipse_u_px, ellipse_v_px`` (uncorrected ellipse centre),
-        ``semi_major_px, semi_minor_px, fit_rms_px, n_edge_points``.
+        One row per sphere: ``u_px, v_px`` (image of the sphere centre, distorted, pixel
+        centres at integers), ``radius_px`` (``f·tan(alpha)``), ``alpha_rad`` (angular
+        radius), ``arc_deg`` (span of the outline points used), ``contrast_dn`` (median
+        |step| over them), ``fit_rms_px``, ``n_edge_points``.
+
+    Notes
+    -----
+    O(pixels) + O(candidates · n_rays · radius).
     """
-    w = _whiteness(image)
-    mask = w >= params.white_min_dn
-    lab, n = ndimage.label(mask, structure=np.ones((3, 3)))
-    cols = ["u_px", "v_px", "ellipse_u_px", "ellipse_v_px", "semi_major_px", "semi_minor_px", "fit_rms_px", "n_edge_points"]
-    if n == 0:
-        return pd.DataFrame(columns=cols)
+    cols = ["u_px", "v_px", "radius_px", "alpha_rad", "arc_deg", "contrast_dn", "edge_width_px", "fit_rms_px", "n_edge_points"]
+    img = np.asarray(image)
+    mask = neutral_mask(img, params.max_chroma, params.min_level_dn)
     rmin, rmax = params.radius_px
-    areas = np.bincount(lab.ravel(), minlength=n + 1)
+    cands = _candidate_centres(mask, rmin, rmax)
+    if len(cands) == 0:
+        return pd.DataFrame(columns=cols)
+    ang = np.linspace(0.0, 2 * np.pi, params.n_rays, endpoint=False)
+    dirs = np.column_stack([np.cos(ang), np.sin(ang)])
+    rows_out = []
+    for lo in range(0, len(cands), 256):  # bounded memory for the vectorised ray sampling
+        chunk = cands[lo:lo + 256]
+        exits = _mask_exits(mask, chunk, dirs)
+        med = np.median(np.where(np.isfinite(exits), exits, 1e9), axis=1)
+        on_circle = np.abs(exits - med[:, None]) <= np.maximum(1.5, 0.15 * med)[:, None]
+        share = on_circle.mean(axis=1)
+        good = (share >= params.min_edge_share) & (med >= rmin) & (med <= rmax)
+        for k in np.nonzero(good)[0]:
+            rows_out.append((chunk[k], exits[k], on_circle[k], med[k]))
+    if not rows_out:
+        return pd.DataFrame(columns=cols)
+    w = _whiteness(img)
     ws = ndimage.gaussian_filter(w, params.edge_sigma_px) if params.edge_sigma_px > 0 else w
-    rows = []
-    for k, sl in enumerate(ndimage.find_objects(lab), start=1):
-        area = areas[k]
-        if sl is None or area < np.pi * rmin ** 2 * 0.5 or area > np.pi * rmax ** 2 * 1.5:
+    h, wd = w.shape
+    found = []
+    for cand, exits, on_circle, med in rows_out:
+        # re-centre on the exit points of the rays on the circle (the inscribed circle's centre is integer)
+        exits = np.where(np.isfinite(exits), exits, med)  # rays that never leave the mask are off the circle anyway
+        e = np.column_stack([cand[0] + dirs[:, 0] * exits, cand[1] + dirs[:, 1] * exits])
+        centre = e[on_circle].mean(axis=0)
+        ex = np.where(on_circle, np.einsum("ij,ij->i", e - centre, dirs), med)  # exits seen from the new centre
+        pts, contrast, width = _outline_points(ws, centre, dirs, ex)
+        # a sharp, strong step: the occluding limb (soft steps: ground texture, the terminator's ramp)
+        use = on_circle & (np.abs(contrast) >= params.min_contrast_dn) & (width <= params.max_edge_width_px)
+        use &= (pts[:, 0] >= 2) & (pts[:, 1] >= 2) & (pts[:, 0] <= wd - 3) & (pts[:, 1] <= h - 3)
+        if use.sum() < max(6, params.min_arc_deg / 360.0 * params.n_rays) or _arc_span_deg(ang[use]) < params.min_arc_deg:
             continue
-        # hysteresis: the shaded side of a sphere is darker than the seed threshold; grow the
-        # blob into pixels above the midpoint of its bright level and the local background
-        r_seed = np.sqrt(area / np.pi)
-        pad = int(np.ceil(2.5 * r_seed)) + 3
-        r0_, r1_ = max(sl[0].start - pad, 0), min(sl[0].stop + pad, w.shape[0])
-        c0_, c1_ = max(sl[1].start - pad, 0), min(sl[1].stop + pad, w.shape[1])
-        roi, seed = w[r0_:r1_, c0_:c1_], lab[r0_:r1_, c0_:c1_] == k
-        near = ndimage.binary_dilation(seed, iterations=int(np.ceil(1.5 * r_seed)) + 2)
-        ring = ~near & ~(lab[r0_:r1_, c0_:c1_] > 0)
-        if ring.sum() < 10:
+        rays = camera.rays_camera(pts[use, 0], pts[use, 1])
+        axis, alpha, res = fit_sphere_outline(rays, camera.f)
+        mad = 1.4826 * np.median(np.abs(res - np.median(res)))
+        keep = np.abs(res) <= max(3.0 * mad, 0.1)  # a grass blade across the limb, a leftover texture edge
+        if keep.sum() < 6:
             continue
-        bg_level, bright = float(np.median(roi[ring])), float(np.percentile(roi[seed], 90))
-        if bright - bg_level < params.min_contrast_dn:
+        if not keep.all():
+            axis, alpha, res = fit_sphere_outline(rays[keep], camera.f)
+        rms = float(np.sqrt(np.mean(res ** 2)))
+        r_px = camera.f * np.tan(alpha)
+        if rms > params.max_fit_rms_px or not (rmin <= r_px <= rmax) or _arc_span_deg(ang[use][keep]) < params.min_arc_deg:
             continue
-        mid = 0.5 * (bg_level + bright)
-        grown, _ = ndimage.label(roi > mid)
-        ids = np.unique(grown[seed])
-        region = np.isin(grown, ids[ids > 0])
-        vv, uu = np.nonzero(region)
-        area = len(uu)
-        uu = uu + c0_
-        vv = vv + r0_
-        cu, cv_ = uu.mean(), vv.mean()
-        cov = np.cov(np.vstack([uu, vv]))
-        ev = np.linalg.eigvalsh(cov)
-        ell_area = 4 * np.pi * np.sqrt(max(ev[0], 1e-9) * ev[1])
-        if area / ell_area < params.min_fill:
-            continue
-        r0 = float(np.sqrt(area / np.pi))
-        pts = _edge_points(ws, np.array([cu, cv_]), r0, params.n_rays)
-        if len(pts) < 10:
-            continue
-        # fit in undistorted pixel coordinates (distortion removed, same scale f)
-        pn = _to_normalised(camera, pts)
-        pu = pn * camera.f + np.array([camera.cx, camera.cy])
-        (eu, ev_), (a, b), _, rms, n_kept = fit_ellipse(pu)
-        if not (rmin <= b and a <= rmax) or b / a < 0.5 or rms > params.max_fit_rms_px:
-            continue
-        if n_kept < params.min_edge_share * params.n_rays:
-            continue
-        centre_n = (np.array([eu, ev_]) - np.array([camera.cx, camera.cy])) / camera.f
-        uv = sphere_centre_from_ellipse(camera, centre_n, a / camera.f)
-        ell_uv = camera.project_camera(np.array([[centre_n[0], centre_n[1], 1.0]]))[0]
-        rows.append([uv[0], uv[1], ell_uv[0], ell_uv[1], a, b, rms, n_kept])
-    return pd.DataFrame(rows, columns=cols)
+        uv = camera.project_camera(axis[None])[0]
+        found.append([uv[0], uv[1], r_px, alpha, _arc_span_deg(ang[use][keep]), float(np.median(np.abs(contrast[use][keep]))),
+                      float(np.median(width[use][keep])), rms, int(keep.sum())])
+    if not found:
+        return pd.DataFrame(columns=cols)
+    det = pd.DataFrame(found, columns=cols).sort_values("n_edge_points", ascending=False, kind="stable")
+    # one row per sphere: candidates of one disc (a plateau split by noise) give the same fit
+    keep_rows: list[int] = []
+    for i, r in det.iterrows():
+        if all(np.hypot(r.u_px - det.at[j, "u_px"], r.v_px - det.at[j, "v_px"]) > 0.5 * r.radius_px for j in keep_rows):
+            keep_rows.append(i)
+    return det.loc[keep_rows].reset_index(drop=True)
+
+
+def fit_sphere_outline_residuals(rays: np.ndarray, axis: np.ndarray, alpha: float, f: float) -> np.ndarray:
+    """Residuals (px, in the virtual plane at focal length ``f``) of outline rays from the cone (``axis``, ``alpha``)."""
+    d = np.asarray(rays, float)
+    p = d @ _rays_to_axis(axis).T
+    return f * np.hypot(p[:, 0], p[:, 1]) / p[:, 2] - f * np.tan(alpha)

@@ -32,7 +32,7 @@ from kitegully import InputError
 from kitegully.closerange.dense import PairMatching, dense_points
 from kitegully.closerange.foldrule import measure_folding_rule
 from kitegully.closerange.gridding import grid_points
-from kitegully.closerange.model import detection_rays, match_markers, read_oriented_photos, triangulate_spheres
+from kitegully.closerange.model import detection_rays, match_markers, read_oriented_photos, triangulate_spheres, verify_spheres
 from kitegully.closerange.spheres import SphereDetection, detect_spheres
 from kitegully.config import config_section
 from kitegully.io.raster import GridSpec, write_raster
@@ -74,9 +74,10 @@ class CloseRangeParams:
         Ray–point distance that still counts as one sphere, in the model's scale expressed
         at the walk's size (scaled by the camera ring radius / 5 m). [I] a tenth of the 0.1 m
         sphere radius: 0.3 px at 5 m is 2 mm, so 1 cm is lenient yet spheres are metres apart.
-        Known to be too tight for sunlit spheres: the shaded limb biases each photo's centre
-        towards the sun, rays from opposite sides then miss by 2–4 cm, and a sphere is split
-        into two candidates or not triangulated (README, closerange); not changed here.
+        Session 6 found it too tight for sunlit spheres (the shaded limb biased each photo's
+        centre towards the sun; rays from opposite sides missed by 2–4 cm); the detector now
+        fits only the lit limb, and scene 10 triangulates all 4 spheres. A sphere can still be
+        split in two candidates (scene 05's S2); the pairing treats copies correctly.
     marker_budget_m : float
         Largest residual of a sphere after the similarity; an assignment of triangulated
         spheres to the survey is accepted only within it (and the inter-sphere distances must
@@ -311,7 +312,7 @@ def photogrammetric_orthophoto(
     photos, sparse = read_oriented_photos(out["model"])
     images = _read_photos(Path(work_dir) / "images", [p.name for p in photos])  # the prepared copies SfM saw
     # spheres: detect, rays, triangulate, pair with the survey, similarity
-    O, D, pid, det_rows = [], [], [], []
+    O, D, pid, alpha, det_rows = [], [], [], [], []
     for k, ph in enumerate(photos):
         det = detect_spheres(images[ph.name], ph.camera, params.spheres)
         if len(det):
@@ -319,16 +320,23 @@ def photogrammetric_orthophoto(
             O.append(o)
             D.append(d)
             pid += [k] * len(det)
+            alpha += det["alpha_rad"].tolist()
             det_rows += [(ph.name, u, v) for u, v in det[["u_px", "v_px"]].to_numpy()]
     if not O:
         raise InputError(f"{photo_dir}: no white sphere was found in any of the {len(photos)} oriented photos")
-    O, D, pid = np.concatenate(O), np.concatenate(D), np.array(pid)
+    O, D, pid, alpha = np.concatenate(O), np.concatenate(D), np.array(pid), np.array(alpha)
     centres = np.array([p.centre for p in photos])
     ring = float(np.median(np.linalg.norm(centres - centres.mean(axis=0), axis=1)))
     tol = params.sphere_tolerance_m * ring / 5.0 if ring > 0 else params.sphere_tolerance_m
     # the model's scale is arbitrary: express the tolerance via the ring radius (~5 m at the walk's size)
-    found = triangulate_spheres(O, D, pid, tol)
+    found_all = triangulate_spheres(O, D, pid, tol)
+    checks_all = verify_spheres(found_all, O, alpha, sparse)
+    found = [f for f, c in zip(found_all, checks_all) if c["sphere"]]
+    checks = [c for c in checks_all if c["sphere"]]
+    log.info("%s: %d sphere detections in %d photos, %d triangulated, %d with one radius from every side (radius spread <= 15 %%)",
+             scene, len(O), len(photos), len(found_all), len(found))
     model_xyz = np.array([f[0] for f in found]).reshape(-1, 3)
+    radii = np.array([c["radius"] for c in checks])
     sxyz = survey[["x", "y", "z"]].to_numpy(float)
     ids = survey["gcp_id"].astype(str).tolist()
     # plausibility: with the similarity the cameras stand at the pole's height above the
@@ -343,11 +351,14 @@ def photogrammetric_orthophoto(
         h = float(np.median(c[:, 2] - ground))
         return 0.5 * params.pole_height_m <= h <= 2.0 * params.pole_height_m
 
-    sim, rows, perm, res = match_markers(model_xyz, sxyz, ids, params.marker_budget_m, plausible=cameras_on_poles)
+    sim, rows, perm, res = match_markers(model_xyz, sxyz, ids, params.marker_budget_m, plausible=cameras_on_poles,
+                                         radii=radii, radius_m=params.sphere_radius_m)
     err = np.linalg.norm(res, axis=1)
     sph = pd.DataFrame({
         "gcp_id": [ids[p] for p in perm], "n_photos": [len(found[r][1]) for r in rows],
         "dx_m": res[:, 0], "dy_m": res[:, 1], "dz_m": res[:, 2], "error_m": err,
+        "radius_m": [sim.scale * checks[r]["radius"] for r in rows],
+        "height_above_tie_points_m": [sim.scale * checks[r]["height"] for r in rows],
     })
     sph.to_csv(out["spheres"], index=False, float_format="%.4f")
     log.info("%s: %d spheres triangulated, %d paired with the survey, marker error %.3f m (max %.3f m), scale %.4f",
@@ -382,6 +393,7 @@ def photogrammetric_orthophoto(
         "images_used": int(summary["n_images"]), "images_aligned": int(summary["n_registered"]),
         "marker_error_m": float(err.mean()), "marker_error_max_m": float(err.max()),
         "spheres_measured": len(rows), "sphere_detections": len(det_rows),
+        "sphere_candidates": len(found_all), "sphere_candidates_round": len(found),
         "scale_error_pct": None if rule is None else rule["scale_error_pct"],
         "rule": rule,
         "tie_points": int(summary["n_points3d"]), "reprojection_px": float(summary["mean_reprojection_error_px"]),
