@@ -15,12 +15,13 @@ strip is 1–5 px wide and its black decimetre marks are visible.  So:
    pixel wide covers at least half of one pixel in every line across it, and 0.25 is the
    midpoint between no paint and that half (the orthophoto's argument, per pixel).  Image
    noise (1 DN read, shot noise ~3 DN at 200 DN) moves ``f`` by a few hundredths only.
-2. **Two joined segments per photo** (:func:`find_rule_views`): paint pixels closer than a
-   decimetre mark (half the strip's width) are grouped; in each of the largest groups two
-   straight lines are fitted (RANSAC, then weighted least squares), and the group is an
-   "L" when the lines meet at more than 15° (a right angle on the ground seen from
-   ``e`` above the horizon looks no sharper than ``2 atan(sin e)``: 20° at the far side's
-   10–12°) at a point each segment reaches (within twice the widest strip).  The corner is
+2. **Two joined segments per photo** (:func:`find_rule_views`): straight segments of paint
+   pixels are extracted one after the other (RANSAC scored by the heaviest run without a
+   gap longer than a decimetre mark spacing at the nearest distance: the marks and, where
+   the strip is narrower than a pixel, aliasing interrupt the paint), then weighted least
+   squares; two segments are an "L" when their lines meet at more than 30° (:data:`MIN_LINE_ANGLE_DEG`:
+   sharper crossings do not fix the corner) at a point each segment reaches (within twice
+   the widest strip).  The corner is
    the lines' intersection (exact for the strip's centre lines); each leg ends where the
    paint integrated across the strip falls to half its level along the leg (the 50 %
    point of a blurred edge, sub-pixel).  An end closer to the image border than the
@@ -32,7 +33,8 @@ strip is 1–5 px wide and its black decimetre marks are visible.  So:
    frame after the sphere similarity: the corner rays of all L's are grouped without labels
    (:func:`kitegully.closerange.model.triangulate_spheres`, the spheres' ray grouping:
    >= 3 photos agreeing within the tolerance), then the A and B end rays of the L's in the
-   winning corner group each.  [I] tolerance = the strip's width (2 cm): wherever the
+   winning corner group each (>= 2 photos: the L is identified by then; within twice the
+   tolerance: an end is located along the strip less sharply than the corner).  [I] tolerance = the strip's width (2 cm): wherever the
    strip is resolved (>= 1 px) a point on it is located within its width.  The result is
    accepted only where the rule can be: corner and ends on the mapped surface (within the
    dense filter's tolerance of the DEM, inside the crop) and the legs orthogonal within
@@ -69,6 +71,12 @@ log = logging.getLogger(__name__)
 
 #: hue range of the paint (°): the rule's yellow (49°) mixed with grass or soil stays inside it
 PAINT_HUE = (35.0, 75.0)
+#: least angle (°) at which two segments' lines may meet to form an L: two lines located to
+#: half a pixel and meeting at θ fix their crossing to 0.5 px / sin θ along the bisector, within
+#: a strip >= 1 px wide for θ >= 30°.  (A right angle on the ground seen from e above the
+#: horizon looks no sharper than 2 atan(sin e): 30° from 15°; the far side's flatter views of
+#: a leg pointing at the camera are dropped, they cannot place the corner.)
+MIN_LINE_ANGLE_DEG = 30.0
 
 
 @dataclass(frozen=True)
@@ -112,8 +120,27 @@ def photo_paint_share(img: np.ndarray, paint_rgb: Sequence[float], gamma: float,
     return f, (h >= PAINT_HUE[0]) & (h <= PAINT_HUE[1]) & (f >= min_share)
 
 
-def _fit_line(P: np.ndarray, w: np.ndarray, tol: float, rng: np.random.Generator, iterations: int = 200):
-    """RANSAC line through points P (N, 2) weighted by w, refined by weighted PCA on the inliers; None if degenerate."""
+def _longest_run(t: np.ndarray, w: np.ndarray, gap: float) -> tuple[float, np.ndarray]:
+    """Weight and member mask of the heaviest run of positions ``t`` along a line with no gap longer than ``gap``."""
+    order = np.argsort(t)
+    ts, ws = t[order], w[order]
+    run = np.concatenate([[0], np.cumsum(np.diff(ts) > gap)])
+    weight = np.bincount(run, weights=ws)
+    best = int(np.argmax(weight))
+    members = np.zeros(len(t), bool)
+    members[order[run == best]] = True
+    return float(weight[best]), members
+
+
+def _fit_segment(P: np.ndarray, w: np.ndarray, tol: float, gap: float, rng: np.random.Generator, iterations: int = 300,
+                 shortlist: int = 20):
+    """One straight, contiguous segment through points P (N, 2) weighted by w: RANSAC scored by the heaviest run.
+
+    Hypotheses are lines through two random points; the ``shortlist`` with the most inlier
+    weight (within ``tol``) are scored by their heaviest run without a gap longer than
+    ``gap``; the winner is refined by weighted PCA on its run (twice).  Returns
+    ``(centre, unit direction, member mask)`` or None.
+    """
     n = len(P)
     if n < 2:
         return None
@@ -126,18 +153,27 @@ def _fit_line(P: np.ndarray, w: np.ndarray, tol: float, rng: np.random.Generator
         return None
     i, d = i[ok], d[ok] / L[ok, None]
     dist = np.abs((P[None, :, 0] - P[i, 0][:, None]) * d[:, 1][:, None] - (P[None, :, 1] - P[i, 1][:, None]) * d[:, 0][:, None])
-    score = ((dist < tol) * w[None]).sum(axis=1)
-    inl = dist[int(np.argmax(score))] < tol
+    total = ((dist < tol) * w[None]).sum(axis=1)
+    best, best_score = None, -1.0
+    for h in np.argsort(total)[::-1][:shortlist]:
+        inl = np.nonzero(dist[h] < tol)[0]
+        score, mem = _longest_run(P[inl] @ d[h], w[inl], gap)
+        if score > best_score:
+            best_score, best = score, (P[i[h]], d[h], inl[mem])
+    c, dd, members = best
     for _ in range(2):
-        if inl.sum() < 2:
+        if len(members) < 2:
             return None
-        ww = w[inl]
-        c = (P[inl] * ww[:, None]).sum(0) / ww.sum()
-        Q = (P[inl] - c) * np.sqrt(ww)[:, None]
-        _, _, Vt = np.linalg.svd(Q, full_matrices=False)
-        dd = Vt[0]
-        inl = np.abs((P[:, 0] - c[0]) * dd[1] - (P[:, 1] - c[1]) * dd[0]) < tol
-    return c, dd, inl
+        ww = w[members]
+        c = (P[members] * ww[:, None]).sum(0) / ww.sum()
+        Q = (P[members] - c) * np.sqrt(ww)[:, None]
+        dd = np.linalg.svd(Q, full_matrices=False)[2][0]
+        inl = np.nonzero(np.abs((P[:, 0] - c[0]) * dd[1] - (P[:, 1] - c[1]) * dd[0]) < tol)[0]
+        _, mem = _longest_run(P[inl] @ dd, w[inl], gap)
+        members = inl[mem]
+    mask = np.zeros(n, bool)
+    mask[members] = True
+    return c, dd, mask
 
 
 def _end_along(f: np.ndarray, origin: np.ndarray, d: np.ndarray, far: float, half_width: float) -> tuple[float, float, bool]:
@@ -165,7 +201,7 @@ def _end_along(f: np.ndarray, origin: np.ndarray, d: np.ndarray, far: float, hal
     half = 0.5 * width
     start = int(np.searchsorted(t, max(far - max(width, 1.0), 0.0)))
     below = np.nonzero(prof[start:] < half)[0]
-    if half <= 0 or len(below) == 0 or start + below[0] == 0:
+    if half <= 0 or len(below) == 0 or below[0] == 0:
         return far, width, False
     jj = start + below[0]
     p0, p1 = prof[jj - 1], prof[jj]
@@ -174,9 +210,14 @@ def _end_along(f: np.ndarray, origin: np.ndarray, d: np.ndarray, far: float, hal
 
 def find_rule_views(
     f: np.ndarray, mask: np.ndarray, photo: int, width_max_px: float, window_px: int, rng: np.random.Generator,
-    max_groups: int = 8,
+    max_segments: int = 8,
 ) -> list[RuleView]:
     """Candidate "L"s of the rule in one photo (see module doc, step 2).
+
+    Straight contiguous segments of paint pixels are extracted one after the other
+    (:func:`_fit_segment`, at most ``max_segments``), each at least 3 strip widths long; two
+    segments form an L when their lines meet at more than ``MIN_LINE_ANGLE_DEG`` (30°) at a point each segment
+    reaches (within twice the widest strip).
 
     Parameters
     ----------
@@ -184,75 +225,69 @@ def find_rule_views(
     photo : index of the photo (kept in the views).
     width_max_px : widest the strip can appear (:func:`strip_width_px`).
     window_px : the background window (an end closer than half of it to the border is not seen).
-    rng : RANSAC stream.  max_groups : the largest paint groups examined.
+    rng : RANSAC stream.  max_segments : segments extracted per photo.
 
     Returns
     -------
     list of :class:`RuleView` (possibly several per photo; the triangulation picks the rule).
-    Cost: O(pixels) for the grouping, O(iterations · group pixels) per group.
+    Cost: O(segments · iterations · paint pixels).
     """
     rows, cols = mask.shape
     tol = 0.5 * width_max_px + 1.0  # half the widest strip + 1 px of blur
     join = 2.0 * width_max_px + 2.0
     min_len = 3.0 * width_max_px  # a 1 m leg is 50 strip widths; seen end-on from the far side still ~12 px
-    gap_iter = max(1, int(np.ceil(0.25 * width_max_px)))  # a black mark: half the strip's width
-    grouped = ndimage.binary_dilation(mask, structure=np.ones((3, 3), bool), iterations=gap_iter)
-    lab, n = ndimage.label(grouped, structure=np.ones((3, 3)))
-    if n == 0:
+    # paint is interrupted by the black marks and, where the strip is narrower than a pixel,
+    # by aliasing: gaps up to one mark spacing (1 dm = 5 strip widths) at the nearest distance are bridged
+    gap = 5.0 * width_max_px
+    rr, cc = np.nonzero(mask)
+    if len(rr) < min_len:
         return []
-    counts = np.bincount(lab[mask], minlength=n + 1)
-    counts[0] = 0
-    order = np.argsort(counts)[::-1][:max_groups]
+    P = np.column_stack([cc, rr]).astype(float)
+    w = np.clip(f[rr, cc], 0.0, 1.0)
+    left = np.ones(len(P), bool)
+    segs = []
+    for _ in range(max_segments):
+        idx = np.nonzero(left)[0]
+        if len(idx) < min_len:
+            break
+        sg = _fit_segment(P[idx], w[idx], tol, gap, rng)
+        if sg is None:
+            break
+        c, d, mem = sg
+        members = idx[mem]
+        left[members] = False
+        t = (P[members] - c) @ d
+        if t.max() - t.min() >= min_len:
+            segs.append((c, d, c + t.min() * d, c + t.max() * d))
     views = []
     margin = 0.5 * window_px
-    for g in order:
-        if counts[g] < min_len:
-            break
-        rr, cc = np.nonzero((lab == g) & mask)
-        P = np.column_stack([cc, rr]).astype(float)
-        w = np.clip(f[rr, cc], 0.0, 1.0)
-        l1 = _fit_line(P, w, tol, rng)
-        if l1 is None:
-            continue
-        rest = ~l1[2]
-        if rest.sum() < min_len:
-            continue
-        l2 = _fit_line(P[rest], w[rest], tol, rng)
-        if l2 is None:
-            continue
-        (c1, d1, in1), (c2, d2, _) = l1, l2
-        in2 = np.abs((P[:, 0] - c2[0]) * d2[1] - (P[:, 1] - c2[1]) * d2[0]) < tol
-        if np.degrees(np.arccos(min(abs(float(d1 @ d2)), 1.0))) < 15.0:
-            continue
-        s1 = np.linalg.solve(np.column_stack([d1, -d2]), c2 - c1)[0]
-        corner = c1 + s1 * d1
-        legs = []
-        for d, inl in ((d1, in1 & ~in2), (d2, in2 & ~in1)):
-            t = (P[inl] - corner) @ d
-            if len(t) == 0:
-                break
-            sgn = 1.0 if np.median(t) > 0 else -1.0
-            t = t * sgn
-            t = t[t > -join]
-            if len(t) == 0 or t.min() > join or t.max() < min_len:
-                break
-            legs.append((d * sgn, float(t.max())))
-        if len(legs) < 2:
-            continue
-        ends, seen, widths = [], [], []
-        for d, far in legs:
-            s, width, crossed = _end_along(f, corner, d, far, tol)
-            e = corner + s * d
-            inside = margin <= e[0] <= cols - 1 - margin and margin <= e[1] <= rows - 1 - margin
-            ends.append(e)
-            seen.append(bool(crossed and inside))
-            widths.append(width)
-        (da, _), (db, _) = legs
-        if da[0] * db[1] - da[1] * db[0] < 0:  # handedness (u right, v down): A is the leg turned to by +90° in the image
-            ends, seen = ends[::-1], seen[::-1]
-        if not (margin <= corner[0] <= cols - 1 - margin and margin <= corner[1] <= rows - 1 - margin):
-            continue
-        views.append(RuleView(photo, corner, np.array(ends), np.array(seen), float(np.median(widths))))
+    for a in range(len(segs)):
+        for b in range(a + 1, len(segs)):
+            (c1, d1, p1, q1), (c2, d2, p2, q2) = segs[a], segs[b]
+            if np.degrees(np.arccos(min(abs(float(d1 @ d2)), 1.0))) < MIN_LINE_ANGLE_DEG:
+                continue
+            corner = c1 + np.linalg.solve(np.column_stack([d1, -d2]), c2 - c1)[0] * d1
+            legs = []
+            for p, q in ((p1, q1), (p2, q2)):
+                near, far_pt = (p, q) if np.linalg.norm(p - corner) < np.linalg.norm(q - corner) else (q, p)
+                if np.linalg.norm(near - corner) > join:
+                    break
+                v = far_pt - corner
+                legs.append((v / np.linalg.norm(v), float(np.linalg.norm(v))))
+            if len(legs) < 2 or not (margin <= corner[0] <= cols - 1 - margin and margin <= corner[1] <= rows - 1 - margin):
+                continue
+            ends, seen, widths = [], [], []
+            for d, far in legs:
+                s_, width, crossed = _end_along(f, corner, d, far, tol)
+                e = corner + s_ * d
+                inside = margin <= e[0] <= cols - 1 - margin and margin <= e[1] <= rows - 1 - margin
+                ends.append(e)
+                seen.append(bool(crossed and inside))
+                widths.append(width)
+            (da, _), (db, _) = legs
+            if da[0] * db[1] - da[1] * db[0] < 0:  # handedness (u right, v down): B is A turned by +90° in the image
+                ends, seen = ends[::-1], seen[::-1]
+            views.append(RuleView(photo, corner, np.array(ends), np.array(seen), float(np.median(widths))))
     return views
 
 
@@ -261,17 +296,41 @@ def _world_rays(photo: OrientedPhoto, uv: np.ndarray, sim: Similarity) -> tuple[
     return sim.apply(o), d @ sim.R.T
 
 
+def _angular_point(O: np.ndarray, D: np.ndarray, X0: np.ndarray, iterations: int = 3) -> np.ndarray:
+    """Point minimising the squared *angular* distances to the rays (each ray weighted by 1 / range²).
+
+    Pixel errors are alike in every photo, so a far ray's metric error is larger in
+    proportion to its range; the plain least-squares point (metric distances,
+    :func:`kitegully.closerange.model._least_squares_point`) would give a far, blurred view
+    the weight of a near, sharp one.  Ranges from the previous estimate (``X0`` first).
+    """
+    X = np.asarray(X0, float)
+    for _ in range(iterations):
+        r2 = np.maximum(np.sum((X - O) ** 2, axis=1), 1e-12)
+        A = np.zeros((3, 3))
+        b = np.zeros(3)
+        for o, d, w in zip(O, D, 1.0 / r2):
+            P = w * (np.eye(3) - np.outer(d, d))
+            A += P
+            b += P @ o
+        X = np.linalg.solve(A, b)
+    return X
+
+
 def _group_point(O: np.ndarray, D: np.ndarray, pid: np.ndarray, tol: float, min_rays: int):
     """Largest group of rays (distinct photos) meeting within ``tol``: (point, member indices) or None."""
     if len(O) < min_rays:
         return None
     found = triangulate_spheres(O, D, pid, tol, min_rays)
-    return found[0] if found else None
+    if not found:
+        return None
+    X, members = found[0]
+    return _angular_point(O[members], D[members], X), members
 
 
 def triangulate_rule(
     views: Sequence[RuleView], photos: Sequence[OrientedPhoto], sim: Similarity, dem: np.ndarray, grid: GridSpec,
-    tolerance_m: float, surface_tolerance_m: float, leg_length_m: float = 1.0, min_rays: int = 3,
+    tolerance_m: float, surface_tolerance_m: float, leg_length_m: float = 1.0, min_rays: int = 3, min_rays_end: int = 2,
 ) -> tuple[dict | None, str]:
     """Corner and leg ends of the rule triangulated in the survey frame from the L's seen in the photos.
 
@@ -280,9 +339,15 @@ def triangulate_rule(
     views : the L's of all photos (:func:`find_rule_views`).
     photos : the oriented photos (``views[i].photo`` indexes them).  sim : model → survey frame.
     dem, grid : the photogrammetric DEM and its grid (the rule lies on it, inside the crop).
-    tolerance_m : ray–point distance of one point ([I] the strip's width).
+    tolerance_m : ray–point distance of the corner ([I] the strip's width); a leg end gets twice
+        it ([I] an end is located along the strip less sharply than the corner, which two
+        straight lines fix: its blurred edge, the black end mark and a sub-pixel strip's
+        dropouts put each photo's end within a strip width, so two rays within twice that).
     surface_tolerance_m : largest height of a rule point off the DEM.
-    leg_length_m : nominal leg ([P] 1 m).  min_rays : fewest photos per point ([I] 3, as the spheres).
+    leg_length_m : nominal leg ([P] 1 m).  min_rays : fewest photos of the corner ([I] 3, as the spheres:
+        the corner identifies the rule).  min_rays_end : fewest photos of a leg end, among those
+        that saw the corner ([I] 2: the L is identified already, and two rays from different
+        photos meeting within the tolerance are themselves the check).
 
     Returns
     -------
@@ -304,21 +369,22 @@ def triangulate_rule(
     max_angle = 2.0 * np.degrees(np.arctan(2.0 * tolerance_m / (0.5 * leg_length_m)))
     why = ""
     for corner, members in groups:
+        corner = _angular_point(O[members], D[members], corner)
         ends, n_end, rays_used = [], [], [(O[members], D[members], corner)]
         for k in (0, 1):
             vs = [views[m] for m in members if views[m].end_seen[k]]
-            if len(vs) < min_rays:
+            if len(vs) < min_rays_end:
                 break
             Oe, De = zip(*(_world_rays(photos[v.photo], v.end_uv[k], sim) for v in vs))
             Oe, De = np.concatenate(Oe), np.concatenate(De)
-            g = _group_point(Oe, De, np.array([v.photo for v in vs]), tolerance_m, min_rays)
+            g = _group_point(Oe, De, np.array([v.photo for v in vs]), 2.0 * tolerance_m, min_rays_end)
             if g is None:
                 break
             ends.append(g[0])
             n_end.append(len(g[1]))
             rays_used.append((Oe[g[1]], De[g[1]], g[0]))
         if len(ends) < 2:
-            why = f"a corner seen in {len(members)} photos, but its leg ends are not both seen in {min_rays} photos"
+            why = f"a corner seen in {len(members)} photos, but its leg ends are not both seen in {min_rays_end} photos"
             continue
         pts = np.vstack([corner, ends])
         r, c = grid.rowcol(pts[:, 0], pts[:, 1])
