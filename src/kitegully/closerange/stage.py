@@ -249,6 +249,29 @@ def _read_photos(photo_dir: Path, names: Sequence[str]) -> dict[str, np.ndarray]
     return out
 
 
+def _original_photos(photo_dir: Path, image_info_path: str | Path, prepared: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The photographer's files where they are the SfM's pixel grid (orientation 1, scale 1), else the prepared copies.
+
+    The prepared copies (:func:`kitegully.sfm.images.prepare_images`) are re-encoded with
+    4:2:0 chroma subsampling, which halves the colour resolution: a 1–2 px yellow strip
+    loses most of its colour there (scene 09: no L in any prepared copy, L's in the
+    originals), while the originals (4:4:4 at quality 95) keep it.  The sphere detection
+    keeps the prepared copies (not changed here).
+    """
+    with open(image_info_path, encoding="utf-8") as fh:
+        info = {r["sfm_name"]: r for r in json.load(fh)}
+    out = {}
+    for name, img in prepared.items():
+        r = info.get(name)
+        if r is not None and int(r.get("orientation", 1)) == 1 and float(r.get("scale", 1.0)) == 1.0:
+            orig = cv2.imread(str(photo_dir / r["name"]), cv2.IMREAD_COLOR)
+            if orig is not None and orig.shape[:2] == img.shape[:2]:
+                out[name] = cv2.cvtColor(orig, cv2.COLOR_BGR2RGB)
+                continue
+        out[name] = img
+    return out
+
+
 def _fill_holes(dem: np.ndarray, ortho: np.ndarray, inside: np.ndarray, max_cells: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Fill nodata holes inside the crop up to ``max_cells`` from their rim; return the count filled."""
     holes = ~np.isfinite(dem) & inside
@@ -419,7 +442,8 @@ def photogrammetric_orthophoto(
     dem, ortho, filled = _fill_holes(surf.dem, surf.ortho, inside, params.fill_holes_cells)
     from kitegully.seeds import rng_for
 
-    rule, rule_method, rule_note = measure_rule(photos, images, sim, ortho, dem, grid, params,
+    rule_images = _original_photos(photo_dir, out["image_info"], images)
+    rule, rule_method, rule_note = measure_rule(photos, rule_images, sim, ortho, dem, grid, params,
                                                 rng_for(seed, "closerange", scene, "rule_photos"),
                                                 rng_for(seed, "closerange", scene, "rule_ransac"))
     write_raster(out["orthophoto"], ortho, grid, nodata=None, band_names=["red", "green", "blue"])
