@@ -189,3 +189,24 @@ def test_strip_width_must_be_positive(bad):
 
     with pytest.raises(InputError, match="closerange.rule_strip_width_m: .* is not a positive width"):
         CloseRangeParams.from_config({"rule_strip_width_m": bad})
+
+
+def test_rule_is_looked_for_in_the_original_photos_where_they_are_the_sfm_grid(tmp_path):
+    """The prepared copies are 4:2:0 JPEGs (a 1 px strip loses its colour): the originals are used where orientation and scale are 1."""
+    import json
+
+    import cv2
+
+    from kitegully.closerange.stage import _original_photos
+
+    orig = np.zeros((20, 30, 3), np.uint8)
+    orig[10, :] = (237, 204, 51)  # a 1 px yellow strip (RGB)
+    cv2.imwrite(str(tmp_path / "IMG_0000.png"), cv2.cvtColor(orig, cv2.COLOR_RGB2BGR))
+    cv2.imwrite(str(tmp_path / "IMG_0001.png"), cv2.cvtColor(orig, cv2.COLOR_RGB2BGR))
+    prepared = {"0000_a.jpg": np.full((20, 30, 3), 7, np.uint8), "0001_b.jpg": np.full((20, 30, 3), 9, np.uint8)}
+    info = [{"name": "IMG_0000.png", "sfm_name": "0000_a.jpg", "orientation": 1, "scale": 1.0},
+            {"name": "IMG_0001.png", "sfm_name": "0001_b.jpg", "orientation": 6, "scale": 1.0}]  # rotated: not the SfM's grid
+    (tmp_path / "info.json").write_text(json.dumps(info))
+    got = _original_photos(tmp_path, tmp_path / "info.json", prepared)
+    assert np.array_equal(got["0000_a.jpg"], orig)
+    assert np.array_equal(got["0001_b.jpg"], prepared["0001_b.jpg"])
