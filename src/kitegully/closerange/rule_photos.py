@@ -44,6 +44,10 @@ strip is 1–5 px wide and its black decimetre marks are visible.  So:
    Scale error (001 Table 1): ``max over legs |l − 1 m| / 1 m`` with ``l`` the 3-D distance
    corner → end.
 
+The photos are the photographer's files (4:4:4 JPEG) where they are the SfM's pixel grid,
+not the SfM's prepared 4:2:0 copies, whose halved chroma erases the colour of a 1–2 px strip
+(:func:`kitegully.closerange.stage._original_photos`).
+
 Known bias: the twin paints a 5 mm black half-mark at each leg's end (the decimetre marks
 are centred on the decimetres), so the paint ends 5 mm before the rule: the legs measure up
 to 0.5 % short.  Not corrected.
