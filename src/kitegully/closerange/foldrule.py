@@ -62,7 +62,17 @@ def paint_fraction(ortho: np.ndarray, paint_rgb: tuple[float, float, float], gam
     """
     lin = (ortho[:3].astype(np.float64) / 255.0) ** gamma
     bg = np.stack([ndimage.median_filter(ch, size=background_cells) for ch in lin])
-    a1 = (np.asarray(paint_rgb, float) ** gamma)[:, None, None] - bg
+    return unmix_paint(lin, bg, np.asarray(paint_rgb, float) ** gamma)
+
+
+def unmix_paint(lin: np.ndarray, bg: np.ndarray, paint_lin: np.ndarray) -> np.ndarray:
+    """Paint share ``f`` solving ``c − b = f · (p − b) + k · b`` per pixel by least squares (see :func:`paint_fraction`).
+
+    ``lin`` and ``bg`` are (3, ...) linear-light colours of the pixels and their background,
+    ``paint_lin`` the paint's (3,) linear colour; returns ``f`` with the shape of ``lin[0]``
+    (0 where the two unknowns are not determined).  O(pixels).
+    """
+    a1 = paint_lin.reshape((3,) + (1,) * (lin.ndim - 1)).astype(lin.dtype) - bg
     y = lin - bg
     a11, a12, a22 = (a1 * a1).sum(0), (a1 * bg).sum(0), (bg * bg).sum(0)
     b1, b2 = (a1 * y).sum(0), (bg * y).sum(0)

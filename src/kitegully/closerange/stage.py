@@ -116,7 +116,16 @@ class CloseRangeParams:
         (linear unmixing against the 9-cell median background). [I] a strip one cell wide
         covers at least half of one cell in every row across it, so 0.25 is the midpoint
         between no paint and that guaranteed half (replaces a saturation threshold that had
-        been set on scene 10).
+        been set on scene 10).  Used by the orthophoto fallback (below).
+    rule_strip_width_m : float
+        Width of the rule's painted strip. [P] 2 cm.  The rule is measured in the photos
+        (:mod:`kitegully.closerange.rule_photos`): the widest the strip can appear is its
+        width at the pole's height (800 px focal length: 5.3 px), which sets the median
+        background window (4 ×: the strip fills at most a quarter of it), the line and
+        grouping tolerances, and the triangulation tolerance of its corner and leg ends (the
+        strip's width: wherever it is resolved, a point on it is located within its width).
+        Where the photos give no rule, the orthophoto method (``rule_min_paint_fraction``)
+        is tried; the record's ``rule_method`` says which one measured it.
     on_scene_failure : str
         ``stop`` (default): a scene that cannot be georeferenced stops the run with its one
         sentence (InputError). ``record`` (``make closerange``): the sentence is logged and
@@ -144,6 +153,7 @@ class CloseRangeParams:
     min_dense_points: int = 10000
     rule_paint_rgb: tuple[float, float, float] = (0.93, 0.80, 0.20)
     rule_min_paint_fraction: float = 0.25
+    rule_strip_width_m: float = 0.02
     on_scene_failure: str = "stop"
 
     @classmethod
@@ -176,6 +186,8 @@ class CloseRangeParams:
             raise InputError(f"closerange.periphery: '{p.periphery}' is not one of circle, hull")
         if p.on_scene_failure not in ("stop", "record"):
             raise InputError(f"closerange.on_scene_failure: '{p.on_scene_failure}' is not one of stop, record")
+        if p.rule_strip_width_m <= 0:
+            raise InputError(f"closerange.rule_strip_width_m: {p.rule_strip_width_m} is not a positive width (m)")
         if p.dense.block_size_px % 2 == 0 or p.dense.downscale < 1:
             raise InputError("closerange.dense: block_size_px must be odd and downscale at least 1")
         return p
@@ -237,6 +249,29 @@ def _read_photos(photo_dir: Path, names: Sequence[str]) -> dict[str, np.ndarray]
     return out
 
 
+def _original_photos(photo_dir: Path, image_info_path: str | Path, prepared: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The photographer's files where they are the SfM's pixel grid (orientation 1, scale 1), else the prepared copies.
+
+    The prepared copies (:func:`kitegully.sfm.images.prepare_images`) are re-encoded with
+    4:2:0 chroma subsampling, which halves the colour resolution: a 1–2 px yellow strip
+    loses most of its colour there (scene 09: no L in any prepared copy, L's in the
+    originals), while the originals (4:4:4 at quality 95) keep it.  The sphere detection
+    keeps the prepared copies (not changed here).
+    """
+    with open(image_info_path, encoding="utf-8") as fh:
+        info = {r["sfm_name"]: r for r in json.load(fh)}
+    out = {}
+    for name, img in prepared.items():
+        r = info.get(name)
+        if r is not None and int(r.get("orientation", 1)) == 1 and float(r.get("scale", 1.0)) == 1.0:
+            orig = cv2.imread(str(photo_dir / r["name"]), cv2.IMREAD_COLOR)
+            if orig is not None and orig.shape[:2] == img.shape[:2]:
+                out[name] = cv2.cvtColor(orig, cv2.COLOR_BGR2RGB)
+                continue
+        out[name] = img
+    return out
+
+
 def _fill_holes(dem: np.ndarray, ortho: np.ndarray, inside: np.ndarray, max_cells: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Fill nodata holes inside the crop up to ``max_cells`` from their rim; return the count filled."""
     holes = ~np.isfinite(dem) & inside
@@ -275,6 +310,31 @@ def _near_median_surface(xyz: np.ndarray, grid: GridSpec, cell_m: float, toleran
     dev = np.full(len(xyz), np.inf)
     dev[inside] = np.abs(xyz[inside, 2] - med[idx[inside]])
     return dev <= tolerance_m
+
+
+def measure_rule(
+    photos: Sequence[Any], images: Mapping[str, np.ndarray], sim: Any, ortho: np.ndarray, dem: np.ndarray, grid: GridSpec,
+    params: CloseRangeParams, rng_photos: np.random.Generator, rng_ortho: np.random.Generator,
+) -> tuple[dict | None, str | None, str]:
+    """The folding rule's legs: measured in the photos (triangulated), else in the orthophoto; (rule, method, note).
+
+    ``method`` is ``"photos"``, ``"orthophoto"`` or None (not found); ``note`` says why the
+    photos gave no rule (empty when they did).  The photo method is the primary one: the
+    2 cm strip is 1–5 px wide in the photos and smeared below any defensible paint share in
+    the 2 cm orthophoto (README, closerange); the orthophoto's own threshold (a 1-cell strip
+    covers at least half a cell) stays principled, so it is kept as the fallback.
+    """
+    from kitegully.closerange.rule_photos import measure_rule_in_photos
+
+    rule, why = measure_rule_in_photos(photos, images, sim, dem, grid, params.rule_paint_rgb, params.rule_strip_width_m,
+                                       params.pole_height_m, params.outlier_tolerance_m, rng_photos)
+    if rule is not None:
+        log.info("folding rule measured in the photos: legs %.3f m, %.3f m (corner in %d photos, ends in %d, %d; %.2f px rms)",
+                 rule["leg_a_m"], rule["leg_b_m"], rule["photos_corner"], rule["photos_a"], rule["photos_b"], rule["rms_px"])
+        return rule, "photos", ""
+    log.info("folding rule not measured in the photos (%s); trying the orthophoto", why)
+    rule = measure_folding_rule(ortho, dem, grid, rng_ortho, params.rule_paint_rgb, params.rule_min_paint_fraction)
+    return rule, (None if rule is None else "orthophoto"), why
 
 
 def photogrammetric_orthophoto(
@@ -382,8 +442,10 @@ def photogrammetric_orthophoto(
     dem, ortho, filled = _fill_holes(surf.dem, surf.ortho, inside, params.fill_holes_cells)
     from kitegully.seeds import rng_for
 
-    rule = measure_folding_rule(ortho, dem, grid, rng_for(seed, "closerange", scene, "rule_ransac"),
-                                params.rule_paint_rgb, params.rule_min_paint_fraction)
+    rule_images = _original_photos(photo_dir, out["image_info"], images)
+    rule, rule_method, rule_note = measure_rule(photos, rule_images, sim, ortho, dem, grid, params,
+                                                rng_for(seed, "closerange", scene, "rule_photos"),
+                                                rng_for(seed, "closerange", scene, "rule_ransac"))
     write_raster(out["orthophoto"], ortho, grid, nodata=None, band_names=["red", "green", "blue"])
     write_raster(out["dem"], dem.astype(np.float32), grid)
     t3 = time.perf_counter()
@@ -395,7 +457,7 @@ def photogrammetric_orthophoto(
         "spheres_measured": len(rows), "sphere_detections": len(det_rows),
         "sphere_candidates": len(found_all), "sphere_candidates_round": len(found),
         "scale_error_pct": None if rule is None else rule["scale_error_pct"],
-        "rule": rule,
+        "rule": rule, "rule_method": rule_method, "rule_note": rule_note,
         "tie_points": int(summary["n_points3d"]), "reprojection_px": float(summary["mean_reprojection_error_px"]),
         "dense_points": int(len(xyz)), "dense_pairs": int(n_pairs),
         "cells_in_crop": n_inside, "holes_pct": 100.0 * holes_before / max(n_inside, 1),
@@ -405,7 +467,8 @@ def photogrammetric_orthophoto(
     }
     log.info("%s: %d/%d photos aligned, %d tie points, %d dense points, holes %.1f %% of the crop, scale error %s, %.0f s",
              scene, record["images_aligned"], record["images_used"], record["tie_points"], record["dense_points"],
-             record["holes_pct"], "n/a" if rule is None else f"{rule['scale_error_pct']:.2f} %", t3 - t0)
+             record["holes_pct"], "n/a" if rule is None else f"{rule['scale_error_pct']:.2f} % (rule measured in the {rule_method})",
+             t3 - t0)
     return record
 
 
@@ -471,13 +534,14 @@ def closerange_tables(
         "scale_error_pct": np.nan if r["scale_error_pct"] is None else r["scale_error_pct"],
         "leg_a_m": np.nan if r["rule"] is None else r["rule"]["leg_a_m"],
         "leg_b_m": np.nan if r["rule"] is None else r["rule"]["leg_b_m"],
+        "rule_method": r.get("rule_method") or ("" if r["rule"] is None else "orthophoto"),
         "tie_points": r["tie_points"], "dense_points": r["dense_points"], "holes_pct": r["holes_pct"],
         "time_s": r["timings_s"]["total"],
     } if scene_succeeded(r) else {"scene": r["scene"], "status": "failed", "reason": r["reason"]} for r in records])
     if len(t1):
         t1 = t1.merge(PAPER_TABLE1, on="scene", how="left")
         ok = t1["status"] == "ok"
-        mean = {c: t1.loc[ok, c].mean() for c in t1.columns if c not in ("scene", "status", "reason")}
+        mean = {c: t1.loc[ok, c].mean() for c in t1.columns if c not in ("scene", "status", "reason", "rule_method")}
         t1.loc[len(t1)] = {"scene": "all", "status": count, "reason": failed_note, **mean}
         t1 = t1[[c for c in t1.columns if c != "reason"] + ["reason"]]  # the sentence last: the .md stays readable
 
