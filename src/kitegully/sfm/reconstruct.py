@@ -229,8 +229,9 @@ def _hierarchical_options(refine_principal_point: bool, min_num_matches: int, se
     opts = pycolmap.HierarchicalPipelineOptions()
     opts.num_threads = num_threads
     opts.num_workers = max(1, min(num_threads, 2))
-    opts.incremental_options = _incremental_options(refine_principal_point, min_num_matches, seed,
-                                                    max(1, num_threads // opts.num_workers))
+    inc = _incremental_options(refine_principal_point, min_num_matches, seed, max(1, num_threads // opts.num_workers))
+    inc.ba_refine_sensor_from_rig = False  # one camera per frame: no rig to refine (COLMAP warns it breaks merging)
+    opts.incremental_options = inc
     return opts
 
 
@@ -294,7 +295,7 @@ def map_model(
     else:
         try:
             models = pycolmap.hierarchical_mapping(database, image_dir, tmp, _hierarchical_options(*args))
-        except (RuntimeError, ValueError):  # COLMAP's check that some cluster registered an image
+        except (RuntimeError, ValueError, IndexError):  # no cluster registered an image (COLMAP checks or indexes an empty list)
             models = {}
     models = {k: r for k, r in models.items() if r.num_reg_images() > 0}
     if not models:
