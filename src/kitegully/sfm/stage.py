@@ -127,8 +127,8 @@ class SfmParams:
         averaging and global positioning of all images at once, then a few global bundle
         adjustments) or ``hierarchical`` (overlapping clusters of at most 500 images mapped
         incrementally and merged). All end with a global bundle adjustment refining the
-        camera's intrinsics. [I] Incremental fits tens of images (the default twin's 57: a
-        minute); its repeated global adjustments over a growing model make its cost grow
+        camera's intrinsics. [I] Incremental fits tens of images (the default twin's 57: 43 s
+        of CPU against global's 47 s, same accuracy); its repeated global adjustments over a growing model make its cost grow
         superlinearly with the image count, so global (or hierarchical) fits the hundreds
         of a whole catchment, where the GPS-log spatial matching already gives a dense,
         well-connected view graph for rotation averaging.
