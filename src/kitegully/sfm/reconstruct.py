@@ -305,7 +305,8 @@ def map_model(
     best = max(models.values(), key=lambda r: r.num_reg_images())
     if mapper == "hierarchical":
         final_bundle_adjustment(best, refine_principal_point, num_threads)
-    best.update_point_3d_errors()  # pixel errors (the global mapper filters on normalised ones)
+    if mapper != "incremental":  # pixel errors after the last adjustment (global filters on normalised ones)
+        best.update_point_3d_errors()
     if out_dir.exists():
         shutil.rmtree(out_dir)
     out_dir.mkdir(parents=True)
