@@ -1,4 +1,4 @@
-"""pycolmap wrapper: SIFT features, matching suited to kite sequences, incremental mapping.
+"""pycolmap wrapper: SIFT features, matching suited to kite sequences, mapping (incremental, global or hierarchical).
 
 The kite camera has one fixed lens, so all images of one shape share one camera whose
 focal length, principal point and radial distortion are refined (self-calibration) by
@@ -180,26 +180,12 @@ def why_no_model(database: Path, min_num_matches: int) -> str:
             "take photos from more positions with more overlap")
 
 
-def incremental_map(
-    database: Path,
-    image_dir: Path,
-    out_dir: Path,
-    refine_principal_point: bool,
-    min_num_matches: int,
-    seed: int,
-    num_threads: int,
-    source_dir: str | Path | None = None,
-) -> pycolmap.Reconstruction:
-    """Incremental mapping; returns the model with the most registered images.
+MAPPERS = ("incremental", "global", "hierarchical")
 
-    ``source_dir`` is the photo folder the user gave (named in errors instead of the
-    prepared copies' work folder).
 
-    Raises
-    ------
-    InputError
-        When no model could be built, with COLMAP's reason (:func:`why_no_model`).
-    """
+def _incremental_options(refine_principal_point: bool, min_num_matches: int, seed: int,
+                         num_threads: int) -> pycolmap.IncrementalPipelineOptions:
+    """COLMAP's incremental pipeline options with self-calibration and every seed set."""
     opts = pycolmap.IncrementalPipelineOptions()
     opts.min_num_matches = min_num_matches
     opts.ba_refine_focal_length = True
@@ -210,16 +196,117 @@ def incremental_map(
     opts.random_seed = seed
     opts.mapper.random_seed = seed
     opts.triangulation.random_seed = seed
+    return opts
+
+
+def _global_options(refine_principal_point: bool, min_num_matches: int, seed: int,
+                    num_threads: int) -> pycolmap.GlobalPipelineOptions:
+    """GLOMAP-style global pipeline options: the same self-calibration, CPU solvers, seeded.
+
+    COLMAP 4.2's global mapper ends with retriangulation, a global bundle adjustment with
+    ``mapper.bundle_adjustment`` (here: focal length, principal point as configured and the
+    radial terms refined, as the incremental mapper's final global BA) and an outlier filter.
+    """
+    opts = pycolmap.GlobalPipelineOptions()
+    opts.min_num_matches = min_num_matches
+    opts.num_threads = num_threads
+    opts.random_seed = seed
+    m = opts.mapper
+    m.num_threads = num_threads
+    m.random_seed = seed
+    ba = m.bundle_adjustment
+    ba.refine_focal_length = True
+    ba.refine_principal_point = refine_principal_point
+    ba.refine_extra_params = True
+    ba.ceres.use_gpu = False
+    m.global_positioning.use_gpu = False
+    return opts
+
+
+def _hierarchical_options(refine_principal_point: bool, min_num_matches: int, seed: int,
+                          num_threads: int) -> pycolmap.HierarchicalPipelineOptions:
+    """COLMAP's partitioned pipeline: overlapping clusters mapped incrementally, then merged."""
+    opts = pycolmap.HierarchicalPipelineOptions()
+    opts.num_threads = num_threads
+    opts.num_workers = max(1, min(num_threads, 2))
+    inc = _incremental_options(refine_principal_point, min_num_matches, seed, max(1, num_threads // opts.num_workers))
+    inc.ba_refine_sensor_from_rig = False  # one camera per frame: no rig to refine (COLMAP warns it breaks merging)
+    opts.incremental_options = inc
+    return opts
+
+
+def final_bundle_adjustment(rec: pycolmap.Reconstruction, refine_principal_point: bool, num_threads: int) -> None:
+    """One global bundle adjustment of all poses, points and the shared intrinsics.
+
+    The hierarchical mapper merges its clusters' models by similarity transforms and ends
+    there; this adjustment gives the merged model the same final self-calibrating BA as the
+    incremental and global mappers. O(iterations × (observations + images³)) with Schur.
+    """
+    opts = pycolmap.BundleAdjustmentOptions()
+    opts.refine_focal_length = True
+    opts.refine_principal_point = refine_principal_point
+    opts.refine_extra_params = True
+    opts.ceres.use_gpu = False
+    opts.ceres.solver_options.num_threads = num_threads
+    pycolmap.bundle_adjustment(rec, opts)
+
+
+def map_model(
+    database: Path,
+    image_dir: Path,
+    out_dir: Path,
+    refine_principal_point: bool,
+    min_num_matches: int,
+    seed: int,
+    num_threads: int,
+    source_dir: str | Path | None = None,
+    mapper: str = "incremental",
+) -> pycolmap.Reconstruction:
+    """Map the matched images into a model; returns the model with the most registered images.
+
+    ``mapper``: ``incremental`` (COLMAP's incremental SfM: one image at a time with
+    repeated global bundle adjustments, whose cost grows superlinearly with the image
+    count), ``global`` (GLOMAP-style: rotation averaging and global positioning of all
+    images at once, then a few global bundle adjustments) or ``hierarchical`` (the view
+    graph split into overlapping clusters of at most 500 images, each mapped incrementally,
+    then merged). Every mapper's model ends with a global bundle adjustment that refines
+    the shared camera's focal length, radial distortion and (``refine_principal_point``)
+    principal point.
+
+    ``source_dir`` is the photo folder the user gave (named in errors instead of the
+    prepared copies' work folder).
+
+    Raises
+    ------
+    InputError
+        When no model could be built, with COLMAP's reason (:func:`why_no_model`).
+    """
+    if mapper not in MAPPERS:
+        raise InputError(f"sfm.mapper: '{mapper}' is not one of {', '.join(MAPPERS)}")
     tmp = out_dir.parent / (out_dir.name + "_all")
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
-    models = pycolmap.incremental_mapping(database, image_dir, tmp, opts)
+    args = (refine_principal_point, min_num_matches, seed, num_threads)
+    if mapper == "incremental":
+        models = pycolmap.incremental_mapping(database, image_dir, tmp, _incremental_options(*args))
+    elif mapper == "global":
+        models = pycolmap.global_mapping(database, image_dir, tmp, _global_options(*args))
+    else:
+        try:
+            models = pycolmap.hierarchical_mapping(database, image_dir, tmp, _hierarchical_options(*args))
+        except (RuntimeError, ValueError, IndexError):  # no cluster registered an image (COLMAP checks or indexes an empty list)
+            models = {}
+    models = {k: r for k, r in models.items() if r.num_reg_images() > 0}
     if not models:
         raise InputError(f"{source_dir or image_dir}: structure from motion built no model: {why_no_model(database, min_num_matches)}")
-    best = max(models.values(), key=lambda r: r.num_reg_images())
     for idx, rec in models.items():
-        log.info("model %d: %d images, %d points", idx, rec.num_reg_images(), rec.num_points3D())
+        log.info("%s mapper, model %d: %d images, %d points", mapper, idx, rec.num_reg_images(), rec.num_points3D())
+    best = max(models.values(), key=lambda r: r.num_reg_images())
+    if mapper == "hierarchical":
+        final_bundle_adjustment(best, refine_principal_point, num_threads)
+    if mapper != "incremental":  # pixel errors after the last adjustment (global filters on normalised ones)
+        best.update_point_3d_errors()
     if out_dir.exists():
         shutil.rmtree(out_dir)
     out_dir.mkdir(parents=True)
@@ -271,14 +358,14 @@ def run_sfm(
         n_priors, m.spatial_max_distance_m, m.spatial_max_neighbors, seed if deterministic else None,
     )
     t2 = time.perf_counter()
-    rec = incremental_map(
+    rec = map_model(
         database, image_dir, model_dir, params.refine_principal_point, params.min_num_matches, seed, num_threads,
-        source_dir,
+        source_dir, params.mapper,
     )
     t3 = time.perf_counter()
     timings = {
         "features_s": t1 - t0, "matching_s": t2 - t1, "mapping_s": t3 - t2, "matching_method": used,
-        "n_position_priors": n_priors, "deterministic": deterministic,
+        "n_position_priors": n_priors, "deterministic": deterministic, "mapper": params.mapper,
     }
-    log.info("features %.1f s, matching (%s) %.1f s, mapping %.1f s", t1 - t0, used, t2 - t1, t3 - t2)
+    log.info("features %.1f s, matching (%s) %.1f s, mapping (%s) %.1f s", t1 - t0, used, t2 - t1, params.mapper, t3 - t2)
     return rec, timings
