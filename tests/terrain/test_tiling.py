@@ -109,3 +109,19 @@ def test_the_default_sites_stay_untiled():
 
     for site in ("kamech_twin", "tiny_twin"):
         assert "tiling" not in load_yaml(Path(__file__).resolve().parents[2] / "config" / "sites" / f"{site}.yaml")
+
+
+def test_whole_block_tiles_partition_the_raster_into_whole_blocks():
+    """Tiles hold whole blocks (the last cut by the edge), cover every cell once; too many tiles: one sentence."""
+    from kitegully.terrain.tiling import TilingParams, whole_block_tiles
+
+    tiles = whole_block_tiles((250, 130), 60, TilingParams(6.0, 12.0, 12.0), "kite-map", "the orthophoto",
+                              "obia.kite_scale.tile_cells", "obia.kite_scale.tile_cells 60")
+    cover = np.zeros((250, 130), int)
+    for t in tiles:
+        assert t.r0 % 60 == 0 and t.c0 % 60 == 0
+        cover[t.r0:t.r0 + t.h, t.c0:t.c0 + t.w] += 1
+    assert (cover == 1).all() and len(tiles) == 4
+    with pytest.raises(InputError, match=r"gives 12 x 12 kite-map tiles but the orthophoto has only 5 x 3 blocks"):
+        whole_block_tiles((250, 130), 60, TilingParams(1.0, 12.0, 12.0), "kite-map", "the orthophoto",
+                          "obia.kite_scale.tile_cells", "obia.kite_scale.tile_cells 60")

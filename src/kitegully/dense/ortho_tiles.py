@@ -26,7 +26,6 @@ from __future__ import annotations
 import json
 import logging
 import time
-from math import ceil
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -38,7 +37,7 @@ from kitegully.dense.stage import DenseParams, peak_memory_mb
 from kitegully.dense.views import PyramidCache, ViewSet, read_offset, views_from_reconstruction
 from kitegully.io.raster import GridSpec, _profile, read_raster
 from kitegully.terrain.tiled_fill import Tile
-from kitegully.terrain.tiling import TilingParams, split_grid
+from kitegully.terrain.tiling import TilingParams, whole_block_tiles
 
 log = logging.getLogger(__name__)
 
@@ -56,19 +55,9 @@ def ortho_tiles(shape: tuple[int, int], params: DenseParams, tiling: TilingParam
         More tiles along an axis than rendering blocks.
     """
     oc = params.orthophoto
-    T = ortho_block(oc.upsample, oc.tile_cells)
-    h, w = int(shape[0]), int(shape[1])
-    nbr, nbc = ceil(h / T), ceil(w / T)
-    nr, nc = tiling.counts
-    if nr > nbr or nc > nbc:
-        raise InputError(f"tiling.tile_m: {tiling.tile_m:g} m gives {nr} x {nc} orthophoto tiles but the DSM has only "
-                         f"{nbr} x {nbc} blocks of dense.orthophoto.tile_cells {oc.tile_cells} / upsample {oc.upsample}; "
-                         "raise tiling.tile_m or lower dense.orthophoto.tile_cells")
-    out = []
-    for b in split_grid((nbr, nbc), nr, nc):
-        r0, c0 = b.r0 * T, b.c0 * T
-        out.append(Tile(b.tid, b.ti, b.tj, r0, c0, min((b.r0 + b.h) * T, h) - r0, min((b.c0 + b.w) * T, w) - c0))
-    return out
+    return whole_block_tiles(shape, ortho_block(oc.upsample, oc.tile_cells), tiling, "orthophoto", "the DSM",
+                             "dense.orthophoto.tile_cells",
+                             f"dense.orthophoto.tile_cells {oc.tile_cells} / upsample {oc.upsample}")
 
 
 def load_views(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path) -> ViewSet:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import logging
-from math import ceil
 from pathlib import Path
 from typing import Sequence
 
@@ -38,7 +37,7 @@ from kitegully.obia.kite import (block_histogram, classify_block, global_thresho
 from kitegully.obia.scene import ObiaParams
 from kitegully.obia.threshold import FINE_BINS_PER_BIN, ThresholdResult
 from kitegully.terrain.tiled_fill import Tile
-from kitegully.terrain.tiling import TilingParams, split_grid
+from kitegully.terrain.tiling import TilingParams, whole_block_tiles
 
 log = logging.getLogger(__name__)
 
@@ -54,19 +53,8 @@ def kite_tiles(shape: tuple[int, int], tile_cells: int, tiling: TilingParams) ->
     InputError
         More tiles along an axis than blocks.
     """
-    h, w = int(shape[0]), int(shape[1])
-    nbr, nbc = ceil(h / tile_cells), ceil(w / tile_cells)
-    nr, nc = tiling.counts
-    if nr > nbr or nc > nbc:
-        raise InputError(f"tiling.tile_m: {tiling.tile_m:g} m gives {nr} x {nc} kite-map tiles but the orthophoto has only "
-                         f"{nbr} x {nbc} blocks of obia.kite_scale.tile_cells {tile_cells}; raise tiling.tile_m or lower "
-                         "obia.kite_scale.tile_cells")
-    out = []
-    for b in split_grid((nbr, nbc), nr, nc):
-        r0, c0 = b.r0 * tile_cells, b.c0 * tile_cells
-        out.append(Tile(b.tid, b.ti, b.tj, r0, c0, min((b.r0 + b.h) * tile_cells, h) - r0,
-                        min((b.c0 + b.w) * tile_cells, w) - c0))
-    return out
+    return whole_block_tiles(shape, tile_cells, tiling, "kite-map", "the orthophoto", "obia.kite_scale.tile_cells",
+                             f"obia.kite_scale.tile_cells {tile_cells}")
 
 
 def _blocks(tile: Tile, shape: tuple[int, int], tile_cells: int, halo: int) -> list[tuple[Window, Window]]:

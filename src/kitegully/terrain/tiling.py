@@ -100,6 +100,44 @@ def split_grid(shape: tuple[int, int], n_rows: int, n_cols: int) -> list[Tile]:
             for i in range(n_rows) for j in range(n_cols)]
 
 
+def whole_block_tiles(shape: tuple[int, int], block: int, tiling: "TilingParams", product: str, source: str,
+                      block_key: str, block_text: str) -> list[Tile]:
+    """Tiles of a raster of ``shape`` made of whole processing blocks of ``block`` cells.
+
+    The ``ceil(H/block) x ceil(W/block)`` blocks are split into the tiling's ``n_rows x n_cols``
+    near-equal rectangles (:func:`split_grid`), so a tile job processes exactly the blocks the
+    untiled job would; the last blocks may be cut by the raster's edge.
+
+    Parameters
+    ----------
+    shape : (rows, cols) of the raster.
+    block : side of a processing block (cells).
+    tiling : the site's tiling.
+    product, source, block_key, block_text : words of the refusal, e.g. ``"kite-map"``, ``"the
+        orthophoto"``, ``"obia.kite_scale.tile_cells"``, ``"obia.kite_scale.tile_cells 2048"``.
+
+    Returns
+    -------
+    list of Tile in row-major order (names as :meth:`TilingParams.names`).
+
+    Raises
+    ------
+    InputError
+        More tiles along an axis than blocks.
+    """
+    h, w = int(shape[0]), int(shape[1])
+    nbr, nbc = ceil(h / block), ceil(w / block)
+    nr, nc = tiling.counts
+    if nr > nbr or nc > nbc:
+        raise InputError(f"tiling.tile_m: {tiling.tile_m:g} m gives {nr} x {nc} {product} tiles but {source} has only "
+                         f"{nbr} x {nbc} blocks of {block_text}; raise tiling.tile_m or lower {block_key}")
+    out = []
+    for b in split_grid((nbr, nbc), nr, nc):
+        r0, c0 = b.r0 * block, b.c0 * block
+        out.append(Tile(b.tid, b.ti, b.tj, r0, c0, min((b.r0 + b.h) * block, h) - r0, min((b.c0 + b.w) * block, w) - c0))
+    return out
+
+
 def write_mosaic(path: str | Path, like: str | Path, tiles: Iterable[Tile], part: Callable[[Tile], np.ndarray],
                  dtype: str | None = None) -> None:
     """Write a raster on the grid of ``like`` window by window: ``part(tile)`` gives each tile's cells.
