@@ -60,11 +60,10 @@ def test_tiled_dem_site_change_equals_untiled(tmp_path):
         if k == "budget":  # sums over tiles of per-tile partial sums
             assert a[["mask", "method"]].equals(b[["mask", "method"]])
             np.testing.assert_allclose(b.iloc[:, 2:].to_numpy(float), a.iloc[:, 2:].to_numpy(float), rtol=1e-12, atol=1e-12)
-        elif k == "coregistration":  # a least-squares fit through BLAS, whose summation order follows the
-            # thread count (Snakemake sets it per job, the test process does not): last-bit differences
+        else:  # the co-registration is a least-squares fit through BLAS, whose summation order follows the
+            # thread count (Snakemake sets it per job, the test process does not): the fit and the tables
+            # computed from its residuals (sigma, ...) differ in the last bits between the two (clean-clone runs)
             pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-12, atol=1e-12, obj=k)
-        else:
-            pd.testing.assert_frame_equal(a, b, check_exact=True, obj=k)
     co = pd.read_csv(out / "coregistration.csv").set_index("quantity")["value"]
     assert co["dx"] == pytest.approx(0.5, abs=0.05) and co["dy"] == pytest.approx(-0.3, abs=0.05)
     det = pd.read_csv(out / "detection.csv").set_index("method")
