@@ -7,6 +7,8 @@ import numpy as np
 from kitegully.closerange.foldrule import measure_folding_rule
 from kitegully.io.raster import GridSpec
 
+from .rule_drawing import rule_cells
+
 
 def _scene(slope_deg=30.0, phi=0.4):
     """3 m square at 1 cm, grass-green, on a plane sloping along y; a 2 cm wide yellow L of two 1 m legs (3-D)."""
@@ -24,15 +26,9 @@ def _scene(slope_deg=30.0, phi=0.4):
     t1 = np.array([np.cos(phi), np.sin(phi), g * np.sin(phi)])
     t1 /= np.linalg.norm(t1)
     t2 = np.cross(normal, t1)
-    for t in (t1, t2):
-        e = t[:2] / np.linalg.norm(t[:2])
-        plan = np.linalg.norm(t[:2])
-        along = (X - corner[0]) * e[0] + (Y - corner[1]) * e[1]
-        across = -(X - corner[0]) * e[1] + (Y - corner[1]) * e[0]
-        on = (along >= -0.01) & (along <= plan) & (np.abs(across) <= 0.01)
-        leg = along / plan
+    for on, mark in rule_cells(X, Y, corner, (t1, t2)):
         ortho[:, on] = np.array([237, 204, 51], np.uint8)[:, None]
-        ortho[:, on & (np.abs(leg - np.round(leg, 1)) <= 0.005)] = 20
+        ortho[:, mark] = 20
     return ortho, dem, grid
 
 

@@ -11,6 +11,8 @@ from kitegully.georef.similarity import Similarity
 from kitegully.io.raster import GridSpec
 from kitegully.twin.camera import Camera
 
+from .rule_drawing import rule_cells
+
 PAINT = (0.93, 0.80, 0.20)
 SLOPE = np.tan(np.radians(20.0))  # ground z = SLOPE * y
 
@@ -64,15 +66,9 @@ def _render(photo: OrientedPhoto, rng: np.random.Generator, rule: bool = True, s
             g = 0.5 + 0.25 * np.sin(7.0 * X) * np.cos(5.0 * Y) + 0.15 * np.sin(23.0 * X + 17.0 * Y)
             col = np.stack([0.30 * g + 0.05, 0.45 * g + 0.05, 0.15 * g], axis=-1)
             if rule:
-                for t in (t1, t2):
-                    e = t[:2] / np.linalg.norm(t[:2])
-                    plan = np.linalg.norm(t[:2])
-                    along = (X - corner[0]) * e[0] + (Y - corner[1]) * e[1]
-                    across = -(X - corner[0]) * e[1] + (Y - corner[1]) * e[0]
-                    on = (along >= -0.01) & (along <= plan) & (np.abs(across) <= 0.01)
-                    leg = along / plan
+                for on, mark in rule_cells(X, Y, corner, (t1, t2)):
                     col[on] = PAINT
-                    col[on & (np.abs(leg - np.round(leg, 1)) <= 0.005)] = 0.08
+                    col[mark] = 0.08
             acc += col
     img = acc / (ss * ss) * 255.0 + rng.normal(0.0, 2.0, acc.shape)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)

@@ -156,6 +156,21 @@ def plan_change(epochs: Sequence[Mapping[str, Any]], out_json: str | Path, site_
     return plan
 
 
+def _tile_surfaces(epochs: Sequence[Mapping[str, Any]], site_crs: str | None, tiling: TilingParams, name: str,
+                   params: ChangeParams, halo_index: int) -> tuple[Any, ...]:
+    """Both epochs on tile ``name``'s window (halo ``halos(...)[halo_index]``), before co-registration.
+
+    Returns ``e1, e2, grid, tile, rows, cols, core_rows, core_cols, z1, z2, window grid, matching voids``.
+    """
+    e1, e2, grid = _load(epochs, site_crs)
+    t, rs, cs, cr, cc = _window(grid, tiling, name, halos(params, grid.cell)[halo_index])
+    z1 = resample_window(e1.dem, grid, rs, cs)
+    z2 = resample_window(e2.dem, grid, rs, cs)
+    gw = grid.window(rs.start, cs.start, z1.shape[0], z1.shape[1])
+    voids = matching_voids((e1, e2), gw, params.min_correlation, params.void_margin_m, valid=np.isfinite(z1) & np.isfinite(z2))
+    return e1, e2, grid, t, rs, cs, cr, cc, z1, z2, gw, voids
+
+
 def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str, Any]], plan_json: str | Path,
                 params: ChangeParams, tiling: TilingParams, name: str, out_npz: str | Path,
                 site_crs: str | None = None) -> int:
@@ -164,14 +179,9 @@ def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     Returns the tile's stable cells. O(window cells · object window).
     """
     plan = json.loads(Path(plan_json).read_text())
-    e1, e2, grid = _load(epochs, site_crs)
-    t, rs, cs, cr, cc = _window(grid, tiling, name, halos(params, grid.cell)[0])
-    z1 = resample_window(e1.dem, grid, rs, cs)
-    z2 = resample_window(e2.dem, grid, rs, cs)
-    gw = grid.window(rs.start, cs.start, z1.shape[0], z1.shape[1])
+    e1, e2, grid, t, rs, cs, cr, cc, z1, z2, gw, voids = _tile_surfaces(epochs, site_crs, tiling, name, params, 0)
     groups = bg.mask_groups(masks, gw)
     unstable = bg.unstable_union(masks, groups, z1.shape)
-    voids = matching_voids((e1, e2), gw, params.min_correlation, params.void_margin_m, valid=np.isfinite(z1) & np.isfinite(z2))
     stable = np.isfinite(z1) & ~unstable & ~voids
     if params.stable_max_object_height_m is not None:
         stable &= ~above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m,
@@ -250,12 +260,7 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     """
     plan = json.loads(Path(plan_json).read_text())
     co = json.loads(Path(coreg_json).read_text())
-    e1, e2, grid = _load(epochs, site_crs)
-    t, rs, cs, cr, cc = _window(grid, tiling, name, halos(params, grid.cell)[1])
-    z1 = resample_window(e1.dem, grid, rs, cs)
-    z2 = resample_window(e2.dem, grid, rs, cs)
-    gw = grid.window(rs.start, cs.start, z1.shape[0], z1.shape[1])
-    voids = matching_voids((e1, e2), gw, params.min_correlation, params.void_margin_m, valid=np.isfinite(z1) & np.isfinite(z2))
+    e1, e2, grid, t, rs, cs, cr, cc, z1, z2, gw, voids = _tile_surfaces(epochs, site_crs, tiling, name, params, 1)
     if co["applied"]:
         z2 = resample_window(e2.dem, grid, rs, cs, co["dx_m"], co["dy_m"]) - _plane_window(co, grid, rs, cs)
     dod = dem_of_difference(z1, z2)

@@ -32,7 +32,6 @@ from __future__ import annotations
 import json
 import logging
 from dataclasses import replace
-from math import ceil
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -48,7 +47,7 @@ from kitegully.dense.views import ViewSet, read_offset, views_from_reconstructio
 from kitegully.io.raster import GridSpec, _profile, read_raster
 from kitegully.io.tables import write_table
 from kitegully.terrain.tiled_fill import Tile
-from kitegully.terrain.tiling import TilingParams, split_grid
+from kitegully.terrain.tiling import TilingParams, whole_block_tiles
 
 log = logging.getLogger(__name__)
 
@@ -79,17 +78,7 @@ def dense_tiles(shape: tuple[int, int], params: DenseParams, tiling: TilingParam
         More tiles along an axis than matching blocks.
     """
     T, _ = matching_block(params)
-    h, w = int(shape[0]), int(shape[1])
-    nbr, nbc = ceil(h / T), ceil(w / T)
-    nr, nc = tiling.counts
-    if nr > nbr or nc > nbc:
-        raise InputError(f"tiling.tile_m: {tiling.tile_m:g} m gives {nr} x {nc} dense tiles but the DSM has only "
-                         f"{nbr} x {nbc} matching blocks of dense.tile_cells {T}; raise tiling.tile_m or lower dense.tile_cells")
-    out = []
-    for b in split_grid((nbr, nbc), nr, nc):
-        r0, c0 = b.r0 * T, b.c0 * T
-        out.append(Tile(b.tid, b.ti, b.tj, r0, c0, min((b.r0 + b.h) * T, h) - r0, min((b.c0 + b.w) * T, w) - c0))
-    return out
+    return whole_block_tiles(shape, T, tiling, "dense", "the DSM", "dense.tile_cells", f"dense.tile_cells {T} (matching)")
 
 
 def load_views_and_grid(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path, crs: str,
