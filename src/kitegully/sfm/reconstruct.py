@@ -18,6 +18,7 @@ import numpy as np
 import pycolmap
 
 from kitegully import InputError
+from kitegully.sfm.feature_cap import cap_features
 from kitegully.sfm.images import ImageInfo
 from kitegully.sfm.priors import write_position_priors
 
@@ -350,6 +351,7 @@ def run_sfm(
         database, image_dir, infos, params.camera_model, params.default_focal_factor,
         params.max_num_features, num_threads, params.first_octave,
     )
+    capped = cap_features(database, params.max_num_features)
     t1 = time.perf_counter()
     m = params.matching
     n_priors = write_position_priors(database, positions, m.gps_sigma_m) if positions else 0
@@ -366,6 +368,8 @@ def run_sfm(
     timings = {
         "features_s": t1 - t0, "matching_s": t2 - t1, "mapping_s": t3 - t2, "matching_method": used,
         "n_position_priors": n_priors, "deterministic": deterministic, "mapper": params.mapper,
+        "keypoints_extracted": capped["keypoints_before"], "keypoints_kept": capped["keypoints_after"],
+        "images_feature_capped": capped["images_capped"],
     }
     log.info("features %.1f s, matching (%s) %.1f s, mapping (%s) %.1f s", t1 - t0, used, t2 - t1, params.mapper, t3 - t2)
     return rec, timings
