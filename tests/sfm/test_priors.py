@@ -58,3 +58,36 @@ def test_spatial_without_positions_is_refused():
         choose_matching_method("spatial", 57, 30, 0)
     with pytest.raises(InputError, match="not one of"):
         choose_matching_method("vocabtree", 57, 30, 0)
+
+
+def test_spatial_neighbours_are_horizontal(tmp_path):
+    """A photo 400 m higher over the same ground is a neighbour; one 1 km to the side is not."""
+    import sqlite3
+
+    import pycolmap
+    from PIL import Image
+
+    from kitegully.sfm.priors import write_position_priors
+    from kitegully.sfm.reconstruct import match_features
+
+    rng = np.random.default_rng(5)
+    tex = np.kron(rng.integers(0, 255, (60, 80)).astype(np.uint8), np.ones((4, 4), np.uint8))
+    (tmp_path / "img").mkdir()
+    for name in ("low.jpg", "high.jpg", "far.jpg"):
+        Image.fromarray(np.repeat(tex[:, :, None], 3, axis=2)).save(tmp_path / "img" / name, quality=95)
+    db = tmp_path / "database.db"
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.num_threads = 1
+    pycolmap.extract_features(db, tmp_path / "img", extraction_options=ext, device=pycolmap.Device.cpu)
+    pos = {"low.jpg": np.array([0.0, 0.0, 100.0]), "high.jpg": np.array([30.0, 0.0, 500.0]),
+           "far.jpg": np.array([1000.0, 0.0, 100.0])}
+    n = write_position_priors(db, pos, 3.0)
+    assert match_features(db, 3, "spatial", 10, 30, 1, n, spatial_max_distance_m=250.0, spatial_max_neighbors=20) == "spatial"
+    con = sqlite3.connect(str(db))
+    names = dict(con.execute("SELECT image_id, name FROM images"))
+    pairs = set()
+    for (pid,) in con.execute("SELECT pair_id FROM matches"):
+        b = pid % 2147483647
+        pairs.add(frozenset((names[(pid - b) // 2147483647], names[b])))
+    con.close()
+    assert pairs == {frozenset(("low.jpg", "high.jpg"))}

@@ -119,7 +119,11 @@ def match_features(
     ``method="auto"`` matches exhaustively up to ``exhaustive_max_images`` images (cheap
     and robust for small kite sets, where the flight path crosses itself); above that,
     spatially when position priors were written (each image with its
-    ``spatial_max_neighbors`` nearest images within ``spatial_max_distance_m``, in 3-D),
+    ``spatial_max_neighbors`` nearest images within ``spatial_max_distance_m``, measured
+    horizontally: a near-nadir photo's footprint is centred below the camera whatever its
+    height, and height only sets the footprint's size, so a photo taken 300 m higher over
+    the same ground must still be a neighbour; in 3-D it was not, and the full-size twin's
+    epoch 2 lost its first 14 photos, taken while the kite climbed, as a separate model),
     else sequentially with ``overlap`` neighbours (quadratic overlap). Exhaustive matching
     costs O(n²) image pairs; spatial and sequential O(n·k). Returns the method used.
 
@@ -144,7 +148,7 @@ def match_features(
                                   device=pycolmap.Device.cpu)
     else:  # spatial
         popt = pycolmap.SpatialPairingOptions()
-        popt.ignore_z = False
+        popt.ignore_z = True  # horizontal distance (see above)
         popt.max_distance = spatial_max_distance_m
         popt.max_num_neighbors = spatial_max_neighbors
         popt.num_threads = num_threads
