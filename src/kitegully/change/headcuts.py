@@ -15,11 +15,18 @@ convolved with its matching window of width w (a symmetric kernel):
   the same line meets it w/2 upslope of the step, the same offset at both epochs, which
   cancels in the retreat.
 
-The stated head of each epoch is that extrapolated **lip** (sub-cell: the crossings are
-interpolated linearly between profile stations ``profile_step_m`` apart); the
-retreat is lip₁ − lip₂ along the epoch-1 downstream axis (upslope positive, signed: a
-negative value on a stable head is measurement noise, kept so its spread stays visible).
-The half-height retreat (``retreat_mid_m``) and the former estimate, the upslope reach of
+Session 8: the two points above assume the head keeps its shape. It does not: a headwall at
+epoch 1 (L ≈ 0) is, on the twin, a wedge of length L = r at epoch 2 (the retreated head's
+depth rises linearly over the retreat), so the extrapolated line put epoch 1's lip w/2 upslope
+of the wall but epoch 2's at the wedge's tip, and measured r − w/2. The stated head of each
+epoch is now the lip of the **fitted smoothed head model** (:func:`fit_head`): hillslope level,
+linear ramp of length L ≥ 0 from the lip, channel level, smoothed by a box of w; least squares
+over lip and L, the lip tried at most ``max_retreat_m + window_m`` upslope of the epoch-1
+channel's coarse head (farther upslope lie other hollows and shrubs that the former 10 m
+profile let the crossings lock on). The retreat is lip₁ − lip₂ along the epoch-1 downstream
+axis (upslope positive, signed: a negative value on a stable head is measurement noise, kept
+so its spread stays visible).
+The half-height retreat (``retreat_mid_m``, level crossings as below) and the older estimate, the upslope reach of
 significant DoD lowering from the epoch-1 head (``retreat_dod_m``), are reported beside it.
 
 Steps per head: (1) on epoch 1's ground surface (grey opening over ``object_window_m``: shrub
@@ -175,18 +182,76 @@ def _crossing(s: np.ndarray, d: np.ndarray, i0: int, level: float, run: int) -> 
     return np.nan
 
 
+def _blurred_ramps(s: np.ndarray, lips: np.ndarray, lengths: np.ndarray, window_m: float) -> np.ndarray:
+    """Unit head ramps (0 upslope of the lip, 1 from lip + L on) smoothed by a box of ``window_m``, on stations ``s``.
+
+    Returns an array (len(lengths), len(lips), len(s)). L = 0 is a step. O(L · lips · stations).
+    """
+    step = float(s[1] - s[0])
+    x = s[None, None, :] - lips[None, :, None]
+    L = lengths[:, None, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.where(L > 0, np.clip(x / np.where(L > 0, L, 1.0), 0.0, 1.0), (x >= 0).astype(np.float64))
+    k = max(1, int(round(window_m / step)))
+    return ndimage.uniform_filter1d(f, k, axis=-1, mode="nearest") if k > 1 else f
+
+
+def fit_head(s: np.ndarray, d: np.ndarray, params: ChangeParams) -> dict[str, float]:
+    """Lip, ramp length, ``D_top`` and ``D_bot`` of the head model that best fits a depth profile (least squares).
+
+    Model ([I], session 8): the incision depth is ``D_top`` upslope of the lip, rises linearly
+    over a ramp of length L ≥ 0 (L ≈ 0: a headwall; L = the retreat: a head cut back as a
+    wedge) and stays at ``D_bot`` downstream, all smoothed by the DEM's horizontal resolution
+    (a box of ``window_m``, the dense-matching window). Fitting the smoothed model puts the lip
+    where the incision begins for a step and for a ramp alike, so a head that changes shape
+    between epochs (a step at epoch 1, a wedge at epoch 2) is not biased by w/2 as the
+    extrapolated 25-75 % line is. Lips are tried every profile station from
+    ``max_retreat_m + window_m`` upslope of the coarse head (the farthest a head can have moved
+    in one season, plus the smoothing) to ``window_m`` short of the profile's end; ramp lengths
+    from 0 to that same distance in profile steps; the fit uses the stations from three windows
+    upslope of the first lip tried (the hillslope level) to the end. ``D_top``, ``D_bot`` solve a
+    linear least-squares problem per (lip, L); only D_bot > D_top counts. NaN where no
+    finite fit exists. O(lips · lengths · stations).
+    """
+    w, step = params.headcut_window_m, float(s[1] - s[0])
+    reach = params.headcut_max_retreat_m + w
+    out = dict(lip=np.nan, length=np.nan, top=np.nan, bottom=np.nan)
+    use = np.isfinite(d) & (s >= -reach - 3 * w)
+    lips = s[(s >= -reach - 1e-9) & (s <= s[-1] - w)]
+    if use.sum() < 4 or lips.size == 0:
+        return out
+    lengths = np.arange(0.0, reach + 1e-9, step)
+    f = _blurred_ramps(s, lips, lengths, w)[..., use]
+    y = d[use]
+    fm = f.mean(axis=-1)
+    cov = ((f - fm[..., None]) * (y - y.mean())).sum(axis=-1)
+    var = ((f - fm[..., None]) ** 2).sum(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rise = cov / var  # D_bot − D_top
+        sse = ((y - y.mean()) ** 2).sum() - cov * rise
+    sse = np.where(np.isfinite(rise) & (rise > 0) & (var > 1e-9), sse, np.inf)
+    if not np.isfinite(sse).any():
+        return out
+    il, jl = np.unravel_index(int(np.argmin(sse)), sse.shape)
+    top = float(y.mean() - rise[il, jl] * fm[il, jl])
+    return dict(lip=float(lips[jl]), length=float(lengths[il]), top=top, bottom=top + float(rise[il, jl]))
+
+
 def locate_head(s: np.ndarray, d: np.ndarray, params: ChangeParams) -> dict[str, float]:
-    """Lip, half-height point, ``D_top`` and ``D_bot`` of the head on a depth profile (see module docstring).
+    """Lip (fitted head model, :func:`fit_head`), half-height point, ``D_top`` and ``D_bot`` of the head on a depth profile.
 
     ``s`` must start upslope (negative) and reach ``window_m + 1.5 m`` downstream of 0 (the
-    coarse head). NaN where the profile never crosses.
+    coarse head). The half-height point is found by the level crossings of the module
+    docstring (its own ``D_top``/``D_bot``, reported beside the lip); ``top``/``bottom`` are
+    the fitted levels. NaN where there is no fit / no crossing.
     """
     w = params.headcut_window_m
     step = float(s[1] - s[0])
     run = max(1, int(round(0.5 * w / step)))
     i0 = int(np.searchsorted(s, w))
     bot = (s >= w) & (s <= w + _PLATEAU_M)
-    out = dict(lip=np.nan, mid=np.nan, top=np.nan, bottom=np.nan)
+    fit = fit_head(s, d, params)
+    out = dict(lip=fit["lip"], mid=np.nan, top=fit["top"], bottom=fit["bottom"])
     if not np.any(np.isfinite(d[bot])):
         return out
     Db = float(np.nanmedian(d[bot]))
@@ -194,14 +259,10 @@ def locate_head(s: np.ndarray, d: np.ndarray, params: ChangeParams) -> dict[str,
     for _ in range(2):
         mid = _crossing(s, d, i0, Dt + 0.5 * (Db - Dt), run)
         if not np.isfinite(mid) or Db <= Dt:
-            return dict(out, bottom=Db)
+            return out
         up = (s >= mid - 3 * w) & (s <= mid - w)
         Dt = float(np.nanmedian(d[up])) if np.any(np.isfinite(d[up])) else 0.0
-    mid = _crossing(s, d, i0, Dt + 0.5 * (Db - Dt), run)
-    a = _crossing(s, d, i0, Dt + 0.25 * (Db - Dt), run)
-    b = _crossing(s, d, i0, Dt + 0.75 * (Db - Dt), run)
-    lip = a - 0.5 * (b - a) if np.isfinite(a) and np.isfinite(b) and b >= a else np.nan
-    return dict(lip=lip, mid=mid, top=Dt, bottom=Db)
+    return dict(out, mid=_crossing(s, d, i0, Dt + 0.5 * (Db - Dt), run))
 
 
 def dod_reach(dod: np.ndarray, grid: GridSpec, x1: float, y1: float, up: np.ndarray, radius_m: float,

@@ -96,6 +96,12 @@ class ChangeParams:
         The channel cells within this distance (m) of the coarse head give the downstream
         axis (their mean position). [I] 4 m: longer than the largest season's retreat (3 m)
         plus a window, short enough that a gully bends little.
+    headcut_max_retreat_m : float
+        The largest headcut retreat expected in one season (m) ([I] 3 m, as in
+        ``search_radius_m``'s budget; field seasons on Mediterranean marls report 0.5-3 m). The
+        fitted head model's lip is tried up to ``max_retreat_m + window_m`` upslope of the
+        epoch-1 channel's coarse head, and its ramp may be that long; farther upslope lie
+        other hollows and shrubs that a longer profile let the fit and the crossings lock on.
     headcut_profile_step_m : float
         Station spacing along the axis (m). [I] 0.1 m, half a 0.2 m cell: crossings are
         interpolated linearly between stations.
@@ -156,6 +162,7 @@ class ChangeParams:
     headcut_thalweg_halfwidth_m: float = 0.75
     headcut_axis_length_m: float = 4.0
     headcut_profile_step_m: float = 0.1
+    headcut_max_retreat_m: float = 3.0
     widening_margin_m: float = 3.0
     widening_min_depth_m: float = 0.25
     widening_end_m: float = 1.0
@@ -179,7 +186,7 @@ class ChangeParams:
         coh = config_section(t["coherence"], "change.thresholds.coherence", ("window_cells", "n_low", "n_high", "p_low", "p_high"))
         b = config_section(sec["budget"], "change.budget", ("variogram_max_lag_m", "variogram_bins", "variogram_samples"))
         h = config_section(sec["headcuts"], "change.headcuts", ("search_radius_m", "incision_sigma_m", "min_incision_m"),
-                           optional=("window_m", "thalweg_halfwidth_m", "axis_length_m", "profile_step_m"))
+                           optional=("window_m", "thalweg_halfwidth_m", "axis_length_m", "profile_step_m", "max_retreat_m"))
         w = config_section(sec.get("widening") or {"margin_m": cls.widening_margin_m, "min_depth_m": cls.widening_min_depth_m,
                                                     "end_m": cls.widening_end_m}, "change.widening", ("margin_m", "min_depth_m", "end_m"))
         q = config_section(sec.get("quality") or {"min_correlation": cls.min_correlation, "void_margin_m": cls.void_margin_m},
@@ -204,6 +211,7 @@ class ChangeParams:
             headcut_thalweg_halfwidth_m=float(h.get("thalweg_halfwidth_m", cls.headcut_thalweg_halfwidth_m)),
             headcut_axis_length_m=float(h.get("axis_length_m", cls.headcut_axis_length_m)),
             headcut_profile_step_m=float(h.get("profile_step_m", cls.headcut_profile_step_m)),
+            headcut_max_retreat_m=float(h.get("max_retreat_m", cls.headcut_max_retreat_m)),
             min_correlation=None if q["min_correlation"] is None else float(q["min_correlation"]),
             void_margin_m=float(q["void_margin_m"]), widening_margin_m=float(w["margin_m"]),
             widening_min_depth_m=float(w["min_depth_m"]), widening_end_m=float(w["end_m"]), seed=int(seed),
@@ -221,8 +229,8 @@ class ChangeParams:
         if not (self.widening_margin_m > 0 and self.widening_min_depth_m > 0 and self.widening_end_m > 0):
             raise InputError("change.widening: margin_m, min_depth_m and end_m must be > 0 m")
         if not (self.headcut_window_m > 0 and self.headcut_thalweg_halfwidth_m > 0 and self.headcut_axis_length_m > 0
-                and 0 < self.headcut_profile_step_m <= self.headcut_window_m / 2):
-            raise InputError("change.headcuts: window_m, thalweg_halfwidth_m and axis_length_m must be > 0 m and "
+                and self.headcut_max_retreat_m > 0 and 0 < self.headcut_profile_step_m <= self.headcut_window_m / 2):
+            raise InputError("change.headcuts: window_m, thalweg_halfwidth_m, axis_length_m and max_retreat_m must be > 0 m and "
                              "profile_step_m in (0, window_m / 2]")
         if self.void_margin_m < 0:
             raise InputError(f"change.quality.void_margin_m must be >= 0 m, got {self.void_margin_m}")
