@@ -148,3 +148,12 @@ def test_step_then_wedge_is_not_biased_by_half_a_window():
 def test_bad_profile_step():
     with pytest.raises(InputError, match=r"change.headcuts: .*profile_step_m"):
         ChangeParams(headcut_profile_step_m=0.8, headcut_window_m=1.0)
+
+
+def test_a_lip_in_a_void_is_not_a_measurement():
+    """The profile's stations within a window of the head are void (no DSM there): no lip, no retreat."""
+    s = np.arange(-10.0, 2.5 + 1e-9, 0.1)
+    d = 0.7 * ndimage.uniform_filter1d((s >= -0.5).astype(float), 10, mode="nearest")
+    assert np.isfinite(locate_head(s, d, PARAMS)["lip"])
+    d[(s > -1.2) & (s < -0.2)] = np.nan
+    assert np.isnan(locate_head(s, d, PARAMS)["lip"])
