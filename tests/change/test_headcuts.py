@@ -157,3 +157,20 @@ def test_a_lip_in_a_void_is_not_a_measurement():
     assert np.isfinite(locate_head(s, d, PARAMS)["lip"])
     d[(s > -1.2) & (s < -0.2)] = np.nan
     assert np.isnan(locate_head(s, d, PARAMS)["lip"])
+
+
+@pytest.mark.parametrize("retreat", [1.0, 2.5])
+@pytest.mark.parametrize("crown_m", [1.2, 2.0])
+def test_shrub_on_the_stretch_the_head_cut_through(retreat, crown_m):
+    """The twin's case: at epoch 1 a 1 m shrub stands on the stretch upslope of the headwall; at
+    epoch 2 the head has cut through it as a wedge of length r and the shrub is gone. Both
+    epochs smoothed by the 1 m window, 2 cm noise. (The former 25-75 % chord gave 1.93 and
+    1.78 m for r = 2.5 m: the step's lip w/2 upslope, the wedge's at its tip.)"""
+    g = grid(200, cell=0.2)
+    X, Y = xy(g)
+    x, y = X - g.x0, g.y0 - Y
+    crown = (np.abs(x - (20.0 - retreat / 2 - 0.3)) < max(retreat / 2, 0.6)) & (np.abs(y - Y_AXIS) < crown_m / 2)
+    z1 = ndimage.uniform_filter(_channel(g, 20.0, 0.2) + 1.0 * crown, 5) + noise(g, 0.02, "shrub1")
+    z2 = ndimage.uniform_filter(_channel(g, 20.0 - retreat, retreat, DEPTH + 0.05), 5) + noise(g, 0.02, "shrub2")
+    out = measure_headcut_retreat(z1.astype(np.float32), z2.astype(np.float32), g, HEADS, PARAMS)
+    assert out["retreat_m"].iloc[0] == pytest.approx(retreat, abs=0.25)
