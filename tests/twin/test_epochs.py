@@ -72,3 +72,18 @@ def test_epoch1_streams_unchanged_epoch2_independent():
     assert not np.allclose(epoch_rng(2018, 2, "flight", "simulate").random(5), old)
     assert epoch_seed(2018, 2, "flight", "render") == epoch_seed(2018, 2, "flight", "render")
     assert epoch_seed(2018, 2, "flight", "render") != epoch_seed(2018, 1, "flight", "render")
+
+
+def test_retreated_head_keeps_its_vertex_spacing():
+    """A 2.5 m retreat on a gully traced every 1 m adds 3 vertices (0.83 m apart), not one 2.5 m wedge."""
+    from kitegully.twin.epochs import retreat_heads
+    from kitegully.twin.gullies import Gully
+
+    head = Gully(1, "gully", "right", "V", np.arange(0.0, 11.0), np.zeros(11), headcut=True, joins=0)
+    side = Gully(2, "gully", "right", "V", np.array([5.0, 5.0]), np.array([8.0, 1.0]), headcut=False, joins=1, join_index=5)
+    got = retreat_heads([head, side], {"headcut_retreat_m": [2.5, 2.5]}, seed=0)
+    assert got == {1: 2.5}
+    np.testing.assert_allclose(head.x[:5], [-2.5, -2.5 + 2.5 / 3, -2.5 + 5 / 3, 0.0, 1.0])
+    assert np.max(np.diff(head.x)) <= 1.0 + 1e-12 and np.all(head.y == 0)
+    assert head.x[side.join_index] == 5.0  # the tributary still joins at the same point
+    assert len(side.x) == 2  # no headcut, no retreat

@@ -19,8 +19,15 @@ from kitegully.twin.noise import fbm_grid
 
 
 def retreat_heads(gullies: list[Gully], ecfg: dict, seed: int) -> dict[int, float]:
-    """Extend headcut gullies upslope in place; returns the retreat (m) per gully id."""
+    """Extend headcut gullies upslope in place; returns the retreat (m) per gully id.
+
+    The extension gets vertices no farther apart than the gully's own first segment (the
+    tracing step), so the retreated head keeps the form it had at epoch 1: depth and width
+    are set per vertex and interpolated along segments, and one vertex at the new head
+    would make the head a wedge as long as the retreat instead of a headwall.
+    """
     out: dict[int, float] = {}
+    shift: dict[int, int] = {}
     lo, hi = ecfg["headcut_retreat_m"]
     for g in gullies:
         if g.kind == "wadi" or not g.headcut or len(g.x) < 2:
@@ -30,11 +37,13 @@ def retreat_heads(gullies: list[Gully], ecfg: dict, seed: int) -> dict[int, floa
         n = np.hypot(tx, ty)
         if n == 0 or r <= 0:
             continue
-        g.x = np.concatenate([[g.x[0] - r * tx / n], g.x])
-        g.y = np.concatenate([[g.y[0] - r * ty / n], g.y])
+        m = int(np.ceil(r / n - 1e-9))
+        back = r * np.arange(m, 0, -1) / m  # distances upslope of the old head, the new head first
+        g.x = np.concatenate([g.x[0] - back * tx / n, g.x])
+        g.y = np.concatenate([g.y[0] - back * ty / n, g.y])
         out[g.gully_id] = r
-    # receiving gullies that gained a vertex at the head shift their indices
-    shift = {gid: 1 for gid in out}
+        shift[g.gully_id] = m
+    # receiving gullies that gained vertices at the head shift their indices
     for g in gullies:
         if g.joins in shift and g.join_index >= 0:
             g.join_index += shift[g.joins]
