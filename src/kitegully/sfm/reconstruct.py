@@ -49,6 +49,8 @@ def extract_features(
     max_num_features: int,
     num_threads: int,
     first_octave: int = -1,
+    estimate_affine_shape: bool = False,
+    domain_size_pooling: bool = False,
 ) -> None:
     """SIFT features for every prepared image; one shared camera per camera group.
 
@@ -57,6 +59,13 @@ def extract_features(
 
     ``first_octave`` -1 doubles the image first (COLMAP's default, most features, about 4x
     the cost); 0 starts at full resolution.
+
+    ``estimate_affine_shape`` fits each keypoint's affine shape (VLFeat's covariant detector)
+    and describes the affine-normalised patch, so a surface seen at different tilts still
+    matches (plain SIFT is similarity-invariant only: its matches collapse beyond a
+    transition tilt of about 2); ``domain_size_pooling`` pools each descriptor over a range
+    of patch sizes. Both run on the CPU only (COLMAP's GPU SIFT lacks them) and cost several
+    times the plain extraction.
 
     The focal-length prior is the median EXIF focal length of the group (in SfM pixels),
     or ``default_focal_factor`` × the larger image side when EXIF lacks it.
@@ -69,6 +78,8 @@ def extract_features(
     ext.max_image_size = -1  # images are already downscaled by prepare_images
     ext.sift.max_num_features = max_num_features
     ext.sift.first_octave = first_octave
+    ext.sift.estimate_affine_shape = bool(estimate_affine_shape)
+    ext.sift.domain_size_pooling = bool(domain_size_pooling)
     for (w, h, cam), members in sorted(groups.items()):
         focals = np.array([m.focal_px for m in members], dtype=float)
         focals = focals[np.isfinite(focals)]
@@ -113,6 +124,7 @@ def match_features(
     spatial_max_distance_m: float = 250.0,
     spatial_max_neighbors: int = 20,
     seed: int | None = None,
+    guided_matching: bool = False,
 ) -> str:
     """Match features: exhaustive, sequential by capture order, or spatial by GPS position.
 
@@ -129,10 +141,15 @@ def match_features(
 
     ``seed`` (deterministic mode) seeds the RANSAC of the two-view verification; COLMAP
     otherwise seeds each worker thread's generator from the system's entropy.
+
+    ``guided_matching`` matches each verified pair a second time, constrained by its
+    estimated two-view geometry (epipolar distance), which recovers matches the ratio test
+    dropped between views of very different tilt.
     """
     method = choose_matching_method(method, n_images, exhaustive_max_images, n_priors)
     mopt = pycolmap.FeatureMatchingOptions()
     mopt.num_threads = num_threads
+    mopt.guided_matching = bool(guided_matching)
     vopt = pycolmap.TwoViewGeometryOptions()
     if seed is not None:
         vopt.ransac.random_seed = int(seed)
@@ -354,6 +371,7 @@ def run_sfm(
     extract_features(
         database, image_dir, infos, params.camera_model, params.default_focal_factor,
         params.max_num_features, num_threads, params.first_octave,
+        params.estimate_affine_shape, params.domain_size_pooling,
     )
     capped = cap_features(database, params.max_num_features)
     t1 = time.perf_counter()
@@ -362,6 +380,7 @@ def run_sfm(
     used = match_features(
         database, len(infos), m.method, m.overlap, m.exhaustive_max_images, num_threads,
         n_priors, m.spatial_max_distance_m, m.spatial_max_neighbors, seed if deterministic else None,
+        params.guided_matching,
     )
     t2 = time.perf_counter()
     rec = map_model(
@@ -374,6 +393,8 @@ def run_sfm(
         "n_position_priors": n_priors, "deterministic": deterministic, "mapper": params.mapper,
         "keypoints_extracted": capped["keypoints_before"], "keypoints_kept": capped["keypoints_after"],
         "images_feature_capped": capped["images_capped"],
+        "estimate_affine_shape": params.estimate_affine_shape, "domain_size_pooling": params.domain_size_pooling,
+        "guided_matching": params.guided_matching,
     }
     log.info("features %.1f s, matching (%s) %.1f s, mapping (%s) %.1f s", t1 - t0, used, t2 - t1, params.mapper, t3 - t2)
     return rec, timings

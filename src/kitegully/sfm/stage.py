@@ -26,6 +26,8 @@ from kitegully.sfm.summary import image_table, model_summary
 log = logging.getLogger(__name__)
 
 MATCHING_METHODS = ("auto", "sequential", "exhaustive", "spatial")
+#: optional boolean keys of ``sfm``: affine-covariant SIFT and guided matching (default false)
+SIFT_OPTIONAL = ("estimate_affine_shape", "domain_size_pooling", "guided_matching")
 
 
 
@@ -132,6 +134,19 @@ class SfmParams:
         superlinearly with the image count, so global (or hierarchical) fits the hundreds
         of a whole catchment, where the GPS-log spatial matching already gives a dense,
         well-connected view graph for rotation averaging.
+    estimate_affine_shape, domain_size_pooling : bool
+        Affine-covariant SIFT (optional keys, default false): each keypoint's affine shape is
+        estimated and the affine-normalised patch described (``domain_size_pooling``: the
+        descriptor pooled over patch sizes). [I] plain SIFT is invariant to similarities
+        only; two views of one surface seen at tilts ``t = 1/sin(grazing angle)`` from
+        azimuths ``Δφ`` apart differ by the transition tilt τ with
+        ``τ + 1/τ = 2 + (t − 1/t)² sin²Δφ``, and SIFT's matches collapse near τ ≈ 2. Kite
+        photos look down (t ≈ 1) and need neither; low oblique pole photos of a steep slope
+        (close-range scene 08: t ≈ 3.2, limit reached at Δφ ≈ 13°) do. CPU only, several
+        times the plain extraction cost.
+    guided_matching : bool
+        Second, geometry-guided matching of each verified pair (optional, default false).
+        [I] recovers matches the ratio test rejects between views of very different tilt.
     """
 
     image_frame: str
@@ -148,12 +163,16 @@ class SfmParams:
     threads: int
     deterministic: bool
     mapper: str = "incremental"
+    estimate_affine_shape: bool = False
+    domain_size_pooling: bool = False
+    guided_matching: bool = False
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "SfmParams":
         """Build from the ``sfm`` config section; raises InputError naming a bad key."""
-        config_section(cfg, "sfm", [k for k in cls.__dataclass_fields__ if k != "mapper"], optional=("mapper",))
-        cfg = {"mapper": "incremental", **cfg}
+        optional = ("mapper",) + SIFT_OPTIONAL
+        config_section(cfg, "sfm", [k for k in cls.__dataclass_fields__ if k not in optional], optional=optional)
+        cfg = {"mapper": "incremental", **{k: False for k in SIFT_OPTIONAL}, **cfg}
         for key, allowed in (("image_frame", ("stored", "display")), ("camera_model", ("SIMPLE_RADIAL", "RADIAL")),
                              ("mapper", MAPPERS)):
             if cfg[key] not in allowed:
@@ -164,8 +183,9 @@ class SfmParams:
         if cfg["jpeg_quality"] > 100 or cfg["first_octave"] > 2:
             raise InputError("sfm.jpeg_quality must be at most 100 and sfm.first_octave at most 2")
         checked_number(cfg, "default_focal_factor", "sfm")
-        if not isinstance(cfg["deterministic"], bool):
-            raise InputError(f"sfm.deterministic: must be true or false, got {cfg['deterministic']!r}")
+        for key in ("deterministic",) + SIFT_OPTIONAL:
+            if not isinstance(cfg[key], bool):
+                raise InputError(f"sfm.{key}: must be true or false, got {cfg[key]!r}")
         values = {k: cfg[k] for k in cls.__dataclass_fields__ if k != "matching"}
         return cls(matching=SfmMatching.from_config(cfg["matching"]), **values)
 
