@@ -134,3 +134,26 @@ def test_a_failed_scene_is_a_row_with_its_sentence_and_left_out_of_the_overall_a
     assert t1.loc["all", "images_aligned"] == pytest.approx(35.0) and t1.loc["all", "status"] == "2 of 3 scenes"
     assert t.table1.columns[1] == "status" and t.accuracy.columns[-1] == "reason"
     assert t1.loc["all", "paper_images_used"] == pytest.approx((613 + 251) / 2)  # the paper over the same scenes
+
+
+@pytest.mark.parametrize("scene, affine", [("scene_08", True), ("scene_10", False)])
+def test_affine_sift_only_in_the_scenes_named(tmp_path, monkeypatch, scene, affine):
+    """closerange.sfm_affine_scenes turns on the sfm stage's affine-covariant SIFT and guided matching for those scenes only."""
+    import kitegully.sfm
+
+    seen = {}
+
+    def fake_reconstruct(*args):
+        seen["params"] = args[6]
+        raise InputError("stop here")
+
+    monkeypatch.setattr(kitegully.sfm, "reconstruct_model", fake_reconstruct)
+    params = CloseRangeParams.from_config(dict(SITE["closerange"], sfm_affine_scenes=["scene_08"]))
+    assert params.sfm_affine_scenes == ("scene_08",)
+    grid = GridSpec(0.0, 5.0, 0.02, 250, 250, "EPSG:32632")
+    with pytest.raises(InputError, match="^stop here$"):
+        photogrammetric_orthophoto(tmp_path, SURVEY, "markers.csv", grid, SITE["sfm"], params, 1, 1, scene,
+                                   tmp_path / "work", _out(tmp_path))
+    p = seen["params"]
+    assert (p.estimate_affine_shape, p.domain_size_pooling, p.guided_matching) == (affine, affine, affine)
+    assert p.matching.method == "exhaustive" and p.max_num_features == params.sfm_max_num_features

@@ -70,6 +70,17 @@ class CloseRangeParams:
     sfm_max_num_features : int
         SIFT features per photo for the SfM (the rest of the sfm stage's settings is reused,
         with exhaustive matching: a ring of photos has no GPS log).
+    sfm_affine_scenes : tuple of str
+        Scenes whose SfM uses affine-covariant SIFT (the sfm stage's ``estimate_affine_shape``
+        and ``domain_size_pooling``) and guided matching; the others plain SIFT. [I] set
+        from the walk's geometry, not from a score: a pole camera at grazing angle γ to
+        the slope sees the ground with tilt ``t = 1/sin γ``, and two photos Δφ apart around the
+        ring differ by the transition tilt τ with ``τ + 1/τ = 2 + (t − 1/t)² sin²Δφ``;
+        plain SIFT's matches collapse near τ ≈ 2. Scene 08 (ring 6.2 m out on a 39° slope,
+        median γ = 18°, t = 3.2) reaches τ = 2 at Δφ ≈ 13°, below the walk's 10° steps plus
+        their scatter (σ = 3° per photo, so ±4.2° per step: 7 of 36 steps measured at
+        13–19°); scene 10 (t = 2.0) reaches it only at 25–30°. Default: none (CPU only,
+        several times the extraction cost).
     sphere_tolerance_m : float
         Ray–point distance that still counts as one sphere, in the model's scale expressed
         at the walk's size (scaled by the camera ring radius / 5 m). [I] a tenth of the 0.1 m
@@ -140,6 +151,7 @@ class CloseRangeParams:
     walk: Mapping[str, Any] = field(default_factory=dict)
     spheres: SphereDetection = SphereDetection()
     sfm_max_num_features: int = 4096
+    sfm_affine_scenes: tuple[str, ...] = ()
     sphere_tolerance_m: float = 0.01
     marker_budget_m: float = 0.05
     pole_height_m: float = 3.0
@@ -164,7 +176,7 @@ class CloseRangeParams:
         for k, x in cfg.items():
             if k == "scenes":
                 v[k] = "all" if x == "all" else tuple(str(s) for s in x)
-            elif k == "scenes_without_rule":
+            elif k in ("scenes_without_rule", "sfm_affine_scenes"):
                 v[k] = tuple(str(s) for s in x)
             elif k == "rule_paint_rgb":
                 v[k] = tuple(float(c) for c in x)
@@ -366,6 +378,10 @@ def photogrammetric_orthophoto(
     photo_dir = Path(photo_dir)
     s = dict(sfm_cfg, max_num_features=params.sfm_max_num_features)
     s["matching"] = dict(s["matching"], camera_log=None, method="exhaustive")
+    affine = scene in params.sfm_affine_scenes
+    if affine:  # steep oblique views: plain SIFT's affine limit falls inside the walk's azimuth steps
+        s.update(estimate_affine_shape=True, domain_size_pooling=True, guided_matching=True)
+        log.info("%s: affine-covariant SIFT and guided matching (closerange.sfm_affine_scenes)", scene)
     summary = reconstruct_model(photo_dir, work_dir, out["model"], out["summary"], out["images"], out["image_info"],
                                 SfmParams.from_config(s), seed, threads)
     t_sfm = time.perf_counter() - t0
@@ -453,6 +469,7 @@ def photogrammetric_orthophoto(
     record = {
         "scene": scene, "status": "ok",
         "images_used": int(summary["n_images"]), "images_aligned": int(summary["n_registered"]),
+        "sift": "affine" if affine else "plain",
         "marker_error_m": float(err.mean()), "marker_error_max_m": float(err.max()),
         "spheres_measured": len(rows), "sphere_detections": len(det_rows),
         "sphere_candidates": len(found_all), "sphere_candidates_round": len(found),
@@ -535,6 +552,7 @@ def closerange_tables(
         "leg_a_m": np.nan if r["rule"] is None else r["rule"]["leg_a_m"],
         "leg_b_m": np.nan if r["rule"] is None else r["rule"]["leg_b_m"],
         "rule_method": r.get("rule_method") or ("" if r["rule"] is None else "orthophoto"),
+        "sift": r.get("sift", "plain"),
         "tie_points": r["tie_points"], "dense_points": r["dense_points"], "holes_pct": r["holes_pct"],
         "time_s": r["timings_s"]["total"],
     } if scene_succeeded(r) else {"scene": r["scene"], "status": "failed", "reason": r["reason"]} for r in records])
