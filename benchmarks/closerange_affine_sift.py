@@ -41,7 +41,8 @@ def links(database: Path, n: int) -> dict:
     finally:
         db.close()
     m = np.zeros((n, n), int)
-    for (a, b), g in zip(pairs, geoms):
+    for pid, g in zip(pairs, geoms):
+        a, b = pycolmap.pair_id_to_image_pair(pid)
         i, j = ids[a], ids[b]
         m[i, j] = m[j, i] = len(g.inlier_matches)
     out = {}
@@ -52,29 +53,42 @@ def links(database: Path, n: int) -> dict:
     return out
 
 
+KEYS = ("n_images", "n_registered", "n_points3d", "mean_reprojection_error_px", "features_s", "matching_s", "mapping_s")
+
+
+def run_variant(photos: str, cfg: dict, variant: str, out: Path) -> dict:
+    """SfM of the photos as closerange_sfm runs it, with the variant's sfm keys; the summary's main numbers."""
+    s = dict(cfg["sfm"], max_num_features=cfg["closerange"]["sfm_max_num_features"], **VARIANTS[variant])
+    s["matching"] = dict(s["matching"], camera_log=None, method="exhaustive")
+    t0 = time.perf_counter()
+    try:
+        summ = reconstruct_model(photos, out / "work", out / "model", out / "summary.json", out / "images.csv",
+                                 out / "image_info.json", SfmParams.from_config(s), cfg["seed"], 2)
+        row = {k: summ[k] for k in KEYS}
+    except Exception as err:  # noqa: BLE001 - a variant that builds no model is a result
+        row = {"error": str(err)}
+    row["total_s"] = time.perf_counter() - t0
+    return row
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("photos")
     ap.add_argument("--site", default="kamech_twin")
     ap.add_argument("--variants", nargs="+", default=["plain", "affine"])
     ap.add_argument("--out", default="/tmp/closerange_affine")
+    ap.add_argument("--links-only", action="store_true", help="only read the ring links of an earlier run's databases")
     a = ap.parse_args()
     cfg = yaml.safe_load((REPO / "config" / "sites" / f"{a.site}.yaml").read_text())
     rows = {}
     for v in a.variants:
-        s = dict(cfg["sfm"], max_num_features=cfg["closerange"]["sfm_max_num_features"], **VARIANTS[v])
-        s["matching"] = dict(s["matching"], camera_log=None, method="exhaustive")
         out = Path(a.out) / v
         out.mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
-        try:
-            summ = reconstruct_model(a.photos, out / "work", out / "model", out / "summary.json", out / "images.csv",
-                                     out / "image_info.json", SfmParams.from_config(s), cfg["seed"], 2)
-            row = {k: summ[k] for k in ("n_images", "n_registered", "n_points3d", "mean_reprojection_error_px",
-                                        "features_s", "matching_s", "mapping_s")}
-        except Exception as err:  # noqa: BLE001 - a variant that builds no model is a result
-            row = {"error": str(err)}
-        row["total_s"] = time.perf_counter() - t0
+        if a.links_only:
+            summ = json.loads((out / "summary.json").read_text())
+            row = {k: summ[k] for k in KEYS if k in summ}
+        else:
+            row = run_variant(a.photos, cfg, v, out)
         row.update(links(out / "work" / "database.db", len(list(Path(a.photos).glob("*.JPG")))))
         rows[v] = row
         print(v, json.dumps(row), flush=True)

@@ -136,24 +136,37 @@ def test_a_failed_scene_is_a_row_with_its_sentence_and_left_out_of_the_overall_a
     assert t1.loc["all", "paper_images_used"] == pytest.approx((613 + 251) / 2)  # the paper over the same scenes
 
 
-@pytest.mark.parametrize("scene, affine", [("scene_08", True), ("scene_10", False)])
-def test_affine_sift_only_in_the_scenes_named(tmp_path, monkeypatch, scene, affine):
-    """closerange.sfm_affine_scenes turns on the sfm stage's affine-covariant SIFT and guided matching for those scenes only."""
+@pytest.mark.parametrize("mode, registered, calls", [
+    ("never", [11], [False]), ("always", [36], [True]), ("fallback", [36], [False]),
+    ("fallback", [11, 36], [False, True]), ("fallback", [None, 36], [False, True]),
+])
+def test_affine_sift_where_plain_sift_leaves_photos_out(tmp_path, monkeypatch, mode, registered, calls):
+    """closerange.sfm_affine_features: the sfm stage's affine-covariant SIFT and guided matching never, always,
+    or redone with them when plain SIFT's model leaves a photo out or builds none (None)."""
     import kitegully.sfm
 
-    seen = {}
+    seen = []
 
     def fake_reconstruct(*args):
-        seen["params"] = args[6]
-        raise InputError("stop here")
+        p = args[6]
+        seen.append(p)
+        assert p.estimate_affine_shape == p.domain_size_pooling == p.guided_matching
+        assert p.matching.method == "exhaustive" and p.max_num_features == 4096
+        n = registered[len(seen) - 1]
+        if n is None:
+            raise InputError("photos: structure from motion built no model: ...")
+        return {"n_images": 36, "n_registered": n}
+
+    def stop(*args):
+        raise RuntimeError("stop here")
 
     monkeypatch.setattr(kitegully.sfm, "reconstruct_model", fake_reconstruct)
-    params = CloseRangeParams.from_config(dict(SITE["closerange"], sfm_affine_scenes=["scene_08"]))
-    assert params.sfm_affine_scenes == ("scene_08",)
+    monkeypatch.setattr("kitegully.closerange.stage.read_oriented_photos", stop)
+    params = CloseRangeParams.from_config(dict(SITE["closerange"], sfm_affine_features=mode))
     grid = GridSpec(0.0, 5.0, 0.02, 250, 250, "EPSG:32632")
-    with pytest.raises(InputError, match="^stop here$"):
-        photogrammetric_orthophoto(tmp_path, SURVEY, "markers.csv", grid, SITE["sfm"], params, 1, 1, scene,
+    with pytest.raises(RuntimeError, match="^stop here$"):
+        photogrammetric_orthophoto(tmp_path, SURVEY, "markers.csv", grid, SITE["sfm"], params, 1, 1, "scene_08",
                                    tmp_path / "work", _out(tmp_path))
-    p = seen["params"]
-    assert (p.estimate_affine_shape, p.domain_size_pooling, p.guided_matching) == (affine, affine, affine)
-    assert p.matching.method == "exhaustive" and p.max_num_features == params.sfm_max_num_features
+    assert [p.estimate_affine_shape for p in seen] == calls
+    with pytest.raises(InputError, match="^closerange.sfm_affine_features: 'sometimes' is not one of never, fallback, always$"):
+        CloseRangeParams.from_config({"sfm_affine_features": "sometimes"})

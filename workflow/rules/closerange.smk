@@ -21,7 +21,7 @@ if "closerange" in config and "obia" in config and IS_TWIN:
     if _cr_unknown:
         raise WorkflowError(f"Invalid configuration: closerange.scenes names {', '.join(_cr_unknown)}, not among the obia scenes ({OBIA_SCENES[0]} .. {OBIA_SCENES[-1]})")
     # what closerange_sfm reads (CloseRangeParams); the walk belongs to the photos rule
-    CR_SFM_KEYS = ("spheres", "sfm_max_num_features", "sfm_affine_scenes", "sphere_tolerance_m", "marker_budget_m", "dense", "trim", "periphery",
+    CR_SFM_KEYS = ("spheres", "sfm_max_num_features", "sfm_affine_features", "sphere_tolerance_m", "marker_budget_m", "dense", "trim", "periphery",
                    "fill_holes_cells", "outlier_cell_m", "outlier_tolerance_m", "min_dense_points",
                    "rule_paint_rgb", "rule_min_paint_fraction", "rule_strip_width_m", "on_scene_failure")
     CR_ON_FAILURE = CR.get("on_scene_failure", "stop")

@@ -70,17 +70,23 @@ class CloseRangeParams:
     sfm_max_num_features : int
         SIFT features per photo for the SfM (the rest of the sfm stage's settings is reused,
         with exhaustive matching: a ring of photos has no GPS log).
-    sfm_affine_scenes : tuple of str
-        Scenes whose SfM uses affine-covariant SIFT (the sfm stage's ``estimate_affine_shape``
-        and ``domain_size_pooling``) and guided matching; the others plain SIFT. [I] set
-        from the walk's geometry, not from a score: a pole camera at grazing angle γ to
-        the slope sees the ground with tilt ``t = 1/sin γ``, and two photos Δφ apart around the
-        ring differ by the transition tilt τ with ``τ + 1/τ = 2 + (t − 1/t)² sin²Δφ``;
-        plain SIFT's matches collapse near τ ≈ 2. Scene 08 (ring 6.2 m out on a 39° slope,
-        median γ = 18°, t = 3.2) reaches τ = 2 at Δφ ≈ 13°, below the walk's 10° steps plus
-        their scatter (σ = 3° per photo, so ±4.2° per step: 7 of 36 steps measured at
-        13–19°); scene 10 (t = 2.0) reaches it only at 25–30°. Default: none (CPU only,
-        several times the extraction cost).
+    sfm_affine_features : str
+        When the SfM uses affine-covariant SIFT (the sfm stage's ``estimate_affine_shape``
+        and ``domain_size_pooling``) with guided matching: ``never``, ``always``, or
+        ``fallback`` (plain SIFT first; if its model leaves any photo out, or builds none,
+        the SfM is redone with affine-covariant features and that model is kept). [I] the
+        walk's geometry: a pole camera at grazing angle γ to the slope sees the ground with
+        tilt ``t = 1/sin γ``, and two photos Δφ apart around the ring differ by the
+        transition tilt τ with ``τ + 1/τ = 2 + (t − 1/t)² sin²Δφ``; plain SIFT is
+        similarity-invariant only and its matches collapse near τ ≈ 2, i.e. beyond
+        ``sin Δφ* = √0.5 / (t − 1/t)``. On the twin's walks (10° steps, ±4.2° per step from
+        the 3° per-photo scatter) γ is 18–31° in all scenes but 06, so Δφ* is 13–25° and
+        1–11 of the 36 steps pass it (``benchmarks/closerange_walk_geometry.py``); whether
+        the ring still closes depends on the next-but-one links, so the photos decide:
+        a ring in which a neighbour link fails still registers every photo through the
+        others, a ring that leaves photos out has broken at such links (scene 08: 11 of 36
+        with plain SIFT, 36 with affine). ``fallback`` pays the several-times extraction
+        cost (CPU only) only in those scenes, not in the default run's scene 10.
     sphere_tolerance_m : float
         Ray–point distance that still counts as one sphere, in the model's scale expressed
         at the walk's size (scaled by the camera ring radius / 5 m). [I] a tenth of the 0.1 m
@@ -151,7 +157,7 @@ class CloseRangeParams:
     walk: Mapping[str, Any] = field(default_factory=dict)
     spheres: SphereDetection = SphereDetection()
     sfm_max_num_features: int = 4096
-    sfm_affine_scenes: tuple[str, ...] = ()
+    sfm_affine_features: str = "never"
     sphere_tolerance_m: float = 0.01
     marker_budget_m: float = 0.05
     pole_height_m: float = 3.0
@@ -176,7 +182,7 @@ class CloseRangeParams:
         for k, x in cfg.items():
             if k == "scenes":
                 v[k] = "all" if x == "all" else tuple(str(s) for s in x)
-            elif k in ("scenes_without_rule", "sfm_affine_scenes"):
+            elif k == "scenes_without_rule":
                 v[k] = tuple(str(s) for s in x)
             elif k == "rule_paint_rgb":
                 v[k] = tuple(float(c) for c in x)
@@ -196,6 +202,8 @@ class CloseRangeParams:
             raise InputError(f"closerange.trim: {p.trim} is not in [0, 0.5) (share cut from each tail)")
         if p.periphery not in ("circle", "hull"):
             raise InputError(f"closerange.periphery: '{p.periphery}' is not one of circle, hull")
+        if p.sfm_affine_features not in ("never", "fallback", "always"):
+            raise InputError(f"closerange.sfm_affine_features: '{p.sfm_affine_features}' is not one of never, fallback, always")
         if p.on_scene_failure not in ("stop", "record"):
             raise InputError(f"closerange.on_scene_failure: '{p.on_scene_failure}' is not one of stop, record")
         if p.rule_strip_width_m <= 0:
@@ -206,23 +214,20 @@ class CloseRangeParams:
 
 
 # --------------------------------------------------------------------------- closerange_photos
-def photograph_scene(
+def scene_walk(
     ortho_path: str, dem_path: str, truth_markers_path: str, truth_eroded_path: str, meta: dict, markers: pd.DataFrame,
-    walk_cfg: Mapping[str, Any], sphere_radius_m: float, folding_rule: bool, seed: int, scene: str, photo_dir: str | Path,
-) -> dict:
-    """Render the pole walk of one scene into ``photo_dir`` (JPEG with EXIF); return the truth record.
+    walk_cfg: Mapping[str, Any], sphere_radius_m: float, folding_rule: bool, seed: int, scene: str,
+):
+    """The photographed world and the pole walk of one scene: ``(PoleScene, PoleWalk, poses)`` (twin side).
 
-    Twin side: the scene's truth (marker mask, eroded mask) builds the photographed world.
-    Returns ``{"n_images", "camera_centres", "spheres", "rule", "render_s"}`` (truth, for
-    the evaluation only).
+    What :func:`photograph_scene` renders; also read by the walk-geometry benchmark
+    (``benchmarks/closerange_walk_geometry.py``) without rendering.
     """
     from kitegully.obia.scene import read_scene_rasters
     from kitegully.seeds import rng_for
     from kitegully.twin.closerange import CloseRangeScene
-    from kitegully.twin.exif import exif_bytes, write_jpeg
-    from kitegully.twin.polewalk import PoleWalk, photograph_walk, prepare_pole_scene, walk_poses
+    from kitegully.twin.polewalk import PoleWalk, prepare_pole_scene, walk_poses
 
-    t0 = time.perf_counter()
     rgb, dem, grid, (tm, te) = read_scene_rasters(ortho_path, dem_path, truth_markers_path, truth_eroded_path)
     sc = CloseRangeScene(scene, grid, rgb, dem, te, tm, markers, meta)
     ps = prepare_pole_scene(sc, sphere_radius_m, folding_rule, rng_for(seed, "closerange", scene, "rule"))
@@ -235,6 +240,26 @@ def photograph_scene(
     min_radius = ps.patch_reach_m + walk.standoff_m
     ps = dataclasses.replace(ps, patch_reach_m=max(ps.patch_reach_m, sphere_reach))
     poses = walk_poses(ps, walk, rng_for(seed, "closerange", scene, "walk"), min_radius_m=min_radius)
+    return ps, walk, poses
+
+
+def photograph_scene(
+    ortho_path: str, dem_path: str, truth_markers_path: str, truth_eroded_path: str, meta: dict, markers: pd.DataFrame,
+    walk_cfg: Mapping[str, Any], sphere_radius_m: float, folding_rule: bool, seed: int, scene: str, photo_dir: str | Path,
+) -> dict:
+    """Render the pole walk of one scene into ``photo_dir`` (JPEG with EXIF); return the truth record.
+
+    Twin side: the scene's truth (marker mask, eroded mask) builds the photographed world.
+    Returns ``{"n_images", "camera_centres", "spheres", "rule", "render_s"}`` (truth, for
+    the evaluation only).
+    """
+    from kitegully.seeds import rng_for
+    from kitegully.twin.exif import exif_bytes, write_jpeg
+    from kitegully.twin.polewalk import photograph_walk
+
+    t0 = time.perf_counter()
+    ps, walk, poses = scene_walk(ortho_path, dem_path, truth_markers_path, truth_eroded_path, meta, markers, walk_cfg,
+                                 sphere_radius_m, folding_rule, seed, scene)
     cam = walk.camera()
     out = Path(photo_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -378,12 +403,28 @@ def photogrammetric_orthophoto(
     photo_dir = Path(photo_dir)
     s = dict(sfm_cfg, max_num_features=params.sfm_max_num_features)
     s["matching"] = dict(s["matching"], camera_log=None, method="exhaustive")
-    affine = scene in params.sfm_affine_scenes
-    if affine:  # steep oblique views: plain SIFT's affine limit falls inside the walk's azimuth steps
-        s.update(estimate_affine_shape=True, domain_size_pooling=True, guided_matching=True)
-        log.info("%s: affine-covariant SIFT and guided matching (closerange.sfm_affine_scenes)", scene)
-    summary = reconstruct_model(photo_dir, work_dir, out["model"], out["summary"], out["images"], out["image_info"],
-                                SfmParams.from_config(s), seed, threads)
+    affine = params.sfm_affine_features == "always"
+    sift_note = "affine" if affine else "plain"
+
+    def sfm(affine_: bool) -> dict:
+        s_ = dict(s, estimate_affine_shape=affine_, domain_size_pooling=affine_, guided_matching=affine_)
+        return reconstruct_model(photo_dir, work_dir, out["model"], out["summary"], out["images"], out["image_info"],
+                                 SfmParams.from_config(s_), seed, threads)
+
+    try:
+        summary = sfm(affine)
+        plain_short = summary["n_registered"] < summary["n_images"]
+        plain_result = f"{summary['n_registered']}/{summary['n_images']} photos registered"
+    except InputError as err:
+        if affine or params.sfm_affine_features != "fallback":
+            raise
+        plain_short, plain_result = True, f"no model ({err})"
+    if plain_short and not affine and params.sfm_affine_features == "fallback":
+        # the ring broke at azimuth steps beyond plain SIFT's affine limit: affine-covariant features
+        log.info("%s: plain SIFT: %s; SfM again with affine-covariant SIFT and guided matching "
+                 "(closerange.sfm_affine_features: fallback)", scene, plain_result)
+        affine, sift_note = True, f"affine (fallback; plain SIFT: {plain_result})"
+        summary = sfm(True)
     t_sfm = time.perf_counter() - t0
     photos, sparse = read_oriented_photos(out["model"])
     images = _read_photos(Path(work_dir) / "images", [p.name for p in photos])  # the prepared copies SfM saw
@@ -469,7 +510,7 @@ def photogrammetric_orthophoto(
     record = {
         "scene": scene, "status": "ok",
         "images_used": int(summary["n_images"]), "images_aligned": int(summary["n_registered"]),
-        "sift": "affine" if affine else "plain",
+        "sift": sift_note,
         "marker_error_m": float(err.mean()), "marker_error_max_m": float(err.max()),
         "spheres_measured": len(rows), "sphere_detections": len(det_rows),
         "sphere_candidates": len(found_all), "sphere_candidates_round": len(found),
@@ -552,7 +593,7 @@ def closerange_tables(
         "leg_a_m": np.nan if r["rule"] is None else r["rule"]["leg_a_m"],
         "leg_b_m": np.nan if r["rule"] is None else r["rule"]["leg_b_m"],
         "rule_method": r.get("rule_method") or ("" if r["rule"] is None else "orthophoto"),
-        "sift": r.get("sift", "plain"),
+        "sift": r.get("sift", "plain").split(" ")[0],
         "tie_points": r["tie_points"], "dense_points": r["dense_points"], "holes_pct": r["holes_pct"],
         "time_s": r["timings_s"]["total"],
     } if scene_succeeded(r) else {"scene": r["scene"], "status": "failed", "reason": r["reason"]} for r in records])
