@@ -68,13 +68,14 @@ def test_survey_without_coordinates_is_named(tmp_path):
 def test_tables_put_the_paper_next_to_ours():
     rec = {"scene": "scene_06", "images_used": 36, "images_aligned": 35, "marker_error_m": 0.02, "spheres_measured": 4,
            "scale_error_pct": None, "rule": None, "tie_points": 9000, "dense_points": 2_000_000, "holes_pct": 3.0,
-           "timings_s": {"total": 60.0}}
+           "timings_s": {"total": 60.0}, "sift": "affine (fallback; plain SIFT: 11/36 photos registered)"}
     conf_sfm = {"scene": "scene_06", "confusion": [[90, 5], [5, 100]], "area_auto_m2": 4.1, "area_ref_m2": 4.0}
     conf_dir = {"scene": "scene_06", "confusion": [[95, 1], [1, 103]], "area_auto_m2": 4.2, "area_ref_m2": 4.3}
     t = closerange_tables([rec], [conf_sfm], [conf_dir])
     row = t.table1.iloc[0]
     assert row["paper_images_used"] == 243 and row["paper_marker_error_m"] == 0.04 and np.isnan(row["scale_error_pct"])
     assert t.table1["scene"].iloc[-1] == "all"
+    assert row["sift"] == "affine" and t.table1["sift"].iloc[-1] == "affine in 1"
     acc = t.accuracy.set_index("scene")
     assert acc.loc["scene_06", "oa_sfm_pct"] == pytest.approx(95.0)
     assert acc.loc["scene_06", "oa_direct_pct"] == pytest.approx(99.0)

@@ -600,8 +600,9 @@ def closerange_tables(
     if len(t1):
         t1 = t1.merge(PAPER_TABLE1, on="scene", how="left")
         ok = t1["status"] == "ok"
-        mean = {c: t1.loc[ok, c].mean() for c in t1.columns if c not in ("scene", "status", "reason", "rule_method")}
-        t1.loc[len(t1)] = {"scene": "all", "status": count, "reason": failed_note, **mean}
+        mean = {c: t1.loc[ok, c].mean() for c in t1.columns if c not in ("scene", "status", "reason", "rule_method", "sift")}
+        n_affine = int((t1.loc[ok, "sift"] == "affine").sum())
+        t1.loc[len(t1)] = {"scene": "all", "status": count, "reason": failed_note, "sift": f"affine in {n_affine}", **mean}
         t1 = t1[[c for c in t1.columns if c != "reason"] + ["reason"]]  # the sentence last: the .md stays readable
 
     def acc_row(scene, conf):
