@@ -87,8 +87,9 @@ lowcost: $(STAMP)
 # Close-range SfM of all OBIA scenes (issue 20; the default run builds closerange.scenes, one
 # scene): pole photos -> SfM -> 2 cm orthophotos -> OBIA, results/<site>/obia/closerange_sfm.csv
 # and closerange_accuracy.csv (~43 min of job time for all 10 measured on the loaded shared machine).
-# on_scene_failure: record: a scene that cannot be georeferenced (05, 08 today) is a `failed` row
-# with its one sentence, and the overall accuracy is over the scenes that succeeded ("8 of 10").
+# on_scene_failure: record: a scene that cannot be georeferenced (none since session 8: 08 now registers
+# with closerange.sfm_affine_features: fallback, ~26 min of its own on the loaded machine) is a `failed`
+# row with its one sentence, and the overall accuracy is over the scenes that succeeded ("9 of 10").
 # --forcerun closerange_classify (about 5 s a scene): Snakemake 9.27 does not rerun a scene's
 # classification when the SfM checkpoint's orthophoto is newer (the classify job is only found
 # after the checkpoint; measured: a rerun SfM left the old classification in the summary).
