@@ -140,7 +140,8 @@ def _quantity(path: Path, key: str, col: str = "quantity", val: str = "value") -
     return float(s.iloc[0]) if len(s) else float("nan")
 
 
-def collect(cfg: dict, t: dict[str, Path], results: Path, regully: bool = False) -> dict:
+def collect(cfg: dict, t: dict[str, Path], results: Path, regully: bool = False,
+            sources: tuple[str, ...] = ("digitised", "automatic", "both")) -> dict:
     """Every summary number of one member from its result files (NaN where a file is missing)."""
     row: dict = {}
     nan = float("nan")
@@ -157,11 +158,12 @@ def collect(cfg: dict, t: dict[str, Path], results: Path, regully: bool = False)
     if "obia" in t and t["obia"].exists():
         row["kite_bare_soil_oa_pct"] = float(pd.read_csv(t["obia"])["overall_accuracy"].iloc[0])
     site = results / cfg["site"]["name"]
-    row.update(score_heads_both(cfg, site, regully))
+    row.update(score_heads_both(cfg, site, regully, sources))
     return row
 
 
-def score_heads_both(cfg: dict, site: Path, regully: bool = False) -> dict:
+def score_heads_both(cfg: dict, site: Path, regully: bool = False,
+                     sources: tuple[str, ...] = ("digitised", "automatic", "both")) -> dict:
     """Gully scores with the digitised heads (the rule's map) and with automatic heads (library run).
 
     ``regully``: map the member's dense DSM again with the current gully code and settings for
@@ -184,7 +186,7 @@ def score_heads_both(cfg: dict, site: Path, regully: bool = False) -> dict:
     valid = np.isfinite(dem)
     out: dict = {}
     if regully:
-        return regully_member(g, twin, dem, grid, ref, polys, true_xy, crs)
+        return regully_member(g, twin, dem, grid, ref, polys, true_xy, crs, sources)
     # digitised: the pipeline's own products
     gm = site / "gully/gully_map.tif"
     if gm.exists():
@@ -209,8 +211,9 @@ def score_heads_both(cfg: dict, site: Path, regully: bool = False) -> dict:
     return out
 
 
-def regully_member(g: dict, twin: Path, dem: np.ndarray, grid, ref, polys, true_xy: np.ndarray, crs: str) -> dict:
-    """Scores of ``map_gullies`` with digitised, automatic and both head sources on one member's DSM."""
+def regully_member(g: dict, twin: Path, dem: np.ndarray, grid, ref, polys, true_xy: np.ndarray, crs: str,
+                   sources: tuple[str, ...] = ("digitised", "automatic", "both")) -> dict:
+    """Scores of ``map_gullies`` with the head ``sources`` (digitised, automatic, both) on one member's DSM."""
     from kitegully.gully.inputs import read_heads
 
     valid = np.isfinite(dem)
@@ -218,13 +221,22 @@ def regully_member(g: dict, twin: Path, dem: np.ndarray, grid, ref, polys, true_
     sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
     out: dict = {"dsm_sigma_z_at_checkpoints_m": sz}
     params = GullyParams.from_config(g)
+    ortho = None
+    if params.crowns.enabled:  # gully.crowns: the member's orthophoto on the DSM grid
+        from kitegully.gully.inputs import read_orthophoto_on_grid
+
+        ortho = read_orthophoto_on_grid(twin.parent / "dense/orthophoto.tif", grid)
     xs, ys = grid.cell_centres()
     for src, key in (("digitised", "dig"), ("automatic", "auto"), ("both", "both")):
+        if src not in sources:
+            continue
         t0 = time.perf_counter()
         ip = HeadDetectionParams.from_config(g["automatic_heads"], sz)
         auto = ip if src != "digitised" else None
         x, y = (hx, hy) if src != "automatic" else (np.zeros(0), np.zeros(0))
-        res = map_gullies(dem, grid, x, y, params, workers=1, auto_heads=auto, incision=ip)
+        res = map_gullies(dem, grid, x, y, params, workers=1, auto_heads=auto, incision=ip, ortho=ortho)
+        if res.bridged is not None:
+            out[f"{key}_bridged_m"] = float(res.bridged.sum()) * grid.cell
         r, c = np.divmod(res.auto_heads, grid.width)
         used = np.concatenate([np.column_stack([x, y]), np.column_stack([xs[c], ys[r]])])
         s = score_gully_run(res.gully, res.extracted_lines, valid, grid, ref, polys, TOLERANCES,
@@ -293,6 +305,10 @@ def main() -> None:
     ap.add_argument("--regully", action="store_true",
                     help="with --collect-only: map each member's existing dense DSM again with the current gully code "
                          "(digitised, automatic and both heads) instead of reading the rule's gully map")
+    ap.add_argument("--sources", default="digitised,automatic,both",
+                    help="with --regully: comma-separated head sources to map (digitised, automatic, both)")
+    ap.add_argument("--set", action="append", default=[],
+                    help="with --regully: gully key=value (yaml value) overrides of every member's config")
     ap.add_argument("--results", default="results")
     ap.add_argument("--out", default=None, help="default results/ensemble (results/ensemble_tiny with --tiny)")
     a = ap.parse_args()
@@ -315,7 +331,11 @@ def main() -> None:
         if a.dry_run:
             continue
         row = {"member": name, "site": cfg["site"]["name"], "seed": cfg["seed"], "base": base.name, "chain_wall_s": wall}
-        row.update(collect(cfg, {k: REPO / v for k, v in t.items()}, REPO / results, a.regully))
+        for kv in a.set:
+            k, v = kv.split("=", 1)
+            cfg["gully"][k] = yaml.safe_load(v)
+        row.update(collect(cfg, {k: REPO / v for k, v in t.items()}, REPO / results, a.regully,
+                           tuple(a.sources.split(","))))
         rows.append(row)
         log.info("%s: %s", name, {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()})
     if a.dry_run:
