@@ -97,9 +97,14 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     ip = HeadDetectionParams.from_config(g["automatic_heads"], sz)
     auto = ip if heads != "digitised" else None
     params = GullyParams.from_config(g)
-    res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto, incision=ip)
+    ortho = None
+    if params.crowns.enabled:  # gully.crowns: the orthophoto on the DSM grid
+        from kitegully.gully.inputs import read_orthophoto_on_grid
+
+        ortho = read_orthophoto_on_grid(site / "dense/orthophoto.tif", grid)
+    res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto, incision=ip, ortho=ortho)
     # cells raised by the fill of the tracing surface (filled depressions and flats) and nodata
-    _zh, zt, _n = tracing_surface(dem, grid, params, 1, ip)
+    _zh, zt, _n = tracing_surface(dem, grid, params, 1, ip, hidden=res.crowns)
     filled, _r = priority_flood_fill(zt, 0.0 if params.flat_routing == "resolve" else params.fill_epsilon_m)
     raised = np.isfinite(zt) & (filled > zt + 1e-6)
     nodata = ~np.isfinite(zt)

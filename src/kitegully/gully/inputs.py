@@ -41,3 +41,24 @@ def check_heads_on_dem(inside: np.ndarray, path: str | Path) -> None:
     """Raise :class:`InputError` if no gully head falls on valid DEM cells."""
     if not np.any(inside):
         raise InputError(f"{path}: none of the {inside.size} gully heads lies on valid DEM cells")
+
+
+def read_orthophoto_on_grid(path: str | Path, grid) -> np.ndarray:
+    """The orthophoto's first three bands (R, G, B) averaged onto ``grid`` (float32, 0 = no data).
+
+    The orthophoto of Stage 5 is made on the DSM's footprint at a finer cell (0.1 m for a
+    0.2 m DSM); each DEM cell takes the mean of the orthophoto pixels it covers
+    (``rasterio.warp.reproject``, average resampling). Raises :class:`InputError` if the
+    file has fewer than three bands. O(n) in orthophoto pixels.
+    """
+    import rasterio
+    from rasterio.warp import Resampling, reproject
+
+    with rasterio.open(path) as src:
+        if src.count < 3:
+            raise InputError(f"{path}: the orthophoto needs R, G and B bands, found {src.count}")
+        out = np.zeros((3, grid.height, grid.width), dtype=np.float32)
+        for b in range(3):
+            reproject(rasterio.band(src, b + 1), out[b], dst_transform=grid.transform, dst_crs=grid.crs,
+                      resampling=Resampling.average, src_nodata=src.nodata if src.nodata is not None else 0, dst_nodata=0)
+    return out

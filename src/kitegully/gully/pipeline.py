@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
+from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden_reaches, interpolate_under
 from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
                                    head_scale_relief, incision_map, surface_roughness, visible_incisions)
@@ -90,6 +91,12 @@ class GullyParams:
         clipped from the map, and the ground surface lowers gully rims; hence off by default.
     buffer_m : float
         Buffer around the network (m); 15 m.
+    crowns : CrownParams
+        Shrub and tree crowns seen in the orthophoto (``gully.crowns``, optional, off by
+        default; :mod:`kitegully.gully.crowns`): the tracing surface under them is the
+        harmonic interpolation of the DSM around them, and traced reaches hidden by them
+        between two mapped reaches count as mapped. Needs the orthophoto and
+        ``gully.automatic_heads``.
     """
 
     sigma_m: float = 10.0
@@ -105,13 +112,17 @@ class GullyParams:
     trace_smoothing_m: float = 0.0
     buffer_m: float = 15.0
     trace_ground: bool = False
+    crowns: CrownParams = CrownParams()
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "GullyParams":
         """Build from the ``gully:`` config section (keys of the same names; ``trace_ground``
-        is optional, default ``false``)."""
-        optional = {"trace_ground"}
-        return cls(**{k: cfg[k] for k in cls.__dataclass_fields__ if k not in optional or k in cfg})
+        and ``crowns`` are optional, default off)."""
+        optional = {"trace_ground", "crowns"}
+        kw = {k: cfg[k] for k in cls.__dataclass_fields__ if k not in optional or k in cfg}
+        if "crowns" in kw:
+            kw["crowns"] = CrownParams.from_config(kw["crowns"])
+        return cls(**kw)
 
     def __post_init__(self) -> None:
         if self.flat_routing not in FLAT_ROUTINGS:
@@ -142,6 +153,9 @@ class GullyResult:
     #: Flat indices of the automatically detected heads that were traced (empty unless ``auto_heads``
     #: was given; with given heads, only those farther than the snapping radius from all of them).
     auto_heads: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: Crown mask (``gully.crowns``; None when off) and the traced cells bridged under it (counted as mapped).
+    crowns: np.ndarray | None = None
+    bridged: np.ndarray | None = None
 
 
 def map_gullies(
@@ -156,6 +170,7 @@ def map_gullies(
     smoothed: np.ndarray | None = None,
     depth: np.ndarray | None = None,
     incision: HeadDetectionParams | None = None,
+    ortho: np.ndarray | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -184,6 +199,8 @@ def map_gullies(
         tiles of a large site (:func:`kitegully.gully.depth.depth_map_tile`).
     incision : HeadDetectionParams, optional
         Parameters of the incision map for ``head_snap: incision`` (default: ``auto_heads``).
+    ortho : ndarray (3, H, W), optional
+        The orthophoto's R, G, B on the DEM grid (any unit; 0 = no data), for ``crowns``.
 
     Returns
     -------
@@ -210,11 +227,22 @@ def map_gullies(
             raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: resolve")
         if filled.shape != dem.shape:
             raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {dem.shape}")
+    hidden = None
+    if params.crowns.enabled:
+        if ortho is None or ip is None:
+            raise ValueError("gully.crowns needs the orthophoto and the incision-map parameters (gully.automatic_heads)")
+        if filled is not None:
+            raise ValueError("gully.crowns changes the tracing surface: it cannot use a filled DEM made elsewhere")
+        if np.shape(ortho)[1:] != dem.shape:
+            raise ValueError(f"orthophoto has shape {np.shape(ortho)[1:]}, the DEM {dem.shape}")
+        tc = time.perf_counter()
+        hidden = crowns_on(dem, grid, params, ip, ortho, workers)
+        t["crowns_s"] = time.perf_counter() - tc
 
     def flow_branch() -> tuple:
         """Steps f-i before the heads: tracing surface, depression fill, flow directions."""
         tb = time.perf_counter()
-        z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip)
+        z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip, hidden=hidden)
         if filled is None:
             fz, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
         else:
@@ -295,7 +323,12 @@ def map_gullies(
     del buf
     polygons = gully_polygons(gully, depth, grid, params.connectivity)
     lines = network_lines(network, grid)
-    extracted = network_lines(network, grid, keep=gully)
+    bridged = None
+    if hidden is not None:
+        bridged = hidden_reaches(network.cells, network.pos_down, gully, hidden, grid.cell, params.crowns.bridge_max_m)
+        log.info("crowns: %d traced cells under crowns, %d of them bridged (hidden reaches <= %s m)",
+                 int(hidden.ravel()[network.cells].sum()), int(bridged.sum()), params.crowns.bridge_max_m)
+    extracted = network_lines(network, grid, keep=gully if bridged is None else gully | bridged)
     t["map_s"] = time.perf_counter() - t0
     log.info(
         "gully map: %d gullies, %.0f m2, %.0f m3; network %.0f m traced, %.0f m inside the map",
@@ -304,13 +337,32 @@ def map_gullies(
     )
     return GullyResult(
         smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised,
-        n_flat, t, auto_idx,
+        n_flat, t, auto_idx, hidden, bridged,
     )
+
+
+def crowns_on(dem: np.ndarray, grid: GridSpec, params: GullyParams, incision: HeadDetectionParams, ortho: np.ndarray,
+              workers: int = 1) -> np.ndarray:
+    """The crown mask of ``gully.crowns`` (:func:`kitegully.gully.crowns.crown_mask`) on the DEM grid.
+
+    Crowns are cells green in the orthophoto that stand more than ``relief_k``·max(σ_z, ρ)
+    above the ground surface of the hole-filled DEM (the object threshold of
+    :func:`remove_objects`: the incision threshold mirrored above the ground). O(n log n).
+    """
+    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
+    zi, _ = interpolate_holes(dem, water_cells)
+    valid = np.isfinite(zi)
+    rough = surface_roughness((gaussian_smooth_fft(zi, incision.scale_m / grid.cell, workers=workers) - zi)[valid])
+    ground = ground_surface(zi, grid.cell, incision.scale_m, incision.slope_window_m, workers)
+    thr = incision.relief_k * max(incision.dsm_sigma_z_m, rough)
+    mask, _info = crown_mask(zi, excess_green(ortho), ground, thr, grid.cell, params.crowns)
+    return mask
 
 
 def tracing_surface(
     dem: np.ndarray, grid: GridSpec, params: GullyParams, workers: int = 1,
     incision: HeadDetectionParams | None = None,
+    hidden: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """The surface the network is traced on (steps f-g before the fill).
 
@@ -327,6 +379,12 @@ def tracing_surface(
     params : GullyParams
     workers : int
         FFT threads.
+    incision : HeadDetectionParams, optional
+        Ground surface and threshold of ``trace_ground``.
+    hidden : ndarray bool (H, W), optional
+        Crown mask (``gully.crowns``): there the surface is the harmonic interpolation of
+        the hole-filled DEM around it (:func:`kitegully.gully.crowns.interpolate_under`),
+        before the tracing smoothing.
 
     Returns
     -------
@@ -345,9 +403,12 @@ def tracing_surface(
     water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
     zi, n_holes = interpolate_holes(dem, water_cells)
     z_trace = zi
+    if hidden is not None:
+        z_trace, n_under = interpolate_under(zi, hidden)
+        log.info("tracing surface: %d cells under crowns interpolated from the DSM around them", n_under)
     if params.trace_smoothing_m > 0:
         holes = ~np.isfinite(zi)
-        z_trace = gaussian_smooth_fft(zi, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas,
+        z_trace = gaussian_smooth_fft(z_trace, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas,
                                       workers=workers)
         z_trace[holes] = np.nan
     if params.trace_ground:
