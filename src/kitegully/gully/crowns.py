@@ -272,7 +272,7 @@ def _hidden_bridges(cells, pos_down, kept, hidden, width, cell_m, max_m):
                 down[i] = step[i] + down[j]
     out = np.zeros(n, dtype=np.bool_)
     for i in range(n):
-        if hidden[i] and not kept[i] and up[i] + down[i] <= max_m:
+        if hidden[i] and not kept[i] and up[i] < inf and down[i] < inf and up[i] + down[i] <= max_m:
             out[i] = True
     return out
 
