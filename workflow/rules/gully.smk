@@ -29,7 +29,12 @@ if "gully" in config:
     GULLY_HEADS_INPUT = {} if GULLY["heads"] == "automatic" else {"heads": GULLY_HEADS}
     # automatic heads (and head_snap: incision, which uses their incision map) with dsm_sigma_z_m: null
     # measure the DSM noise at the (observed) checkpoints
-    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief")) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
+    GULLY_CROWNS = bool(GULLY.get("crowns", {}).get("enabled", False))  # gully.crowns: the orthophoto's crowns
+    if GULLY_CROWNS:
+        if GULLY["dem"] != "dense":
+            raise WorkflowError("Invalid configuration: gully.crowns needs gully.dem: dense (the orthophoto of that DSM)")
+        GULLY_HEADS_INPUT["ortho"] = result("dense", "orthophoto.tif")
+    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief") or GULLY_CROWNS) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
         _cps = result("twin", "observed/checkpoints.csv") if IS_TWIN else config.get("inputs", {}).get("checkpoints")
         if not _cps:
             raise WorkflowError("Invalid configuration: gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints (inputs.checkpoints)")

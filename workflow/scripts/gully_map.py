@@ -4,7 +4,7 @@ import numpy as np
 
 from kitegully.gully import GullyParams, gully_summary, map_gullies, map_raster
 from kitegully.gully.heads import automatic_head_params
-from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads
+from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads, read_orthophoto_on_grid
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
@@ -18,10 +18,12 @@ check_dem(dem, inp.dem, grid.crs, crs)
 if source == "truth_plus_noise":
     log.warning("mapping on the truth-plus-noise stand-in DEM: NOT the photogrammetric DSM (gully.dem)")
 hx, hy = read_heads(inp.heads, crs) if heads != "automatic" else (np.zeros(0), np.zeros(0))
-auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"), params.head_snap)
+auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"), params.head_snap,
+                             needed=params.crowns.enabled)
 tiled = {k: read_raster(inp[k])[0] for k in ("filled", "smoothed", "depth") if k in inp.keys()}  # tiled sites: merged tiles
+ortho = read_orthophoto_on_grid(inp.ortho, grid) if "ortho" in inp.keys() else None  # gully.crowns
 res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads,
-                  auto_heads=auto if heads != "digitised" else None, incision=auto, **tiled)
+                  auto_heads=auto if heads != "digitised" else None, incision=auto, ortho=ortho, **tiled)
 if heads != "automatic":
     check_heads_on_dem(res.heads_inside, inp.heads)
 write_raster(out.depth, res.depth, grid)

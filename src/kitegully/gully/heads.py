@@ -466,7 +466,8 @@ def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points) -> float:
 
 
 def automatic_head_params(heads: str, cfg: Mapping[str, Any], dem: np.ndarray, grid: GridSpec,
-                          checkpoints_csv: str | None = None, head_snap: str = "") -> "HeadDetectionParams | None":
+                          checkpoints_csv: str | None = None, head_snap: str = "",
+                          needed: bool = False) -> "HeadDetectionParams | None":
     """Parameters of the automatic head detection (None for ``digitised`` heads not snapped by ``incision``).
 
     ``head_snap: incision`` uses the detector's incision map (:func:`incision_map`) for the
@@ -484,12 +485,15 @@ def automatic_head_params(heads: str, cfg: Mapping[str, Any], dem: np.ndarray, g
         The mapping DEM.
     checkpoints_csv : str, optional
         Observed checkpoints; with ``dsm_sigma_z_m: null`` the DSM noise is measured there.
+    needed : bool
+        The parameters are needed whatever the heads (``gully.crowns``: ground surface and
+        height threshold of the crown mask).
 
     Returns
     -------
     HeadDetectionParams or None
     """
-    if heads == "digitised" and head_snap not in ("incision", "relief"):
+    if heads == "digitised" and head_snap not in ("incision", "relief") and not needed:
         return None
     sz = None
     if checkpoints_csv:
