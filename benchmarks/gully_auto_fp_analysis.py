@@ -60,7 +60,12 @@ def analyse_member(cfg: dict, site: Path) -> pd.DataFrame:
     sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
     ip = HeadDetectionParams.from_config(g["automatic_heads"], sz)
     params = GullyParams.from_config(g)
-    res = map_gullies(dem, grid, np.zeros(0), np.zeros(0), params, workers=1, auto_heads=ip)
+    ortho = None
+    if params.crowns.enabled:  # gully.crowns: the orthophoto on the DSM grid
+        from kitegully.gully.inputs import read_orthophoto_on_grid
+
+        ortho = read_orthophoto_on_grid(site / "dense/orthophoto.tif", grid)
+    res = map_gullies(dem, grid, np.zeros(0), np.zeros(0), params, workers=1, auto_heads=ip, ortho=ortho)
     heads = res.auto_heads
     xy = grid.flat_xy(heads)
     cl = read_vector(twin / "truth/gully_centrelines.gpkg", crs=crs)
@@ -79,7 +84,7 @@ def analyse_member(cfg: dict, site: Path) -> pd.DataFrame:
     relief, rough = head_scale_relief(dem, grid.cell, ip, 1)
     thr = ip.relief_k * max(ip.dsm_sigma_z_m, rough)
     # each head's own path (traced in the same order as the pipeline)
-    _zh, zt, _n = tracing_surface(dem, grid, params, 1, ip)
+    _zh, zt, _n = tracing_surface(dem, grid, params, 1, ip, hidden=res.crowns)
     filled, _r = priority_flood_fill(zt, 0.0)
     dirs = flow_directions(filled)[0]
     cells, _down, starts, ends = trace_paths(filled, heads, dirs)

@@ -119,7 +119,9 @@ def site_gully_config() -> dict:
     """The default site's ``gully:`` section: the children run with the rules' settings."""
     import yaml
 
-    return yaml.safe_load((REPO / "config" / "sites" / "kamech_twin.yaml").read_text())["gully"]
+    g = yaml.safe_load((REPO / "config" / "sites" / "kamech_twin.yaml").read_text())["gully"]
+    g["crowns"] = {"enabled": False}  # the synthetic catchment has no orthophoto (gully.crowns needs one)
+    return g
 
 
 def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> None:

@@ -55,6 +55,7 @@ def main() -> None:
         cfg = yaml.safe_load(BASE.read_text())
         for f in files:
             cfg = deep_merge(cfg, yaml.safe_load(f.read_text()))
+        cfg["gully"]["crowns"] = {"enabled": False}  # the stand-in DEM has no orthophoto (gully.crowns needs one)
         for kv in a.set:
             k, v = kv.split("=", 1)
             cfg["gully"][k] = yaml.safe_load(v)

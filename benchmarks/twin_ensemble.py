@@ -200,8 +200,14 @@ def score_heads_both(cfg: dict, site: Path, regully: bool = False,
     t0 = time.perf_counter()
     sz = dsm_noise_at_checkpoints(dem, grid, read_checkpoints(twin / "observed/checkpoints.csv"))
     out["dsm_sigma_z_at_checkpoints_m"] = sz
-    res = map_gullies(dem, grid, np.zeros(0), np.zeros(0), GullyParams.from_config(g), workers=1,
-                      auto_heads=HeadDetectionParams.from_config(g["automatic_heads"], sz))
+    params = GullyParams.from_config(g)
+    ortho = None
+    if params.crowns.enabled:  # gully.crowns: the member's orthophoto on the DSM grid
+        from kitegully.gully.inputs import read_orthophoto_on_grid
+
+        ortho = read_orthophoto_on_grid(site / "dense/orthophoto.tif", grid)
+    res = map_gullies(dem, grid, np.zeros(0), np.zeros(0), params, workers=1,
+                      auto_heads=HeadDetectionParams.from_config(g["automatic_heads"], sz), ortho=ortho)
     xs, ys = grid.cell_centres()
     r, c = np.divmod(res.auto_heads, grid.width)
     s = score_gully_run(res.gully, res.extracted_lines, valid, grid, ref, polys, TOLERANCES,
