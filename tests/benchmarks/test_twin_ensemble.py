@@ -71,6 +71,14 @@ def test_regully_scores_three_head_sources_on_a_member_dsm(tmp_path):
                   "z": 0.1 * cy + 0.05 * np.abs(cx - 40.0)}).to_csv(twin / "observed/checkpoints.csv", index=False)
     ref = gpd.GeoDataFrame({"gully_no": [1]}, geometry=[line], crs=crs)
     polys = gpd.GeoDataFrame({"gully_id": [1]}, geometry=[line.buffer(1.0)], crs=crs)
+    # the member's orthophoto (the site's gully.crowns reads it): bare brown soil, no crowns
+    import rasterio
+
+    (tmp_path / "dense").mkdir()
+    with rasterio.open(tmp_path / "dense/orthophoto.tif", "w", driver="GTiff", width=n, height=n, count=3, dtype="uint8",
+                       crs=crs, transform=grid.transform) as dst:
+        for b, v in enumerate((150, 110, 80)):
+            dst.write(np.clip(v + rng.normal(0, 3, (n, n)), 1, 255).astype(np.uint8), b + 1)
     g = yaml.safe_load((te.BASE).read_text())["gully"]
     out = te.regully_member(g, twin, z, grid, ref, polys, np.array([[head.x, head.y]]), crs)
     for key in ("dig", "auto", "both"):
