@@ -57,9 +57,10 @@ def test_tiled_dem_site_change_equals_untiled(tmp_path):
             assert np.array_equal(a.read(1), b.read(1), equal_nan=True), k  # measured: bit for bit
     for k, name in TABLES.items():
         a, b = pd.read_csv(refs[k]), pd.read_csv(out / name)
-        if k == "budget":  # sums over tiles of per-tile partial sums
+        if k == "budget":  # sums over tiles of per-tile partial sums: another summation order
+            # (a clean-clone run measured 2e-12 relative, e.g. 255.13985633850 against 255.13985633900 m3)
             assert a[["mask", "method"]].equals(b[["mask", "method"]])
-            np.testing.assert_allclose(b.iloc[:, 2:].to_numpy(float), a.iloc[:, 2:].to_numpy(float), rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(b.iloc[:, 2:].to_numpy(float), a.iloc[:, 2:].to_numpy(float), rtol=1e-9, atol=1e-12)
         else:  # the co-registration is a least-squares fit through BLAS, whose summation order follows the
             # thread count (Snakemake sets it per job, the test process does not): the fit and the tables
             # computed from its residuals (sigma, ...) differ in the last bits between the two (clean-clone runs);
