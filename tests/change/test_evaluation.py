@@ -24,3 +24,34 @@ def test_detection_counts():
     row = detection_table(dod, sigma, true, det).iloc[0]
     assert (row.true_change_cells, row.detected, row.missed) == (3, 2, 1)  # wrong sign counts as missed
     assert (row.stable_cells, row.false) == (3, 1)
+
+
+def test_headcut_ceiling_measures_the_true_surfaces(tmp_path):
+    """The method run on two constructed 'true' surfaces (a headwall retreated 1.5 m): its table and rows."""
+    import geopandas as gpd
+    import pandas as pd
+    from shapely.geometry import Point
+
+    from change.test_headcuts import HEADS, PARAMS, _pair
+    from change.change_synth import CRS, grid
+    from kitegully.change.evaluation import _headcut_ceiling
+    from kitegully.io.raster import Raster
+
+    g = grid(200, cell=0.2)
+    z1, z2 = _pair(g, 1.5, 1, sd=0.0)
+    crs = CRS
+    heads = tmp_path / "heads.gpkg"
+    gpd.GeoDataFrame(dict(head_id=HEADS.head_id), geometry=[Point(x, y) for x, y in zip(HEADS.x, HEADS.y)],
+                     crs=crs).to_file(heads)
+    true = {}
+    for k, x in (("1", g.x0 + 20.0), ("2", g.x0 + 18.5)):
+        true[k] = tmp_path / f"true_heads{k}.gpkg"
+        gpd.GeoDataFrame(dict(gully_id=[5], retreat_m=[1.5]), geometry=[Point(x, g.y0 - 20.0)], crs=crs).to_file(true[k])
+    rows = _headcut_ceiling(Raster(z1, g), Raster(z2, g), g, (str(heads), PARAMS), str(true["1"]), str(true["2"]),
+                            {"head_match_m": 10.0}, str(tmp_path / "ceiling.csv"))
+    table = pd.read_csv(tmp_path / "ceiling.csv")
+    assert table["retreat_m"].iloc[0] == pytest.approx(1.5, abs=0.2)
+    assert table["true_retreat_m"].iloc[0] == pytest.approx(1.5)
+    values = {q: v for q, v, _ in rows}
+    assert values["headcut |error| n, heads that retreated, lip, method on the true surfaces"] == 1
+    assert values["headcut |error| median, heads that retreated, lip, method on the true surfaces"] < 0.2

@@ -291,17 +291,21 @@ if "change" in config:
                 truth2=CHANGE_EVAL["dem2_truth"],
                 **{k: CHANGE_EVAL[k] for k in ("heads1_truth", "heads2_truth", "polygons1_truth", "polygons2_truth") if CHANGE_EVAL.get(k)},
                 **{f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]},
+                **({"heads": CHANGE["heads_file"]} if CHANGE["heads_file"] else {}),
             output:
                 detection=report(result("change", "detection.csv"), caption=caption("change_detection"), category=CHANGE_CAT),
                 budget_vs_truth=report(result("change", "budget_vs_truth.csv"), caption=caption("change_budget_vs_truth"), category=CHANGE_CAT),
                 headcuts_vs_truth=report(result("change", "headcut_retreat_vs_truth.csv"), caption=caption("change_headcuts"), category=CHANGE_CAT),
                 moritani_plots=result("change", "moritani_plots.csv"),
                 widening_vs_truth=result("change", "widening_vs_truth.csv"),
+                headcuts_on_truth=result("change", "headcut_retreat_on_true_surfaces.csv"),
                 summary=report(result("change", "evaluation_summary.csv"), caption=caption("change_evaluation"), category=CHANGE_CAT),
             params:
                 masks=CHANGE["masks"],
                 evaluation={k: CHANGE_EVAL[k] for k in ("plot_m", "min_lowering_m", "head_match_m", "net_tolerance")},
                 widening_margin_m=(CHANGE.get("widening") or {}).get("margin_m", 3.0),
+                methods=CHANGE_PARAMS_METHODS,
+                seed=config["seed"],
             log:
                 logfile("change", "evaluate"),
             script:

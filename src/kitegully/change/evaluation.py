@@ -111,16 +111,39 @@ def headcut_rows(ht: pd.DataFrame) -> list[tuple[str, float, str]]:
     return rows
 
 
+def _headcut_ceiling(t1: Raster, t2: Raster, grid, spec: tuple[str, Any], true_heads1: str, true_heads2: str,
+                     cfg: Mapping[str, Any], path: str) -> list[tuple[str, float, str]]:
+    """The headcut measurement on the true surfaces (evaluation only); its table and summary rows."""
+    from kitegully.change.headcuts import measure_headcut_retreat
+    from kitegully.change.stage import read_heads
+    heads_path, params = spec
+    ref = measure_headcut_retreat(resample(t1, grid), resample(t2, grid), grid, read_heads(heads_path), params)
+    rt = headcut_table(ref, read_vector(true_heads1), read_vector(true_heads2), cfg["head_match_m"])
+    write_table(rt, path)
+    rows = []
+    for label, sel in (("heads that retreated", rt["true_retreat_m"] > 0), ("stable heads", rt["true_retreat_m"] == 0)):
+        e = rt.loc[sel & rt["error_m"].notna(), "error_m"].abs()
+        rows += [(f"headcut |error| n, {label}, lip, method on the true surfaces", len(e), "count"),
+                 (f"headcut |error| median, {label}, lip, method on the true surfaces", float(e.median()) if len(e) else np.nan, "m")]
+    return rows
+
+
 def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, str], truth1: str, truth2: str,
                     masks: Sequence[Mapping[str, Any]], budget_csv: str, headcuts_csv: str,
                     true_heads1: str | None, true_heads2: str | None, cfg: Mapping[str, Any],
-                    out: Mapping[str, str], widening: tuple | None = None) -> dict[str, Any]:
+                    out: Mapping[str, str], widening: tuple | None = None,
+                    headcut_ceiling: tuple[str, Any] | None = None) -> dict[str, Any]:
     """Write detection.csv, budget_vs_truth.csv, headcut_retreat_vs_truth.csv, moritani tables and a summary.
 
     ``cfg``: ``plot_m`` and ``min_lowering_m`` (Moritani plots), ``head_match_m``,
     ``net_tolerance`` (target, fraction of the true net volume). ``widening``:
     ``(widening_csv, true_polygons1, true_polygons2, margin_m, sections_gpkg)`` → ``out["widening_vs_truth"]``
     (true width = the extended section line's length inside the true polygons of each epoch).
+    ``headcut_ceiling``: ``(digitised_heads_gpkg, ChangeParams)``: the headcut measurement run
+    once more on the two TRUE surfaces (``truth1``, ``truth2``) from the same digitised heads →
+    ``out["headcuts_on_truth"]`` and summary rows: what the method measures where the surfaces
+    resolve every head, beside what it measures on the photogrammetric DEMs (the split of
+    the error between method and DEM).
     """
     dod_r = Raster.read(dod_path)
     dod, grid = dod_r.data, dod_r.grid
@@ -148,6 +171,11 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
     else:
         ht = heads.assign(true_retreat_m=np.nan, error_m=np.nan)
     write_table(ht, out["headcuts_vs_truth"])
+    ceiling_rows = []
+    if headcut_ceiling is not None and true_heads1 and true_heads2 and "headcuts_on_truth" in out:
+        ceiling_rows = _headcut_ceiling(t1, t2, grid, headcut_ceiling, true_heads1, true_heads2, cfg, out["headcuts_on_truth"])
+    elif "headcuts_on_truth" in out:  # no digitised or true heads: an empty table with the columns
+        write_table(ht.iloc[0:0], out["headcuts_on_truth"])
 
     plots_df, mor = moritani_plots(dod, true, grid.cell, cfg["plot_m"], cfg["min_lowering_m"])
     write_table(plots_df, out["moritani_plots"])
@@ -194,6 +222,7 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
         ("target: headcut median |error| <= 0.5 m (heads that retreated)",
          float(len(hc_moving) > 0 and hc_moving["error_m"].abs().median() <= 0.5), "1 = met"),
         *headcut_rows(ht),
+        *ceiling_rows,
         ("false detection rate on unchanged cells, 95 %", float(prob["false_rate"]) * 100, "%"),
         ("target: false detections <= 5 % at 95 %", float(prob["false_rate"] <= 0.05), "1 = met"),
         ("detection rate of change > 2 sigma, 95 %", float(prob["detection_rate"]) * 100, "%"),
