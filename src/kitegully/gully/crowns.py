@@ -30,6 +30,7 @@ import scipy.sparse.linalg as spla
 from numba import njit
 
 from kitegully import InputError
+from kitegully.gully.network import topological_order
 
 log = logging.getLogger(__name__)
 
@@ -219,28 +220,8 @@ def interpolate_under(z: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int]
 @njit(cache=True)
 def _hidden_bridges(cells, pos_down, kept, hidden, width, cell_m, max_m):
     n = cells.size
-    indeg = np.zeros(n, dtype=np.int64)
-    for i in range(n):
-        if pos_down[i] >= 0:
-            indeg[pos_down[i]] += 1
-    # topological order, heads first (Kahn)
-    order = np.empty(n, dtype=np.int64)
-    left = indeg.copy()
-    qh = 0
-    qt = 0
-    for i in range(n):
-        if indeg[i] == 0:
-            order[qt] = i
-            qt += 1
-    while qh < qt:
-        i = order[qh]
-        qh += 1
-        j = pos_down[i]
-        if j >= 0:
-            left[j] -= 1
-            if left[j] == 0:
-                order[qt] = j
-                qt += 1
+    order, _ = topological_order(pos_down)  # heads first
+    qt = order.size
     step = np.zeros(n)
     for i in range(n):
         j = pos_down[i]

@@ -184,27 +184,60 @@ def _plane_gradient(smoothed: np.ndarray, r0: np.ndarray, c0: np.ndarray) -> tup
 
 
 @njit(cache=True)
-def _strahler_and_segments(pos_down):
+def topological_order(pos_down):
+    """Cells of a downstream forest in topological order, heads first (Kahn's algorithm).
+
+    Parameters
+    ----------
+    pos_down : ndarray int64 (n,)
+        Index of each cell's downstream neighbour, -1 at an outlet.
+
+    Returns
+    -------
+    order : ndarray int64 (n,)
+        Cell indices, every cell after all cells that drain into it.
+    indeg : ndarray int64 (n,)
+        Number of cells draining into each cell (0 at a head).
+
+    Notes
+    -----
+    O(n).
+    """
     n = pos_down.size
     indeg = np.zeros(n, dtype=np.int64)
     for i in range(n):
         if pos_down[i] >= 0:
             indeg[pos_down[i]] += 1
-    # Kahn's algorithm from the heads; Strahler: max of inflows, +1 if the max is shared.
-    order = np.zeros(n, dtype=np.int64)
-    best = np.zeros(n, dtype=np.int64)
-    nbest = np.zeros(n, dtype=np.int64)
+    order = np.empty(n, dtype=np.int64)
     left = indeg.copy()
-    queue = np.empty(n, dtype=np.int64)
     qh = 0
     qt = 0
     for i in range(n):
         if indeg[i] == 0:
-            queue[qt] = i
+            order[qt] = i
             qt += 1
     while qh < qt:
-        i = queue[qh]
+        i = order[qh]
         qh += 1
+        j = pos_down[i]
+        if j >= 0:
+            left[j] -= 1
+            if left[j] == 0:
+                order[qt] = j
+                qt += 1
+    return order[:qt], indeg
+
+
+@njit(cache=True)
+def _strahler_and_segments(pos_down):
+    n = pos_down.size
+    queue, indeg = topological_order(pos_down)
+    # Strahler, heads first: max of inflows, +1 if the max is shared.
+    order = np.zeros(n, dtype=np.int64)
+    best = np.zeros(n, dtype=np.int64)
+    nbest = np.zeros(n, dtype=np.int64)
+    for q in range(queue.size):
+        i = queue[q]
         if indeg[i] == 0:
             order[i] = 1
         elif nbest[i] >= 2:
@@ -218,10 +251,6 @@ def _strahler_and_segments(pos_down):
                 nbest[j] = 1
             elif order[i] == best[j]:
                 nbest[j] += 1
-            left[j] -= 1
-            if left[j] == 0:
-                queue[qt] = j
-                qt += 1
     # Segments start at heads and confluences and run down to the next confluence
     # (included as last vertex) or an outlet.
     verts = np.empty(2 * n, dtype=np.int64)
