@@ -17,7 +17,11 @@ the polygon and draped on the DEM:
 Reference surface ``z_ref`` (:data:`REFERENCES`): ``lower_end`` = elevation of the lower
 end of the section, level across ([I] METHODS.md 3.2 step 9); ``line`` = straight line
 between the two ends; ``spill`` = the sink-fill level of the conditioned DEM (the spill
-surface of the pool the section lies in). With rim cells given, the ends are first
+surface of the pool the section lies in); ``banks`` = one parabola fitted to the ground over
+``bank_fit_m`` beyond both reference ends, ``bank_lines`` = a line fitted to each of them, both
+extended across and blended (:func:`bank_reference`: the pre-incision surface of a gully cut
+into a hollow or a valley floor, which the straight line between the rims cuts across).
+With rim cells given, the ends are first
 prolonged outwards to the rim (:func:`extend_to_rims`), so the reference stands on the
 upper edges rather than on the pool's outline. With a ground segment length ``g`` > 0 (a DSM
 with low vegetation on the rims), the profile is first replaced by its ground
@@ -44,7 +48,7 @@ from kitegully.polygons.thalweg import resample_line, snakes_smooth
 log = logging.getLogger(__name__)
 
 #: Depth reference surfaces (``polygons.morphometry.reference``).
-REFERENCES = ("lower_end", "line", "spill")
+REFERENCES = ("lower_end", "line", "spill", "banks", "bank_lines")
 #: Which medial-axis branches carry sections (``polygons.morphometry.branches``).
 BRANCHES = ("all", "longest")
 
@@ -152,12 +156,16 @@ def drape(line: shapely.LineString, surface: np.ndarray, grid: GridSpec, step: f
 
 
 def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndarray | None = None) -> tuple[float, float]:
-    """(max depth, cross-sectional area) of a draped section below the reference surface."""
+    """(max depth, cross-sectional area) of a draped section below the reference surface.
+
+    ``level`` is the reference surface itself along ``s`` for ``spill`` (the pool level),
+    ``banks`` and ``bank_lines`` (:func:`bank_reference`).
+    """
     if reference == "lower_end":
         zr = np.full_like(z, min(z[0], z[-1]))
     elif reference == "line":
         zr = z[0] + (z[-1] - z[0]) * (s / s[-1] if s[-1] > 0 else 0.0)
-    elif reference == "spill":
+    elif reference in ("spill", "banks", "bank_lines"):
         zr = level
     else:
         raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
@@ -200,6 +208,66 @@ def ground_profile(z: np.ndarray, step: float, segment_m: float) -> np.ndarray:
     zz = np.where(ok, z, np.nanmax(z) if ok.any() else 0.0)
     g = ndi.grey_opening(zz, size=k, mode="nearest")
     return np.where(ok, g, z)
+
+
+def bank_reference(s: np.ndarray, z: np.ndarray, length: float, fit_m: float, model: str = "quadratic") -> np.ndarray:
+    """Pre-incision surface across a gully from its two banks, on the samples ``0 <= s <= length``.
+
+    The banks are the profile over ``fit_m`` outwards from each reference end (``s`` in
+    [−fit_m, 0] and [length, length + fit_m]).
+
+    - ``quadratic``: one parabola z = a + b·s + c·s² fitted (least squares) to both banks at once:
+      on a plane (a hillside tilted across the gully) it is that plane, i.e. the straight line
+      between the ends (``reference="line"``); in a hollow of constant curvature κ (where flow
+      converges and gullies cut in) it is the hollow's own floor, κ·B²/8 below the straight line
+      at the middle of a section of width B between the ends; in a V-shaped valley floor (sides
+      of slope c) it takes part of the c·B/2 by which the straight line stands above the V.
+    - ``lines``: a straight line fitted to each bank, both extended across the gully and blended
+      linearly, z_ref(s) = (1 − s/L)·left(s) + (s/L)·right(s): exact on a plane and in a V-shaped
+      valley floor, but in a hollow each bank's slope, taken a lever arm away from the gully,
+      extrapolates below the hollow's floor.
+
+    With fewer than two finite samples on either bank (no slope there) the straight line between
+    the ends is returned.
+
+    Parameters
+    ----------
+    s : ndarray (n,)
+        Positions along the section prolonged beyond both reference ends (m; 0 = first end),
+        increasing.
+    z : ndarray (n,)
+        Ground elevations at ``s`` (m); NaN = no data.
+    length : float
+        Position of the second reference end (m).
+    fit_m : float
+        Length of each bank beyond its end (m).
+    model : str
+        ``quadratic`` or ``lines``.
+
+    Returns
+    -------
+    ndarray
+        z_ref at the samples ``0 <= s <= length``. O(n).
+    """
+    inner = (s >= -1e-9) & (s <= length + 1e-9)
+    si, zi = s[inner], z[inner]
+    L = max(float(length), 1e-9)
+    t = np.clip(si / L, 0.0, 1.0)
+    chord = zi[0] + (zi[-1] - zi[0]) * t if zi.size else zi
+    left = (s >= -fit_m - 1e-9) & (s <= 1e-9) & np.isfinite(z)
+    right = (s >= length - 1e-9) & (s <= length + fit_m + 1e-9) & np.isfinite(z)
+    if model not in ("quadratic", "lines"):
+        raise ValueError(f"model must be 'quadratic' or 'lines', got {model!r}")
+    if left.sum() < 2 or right.sum() < 2:
+        return chord
+    if model == "quadratic":
+        sel = left | right
+        c2, c1, c0 = np.polyfit(s[sel], z[sel], 2)
+        return c0 + si * (c1 + si * c2)
+    else:
+        bl, al = np.polyfit(s[left], z[left], 1)
+        br, ar = np.polyfit(s[right], z[right], 1)
+        return (1.0 - t) * (al + bl * si) + t * (ar + br * si)
 
 
 def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid: GridSpec, search: float, step: float) -> float:
@@ -258,6 +326,35 @@ def _ground_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, ste
     return s, np.interp(s + n_out * step, s_all, g)
 
 
+def _bank_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float,
+                fit_m: float, model: str = "quadratic") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(s, z, z_ref) along ``line`` with the :func:`bank_reference` of its ends.
+
+    The line is draped prolonged by ``fit_m`` (+ ``segment_m`` for the ground opening, which is
+    unreliable within one segment of the prolonged ends) at both ends, opened
+    (:func:`ground_profile`), and the banks fitted on the prolonged parts.
+    """
+    a, b = np.asarray(line.coords[0])[:2], np.asarray(line.coords[-1])[:2]
+    L = float(np.hypot(*(b - a)))
+    n = max(int(np.ceil(L / step)), 1)
+    s = np.linspace(0.0, L, n + 1)
+    if L == 0:
+        _, _, _, z = drape(line, dem, grid, step)
+        return s, z, z.copy()
+    u = (b - a) / L
+    out = int(np.ceil((fit_m + segment_m) / step)) * step
+    ext = shapely.LineString([a - out * u, b + out * u])
+    s_all, _, _, z_all = drape(ext, dem, grid, step)
+    if segment_m > 0:
+        z_all = ground_profile(z_all, float(s_all[1] - s_all[0]) if s_all.size > 1 else step, segment_m)
+    s_all = s_all - out
+    z = np.interp(s, s_all, z_all)
+    keep = (s_all < 0) | (s_all > L)
+    s_b = np.concatenate([s_all[keep & (s_all < 0)], s, s_all[keep & (s_all > L)]])
+    z_b = np.concatenate([z_all[keep & (s_all < 0)], z, z_all[keep & (s_all > L)]])
+    return s, z, bank_reference(s_b, z_b, L, fit_m, model)
+
+
 def measure_sections(
     labels: np.ndarray,
     polygons: gpd.GeoDataFrame,
@@ -274,6 +371,7 @@ def measure_sections(
     rim_search_m: float = 0.0,
     prolong: bool = False,
     ground_segment_m: float = 0.0,
+    bank_fit_m: float = 0.0,
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -311,6 +409,9 @@ def measure_sections(
         Depth and area are measured on the section's ground profile (:func:`ground_profile`
         with this segment, m), draped over the reference line prolonged by the segment at both
         ends; 0 = on the DEM as it is.
+    bank_fit_m : float
+        For ``reference="banks"`` / ``"bank_lines"``: length of ground fitted beyond each
+        reference end (m) (:func:`bank_reference`); must be > 0 then.
 
     Returns
     -------
@@ -334,6 +435,8 @@ def measure_sections(
         raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
     if branches not in BRANCHES:
         raise ValueError(f"branches must be one of {BRANCHES}, got {branches!r}")
+    if reference in ("banks", "bank_lines") and bank_fit_m <= 0:
+        raise ValueError(f"reference {reference!r} needs bank_fit_m > 0")
     dem64 = np.asarray(dem, np.float64)
     lev64 = np.asarray(level, np.float64)
     objs = ndi.find_objects(labels)
@@ -383,11 +486,14 @@ def measure_sections(
                 line = piece
                 if rims is not None and rim_search_m > 0:
                     line, _ = extend_to_rims(piece, rims, grid, rim_search_m)
-                if ground_segment_m > 0:
+                lev = None
+                if reference in ("banks", "bank_lines"):
+                    s, z, lev = _bank_drape(line, dem64, grid, step, ground_segment_m, bank_fit_m,
+                                            "quadratic" if reference == "banks" else "lines")
+                elif ground_segment_m > 0:
                     s, z = _ground_drape(line, dem64, grid, step, ground_segment_m)
                 else:
                     s, x, y, z = drape(line, dem64, grid, step)
-                lev = None
                 if reference == "spill":
                     _, _, _, lev = drape(line, lev64, grid, step)
                     lev = np.interp(s, np.linspace(0.0, line.length, lev.size), lev)
@@ -395,7 +501,7 @@ def measure_sections(
                 vol += area * slab
                 ws.append(piece.length)
                 ds.append(depth)
-                if line is not piece or ground_segment_m > 0:  # the stored section is the clipped one (width = its length), draped
+                if line is not piece or ground_segment_m > 0 or lev is not None:  # the stored section is the clipped one (width = its length), draped
                     _, x, y, z = drape(piece, dem64, grid, step)
                 sec_rec.append({"polygon_id": pid, "branch": bi, "station_m": s0, "width_m": piece.length, "depth_m": depth, "area_m2": area,
                                 "slab_m": slab, "reference_length_m": line.length, "geometry": shapely.LineString(np.column_stack([x, y, z]))})

@@ -123,6 +123,11 @@ class PolygonParams:
     prolong_axes : bool
         Prolong the medial axes' free ends straight on to the polygon outline [I]: thinning
         stops an axis about a half width short of each end, so its slabs miss the ends.
+    bank_fit_m : float
+        For ``reference`` ``banks`` / ``bank_lines``: length of ground beyond each reference end
+        (m) that the pre-incision surface across the gully is fitted to
+        (:func:`kitegully.polygons.morphometry.bank_reference`) [I: one curvature window, the
+        scale at which the stage already describes the surface around an edge].
     """
 
     cell_m: float = 0.5
@@ -164,6 +169,7 @@ class PolygonParams:
     rim_search_m: float = 0.0
     prolong_axes: bool = False
     ground_segment_m: float = 0.0
+    bank_fit_m: float = 0.0
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "PolygonParams":
@@ -179,7 +185,7 @@ class PolygonParams:
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
                                                                           "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"])
         m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"],
-                           optional=["ground_segment_m"])
+                           optional=["ground_segment_m", "bank_fit_m"])
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
@@ -197,7 +203,7 @@ class PolygonParams:
             terrain_held=c["terrain_held"], below_rims=c["below_rims"],
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
             branches=m["branches"], rim_search_m=float(m["rim_search_m"]), prolong_axes=bool(m["prolong_axes"]),
-            ground_segment_m=float(m.get("ground_segment_m", 0.0)),
+            ground_segment_m=float(m.get("ground_segment_m", 0.0)), bank_fit_m=float(m.get("bank_fit_m", 0.0)),
         )
 
     def __post_init__(self) -> None:
@@ -207,6 +213,8 @@ class PolygonParams:
             raise InputError(f"polygons.morphometry.reference: must be one of {REFERENCES}, got {self.reference!r}")
         if self.branches not in BRANCHES:
             raise InputError(f"polygons.morphometry.branches: must be one of {BRANCHES}, got {self.branches!r}")
+        if self.reference in ("banks", "bank_lines") and not self.bank_fit_m > 0:
+            raise InputError(f"polygons.morphometry.bank_fit_m: reference {self.reference!r} needs a bank length > 0 (m), got {self.bank_fit_m}")
         if self.ground_segment_m < 0:
             raise InputError(f"polygons.morphometry.ground_segment_m: must be 0 or more, got {self.ground_segment_m}")
         if self.edge_ground_m < 0:
@@ -272,7 +280,8 @@ def measure_morphometry(labels: np.ndarray, polygons: gpd.GeoDataFrame, dem: np.
     """
     p = params
     return measure_sections(labels, polygons, dem, level, grid, p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha,
-                            p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m)
+                            p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m,
+                            p.bank_fit_m)
 
 
 def morphometry_rows(axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: pd.DataFrame, params: PolygonParams) -> list[tuple]:
