@@ -3,10 +3,13 @@
 
 The stage runs once per member on its photogrammetric DSM (or its pickled result from
 ``polygons_depth_diagnosis.py`` is reused); its t = 0.5 m polygons and rims are then measured
-again with each depth reference option (``line``, the site setting before session 9; ``banks``
+again with each depth reference option (``line``, the site setting; ``banks`` / ``bank_lines``
 with the bank fit length of the option), on the DSM and, as a check of the method alone, on the
 twin's true ground brought to the stage grid by the stage's minimum-z resampling. Scored as the
-``polygons_evaluate`` rule does (median |error| and bias of width and depth, total volume).
+``polygons_evaluate`` rule does (median |error| and bias of width and depth, total volume),
+and the total volume error split into the true volume the matched sections stand for (coverage),
+the matched sections' area error and the volume of sections with no true reach within the match
+distance (false polygons): total = coverage × (1 + area error) + unmatched − 1.
 
 Evaluation only; the options and their values are stated from the geometry in README and the site
 file, not chosen here.
@@ -88,6 +91,13 @@ def score(member: str, root: Path, options: list[str], cache: Path | None) -> li
                    "area_med_err_m2": e.loc["area (m2)", "median_error"],
                    "volume_error_pct": e.loc["volume, all sections vs all true gullies (m3)", "error_pct"],
                    "matched_volume_error_pct": e.loc["volume, gullies with matched sections (m3)", "error_pct"]}
+            v_true = e.loc["volume, all sections vs all true gullies (m3)", "true"]
+            v_all = float((sec["area_m2"] * sec["slab_m"]).sum())
+            v_m = float((per["area_m2"] * per["slab_m"]).sum())
+            v_mt = float((per["area_true_m2"] * per["slab_m"]).sum())
+            row.update({"true_volume_covered_pct": 100 * v_mt / v_true,  # true volume of the reaches the matched sections stand for
+                        "matched_area_error_pct": 100 * (v_m - v_mt) / v_mt if v_mt else np.nan,  # their sections' areas against the truth
+                        "unmatched_volume_pct": 100 * (v_all - v_m) / v_true})  # sections with no true reach within the match distance
             rows.append(row)
             print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()}, flush=True)
     return rows
