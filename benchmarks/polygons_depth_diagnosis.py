@@ -162,6 +162,50 @@ def diagnose(member: str, root: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def volume_split(member: str, root: Path, reference: str | None = None, surface: str = "dsm") -> dict:
+    """Total volume split into mapping and sections: the true incision volume inside the t = 0.5 m polygons.
+
+    ``true_in_polygons_pct``: share of the true incision volume (Σ D · cell² on the 0.2 m grid) whose cells lie
+    in a polygon, ``..._rims_pct`` the same with the polygons grown by ``rim_search_m`` (the sections' references
+    reach that far); ``sections_over_in_rims_pct``: the sections' volume (Σ area · slab, site settings) against
+    the latter. ``reference`` overrides the site's; ``surface`` ``true_dtm`` drapes the same sections on the true
+    ground (minimum-z resampled to the stage cell). Evaluation only.
+    """
+    import scipy.ndimage as ndi
+
+    from kitegully.polygons.evaluation import rasterize
+    from kitegully.polygons.morphometry import measure_sections
+
+    cfg = member_config(member)
+    p = PolygonParams.from_config(cfg["polygons"])
+    res = pickle.loads((CACHE / f"{member}.pkl").read_bytes())
+    truth = root / cfg["site"]["name"] / "twin" / "truth"
+    dtm = Raster.read(truth / "dtm.tif")
+    D = true_incision(cfg, dtm.grid)
+    thr = p.morph_threshold_m
+    ref = reference or p.reference
+    z = res.dem
+    if surface == "true_dtm":
+        zt, _ = min_z_resample(dtm.data, dtm.grid, p.cell_m)
+        zt = np.asarray(zt, np.float64)[: z.shape[0], : z.shape[1]]
+        z = np.where(np.isfinite(zt), zt, res.dem)
+    _, sec, _ = measure_sections(res.labels[thr], res.polygons[thr], z, res.level, res.grid, p.section_spacing_m, ref,
+                                 p.smooth_step_m, p.snakes_alpha, p.snakes_beta, p.branches, res.rims, p.rim_search_m, p.prolong_axes,
+                                 p.ground_segment_m, p.bank_fit_m if p.bank_fit_m > 0 else p.rim_search_m)
+    inside = rasterize(res.polygons[thr].geometry, dtm.grid).astype(bool)
+    grown = ndi.distance_transform_edt(~inside, sampling=dtm.grid.cell) <= p.rim_search_m
+    ca = dtm.grid.cell ** 2
+    v_true = float(D.sum() * ca)
+    v_in, v_grown = float(D[inside].sum() * ca), float(D[grown].sum() * ca)
+    v_sec = float((sec["area_m2"] * sec["slab_m"]).sum())
+    reach = read_vector(truth / "gully_centrelines.gpkg")
+    p_exp = np.where(reach["shape"] == "U", cfg["twin"]["gullies"]["u_shape_exponent"], 1.0)
+    v_reach = float((reach["width_m"] * reach["depth_m"] * p_exp / (p_exp + 1) * reach["length_m"]).sum())
+    return {"member": member, "reference": ref, "surface": surface, "true_volume_reaches_m3": v_reach, "true_volume_raster_m3": v_true,
+            "true_in_polygons_pct": 100 * v_in / v_true, "true_in_polygons_grown_to_rims_pct": 100 * v_grown / v_true,
+            "sections_m3": v_sec, "sections_over_in_rims_pct": 100 * v_sec / v_grown, "volume_error_pct": 100 * (v_sec - v_reach) / v_reach}
+
+
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
     m = df.dropna(subset=["depth_reach"]).copy()
     m["err_dsm"] = m["depth_dsm"] - m["depth_reach"]
@@ -191,12 +235,21 @@ def main() -> None:
     ap.add_argument("--default-root", default="/work/run10/results", help="results folder of the default twin")
     ap.add_argument("--members", default="default," + ",".join(p.stem for p in sorted(ENSEMBLE_DIR.glob("*.yaml"))))
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_depth_diagnosis"))
+    ap.add_argument("--volume-split", action="store_true", help="only the volume split (needs the cached stage results)")
     ap.add_argument("--cache", default=str(REPO / "results" / "benchmarks" / "polygons_depth_cache"), help="pickled stage results ('' = none)")
     args = ap.parse_args()
     global CACHE
     CACHE = Path(args.cache) if args.cache else None
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    if args.volume_split:
+        vs = pd.DataFrame([volume_split(m, Path(args.default_root if m == "default" else args.root), ref, surf)
+                           for m in args.members.split(",") for ref in ("line", "banks") for surf in ("dsm", "true_dtm")])
+        vs.to_csv(out.with_name(out.name + "_volume.csv"), index=False)
+        text = "# Polygons: the total volume split into mapping and sections\n\n" + vs.to_markdown(index=False, floatfmt=".1f") + "\n"
+        out.with_name(out.name + "_volume.md").write_text(text, encoding="utf-8")
+        print(text)
+        return
     frames = []
     for mem in args.members.split(","):
         frames.append(diagnose(mem, Path(args.default_root if mem == "default" else args.root)))

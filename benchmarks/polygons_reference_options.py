@@ -3,8 +3,8 @@
 
 The stage runs once per member on its photogrammetric DSM (or its pickled result from
 ``polygons_depth_diagnosis.py`` is reused); its t = 0.5 m polygons and rims are then measured
-again with each depth reference option (``line``, the site setting; ``banks`` / ``bank_lines``
-with the bank fit length of the option), on the DSM and, as a check of the method alone, on the
+again with each depth reference option (``line``, the site setting before session 9; ``banks`` / ``bank_lines``
+with the bank fit length of the option, and where a section end without a rim stays, ``no_rim``), on the DSM and, as a check of the method alone, on the
 twin's true ground brought to the stage grid by the stage's minimum-z resampling. Scored as the
 ``polygons_evaluate`` rule does (median |error| and bias of width and depth, total volume),
 and the total volume error split into the true volume the matched sections stand for (coverage),
@@ -73,11 +73,11 @@ def score(member: str, root: Path, options: list[str], cache: Path | None) -> li
     surfaces = {"dsm": res.dem, "true_dtm": np.where(np.isfinite(zt), zt, res.dem)}
     rows = []
     for opt in options:
-        ref, _, fit = opt.partition(":")
+        ref, fit, no_rim = (opt.split(":") + ["", ""])[:3]
         for sname, z in surfaces.items():
             _, sec, _ = measure_sections(res.labels[thr], res.polygons[thr], z, res.level, res.grid, p.section_spacing_m, ref, p.smooth_step_m,
                                          p.snakes_alpha, p.snakes_beta, p.branches, res.rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m,
-                                         bank_fit_m=float(fit or 0.0))
+                                         bank_fit_m=float(fit or 0.0), no_rim=no_rim or "outline")
             ev = evaluate_against_truth(res.polygons[thr], sec, t_poly, t_cl, res.grid, evcfg, u_exp)
             e = ev["errors"].set_index("quantity")
             per = ev["sections"]
@@ -108,7 +108,7 @@ def main() -> None:
     ap.add_argument("--root", default="/work/wt/ensrun/results", help="results folder of the ensemble members")
     ap.add_argument("--default-root", default="/work/run10/results", help="results folder of the default twin")
     ap.add_argument("--members", default="default," + ",".join(q.stem for q in sorted(ENSEMBLE_DIR.glob("*.yaml"))))
-    ap.add_argument("--options", default="line,banks:4.5", help="comma-separated reference[:bank_fit_m]")
+    ap.add_argument("--options", default="line,banks:4.5", help="comma-separated reference[:bank_fit_m[:no_rim]]")
     ap.add_argument("--cache", default=str(REPO / "results" / "benchmarks" / "polygons_depth_cache"))
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_reference_options"))
     args = ap.parse_args()

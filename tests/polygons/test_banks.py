@@ -123,3 +123,50 @@ def test_bank_reference_needs_a_bank_length():
     with pytest.raises(InputError, match=r"^polygons.morphometry.bank_fit_m: reference 'banks' needs a bank length > 0 \(m\), got 0.0$"):
         PolygonParams(reference="banks")
     assert PolygonParams(reference="banks", bank_fit_m=4.5).bank_fit_m == 4.5
+
+
+def _tilted_notch(shape: str, width: float = 6.0, depth: float = 1.5, cross: float = 0.05, cell: float = 0.5):
+    """A straight notch along y in a plane rising at ``cross`` towards +x (so the field falls away west of it, rises east)."""
+    grid = GridSpec(500000.0, 4000000.0, cell, 120, 200, CRS)
+    xs, ys = grid.cell_centres()
+    x, y = np.meshgrid(xs, ys)
+    xc = float(xs[60])
+    d = np.abs(x - xc)
+    h = 0.5 * width
+    p = 1.0 if shape == "V" else 4.0
+    z = 100.0 + 0.02 * (y - ys.min()) + cross * (x - xc) - np.where(d < h, depth * (1.0 - (d / h) ** p), 0.0)
+    return z.astype(np.float32), grid, xc
+
+
+@pytest.mark.parametrize("shape", ["V", "U"])
+def test_an_end_without_a_rim_goes_to_the_highest_ground_not_the_outline(shape):
+    W, D = 6.0, 1.5
+    dem, grid, xc = _tilted_notch(shape, W, D)
+    xs, _ = grid.cell_centres()
+    lab = np.zeros(dem.shape, np.int32)
+    lab[20:180, :] = (np.abs(xs - xc) <= 0.5 * W - 0.75)[None, :]  # the outline 0.75 m inside both edges
+    polys = polygons_from_labels(lab, grid, 0.5)
+    no_rims = np.zeros(dem.shape, bool)  # the breakline test marked no upper edge on either side
+    args = (lab, polys, dem, dem, grid, 10.0, "banks", 2.0, 1.0, 1.0)
+    kw = dict(branches="all", rims=no_rims, rim_search_m=4.5, ground_segment_m=0.0, bank_fit_m=FIT)  # a DTM
+    _, s_out, _ = measure_sections(*args, **kw)
+    _, s_hi, _ = measure_sections(*args, no_rim="highest_ground", **kw)
+    # with the 4 m ground opening (a DSM) the west rim, whose field falls away, is read low by at most
+    # cross slope x segment (the opening's stated limit, test_ground.py)
+    _, s_hi_g, _ = measure_sections(*args, no_rim="highest_ground", **{**kw, "ground_segment_m": 4.0})
+    assert np.all((s_hi_g["depth_m"] <= D + 0.02) & (s_hi_g["depth_m"] >= D - 0.05 * 4.0))
+    # on the outline the reference stands on the walls: too shallow, and the walls' area is lost
+    assert np.median(s_out["depth_m"]) < D - 0.1
+    assert np.median(s_out["area_m2"]) < 0.85 * true_area(shape, W, D)
+    # west the field falls away: the highest ground is the edge itself; east it rises: the end goes the whole
+    # search, onto the field, which the bank parabola (= the plane) follows, so it adds nothing
+    assert np.abs(s_hi["depth_m"] - D).max() <= 0.05
+    assert np.median(s_hi["area_m2"]) == pytest.approx(true_area(shape, W, D), rel=0.05)
+    ref = s_hi["reference_length_m"].to_numpy()
+    assert np.all(ref >= W - 0.5) and np.all(ref <= W - 1.5 + 4.5 + 0.5 + 0.75)
+    assert np.allclose(s_hi["width_m"], s_out["width_m"])  # width stays the clipped length
+
+
+def test_no_rim_setting_is_checked():
+    with pytest.raises(InputError, match=r"^polygons.morphometry.no_rim: must be one of \('outline', 'highest_ground'\), got 'field'$"):
+        PolygonParams(no_rim="field")

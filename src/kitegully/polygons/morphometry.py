@@ -49,6 +49,8 @@ log = logging.getLogger(__name__)
 
 #: Depth reference surfaces (``polygons.morphometry.reference``).
 REFERENCES = ("lower_end", "line", "spill", "banks", "bank_lines")
+#: Where a section end without a rim stays (``polygons.morphometry.no_rim``).
+NO_RIM = ("outline", "highest_ground")
 #: Which medial-axis branches carry sections (``polygons.morphometry.branches``).
 BRANCHES = ("all", "longest")
 
@@ -294,8 +296,37 @@ def _rim_offset(end_xy: np.ndarray, out_dir: np.ndarray, rims: np.ndarray, grid:
     return float(0.5 * (k[i0] + k[i1 - 1]) * step)
 
 
-def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, search: float) -> tuple[shapely.LineString, float]:
+def _highest_ground_offset(end_xy: np.ndarray, out_dir: np.ndarray, dem: np.ndarray, grid: GridSpec, search: float, step: float,
+                           segment_m: float) -> float:
+    """Distance (m) from a section end outwards to the highest point of the ground profile within ``search``.
+
+    The profile is draped every ``step`` from one segment inside the end to one segment beyond
+    ``search`` and opened with ``segment_m`` (:func:`ground_profile`), so a plant clump is not
+    taken for the upper edge. O(search / step).
+    """
+    n_seg = int(np.ceil(segment_m / step)) if segment_m > 0 else 0
+    k = np.arange(-n_seg, int(np.floor(search / step)) + n_seg + 1)
+    x = end_xy[0] + out_dir[0] * k * step
+    y = end_xy[1] + out_dir[1] * k * step
+    r, c = grid.rowcol(x, y)
+    z = map_coordinates(dem, [np.asarray(r, float), np.asarray(c, float)], order=1, mode="nearest")
+    g = ground_profile(z, step, segment_m) if segment_m > 0 else z
+    sel = (k >= 0) & (k * step <= search + 1e-9) & np.isfinite(g)
+    if not sel.any():
+        return 0.0
+    return float(k[sel][int(np.argmax(g[sel]))] * step)
+
+
+def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, search: float, dem: np.ndarray | None = None,
+                   segment_m: float = 0.0) -> tuple[shapely.LineString, float]:
     """The clipped section prolonged at each end to the nearest rim within ``search`` m (:func:`_rim_offset`).
+
+    With ``dem`` given, an end that finds no rim cell within ``search`` is prolonged instead to
+    the highest point of the ground profile within ``search`` (:func:`_highest_ground_offset`):
+    the polygon's outline lies t deep inside the gully, and where the breakline test marked no
+    upper edge the wall still rises to one; where the field beyond keeps rising the end goes the
+    whole ``search`` (with ``reference="banks"`` that field lies on the fitted bank surface and
+    adds no depth or area).
 
     Returns the prolonged line and the offset (m) of the clipped section's start along it.
     """
@@ -307,6 +338,11 @@ def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, 
     step = 0.5 * grid.cell
     oa = _rim_offset(a, -u, rims, grid, search, step)
     ob = _rim_offset(b, u, rims, grid, search, step)
+    if dem is not None:
+        if oa == 0.0:
+            oa = _highest_ground_offset(a, -u, dem, grid, search, step, segment_m)
+        if ob == 0.0:
+            ob = _highest_ground_offset(b, u, dem, grid, search, step, segment_m)
     return shapely.LineString([a - oa * u, b + ob * u]), oa
 
 
@@ -372,6 +408,7 @@ def measure_sections(
     prolong: bool = False,
     ground_segment_m: float = 0.0,
     bank_fit_m: float = 0.0,
+    no_rim: str = "outline",
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -412,6 +449,10 @@ def measure_sections(
     bank_fit_m : float
         For ``reference="banks"`` / ``"bank_lines"``: length of ground fitted beyond each
         reference end (m) (:func:`bank_reference`); must be > 0 then.
+    no_rim : str
+        Where a section end that finds no rim within ``rim_search_m`` stays (:data:`NO_RIM`):
+        ``outline`` = on the polygon outline; ``highest_ground`` = at the highest point of the
+        ground profile within ``rim_search_m`` outside it (:func:`extend_to_rims`).
 
     Returns
     -------
@@ -435,6 +476,8 @@ def measure_sections(
         raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
     if branches not in BRANCHES:
         raise ValueError(f"branches must be one of {BRANCHES}, got {branches!r}")
+    if no_rim not in NO_RIM:
+        raise ValueError(f"no_rim must be one of {NO_RIM}, got {no_rim!r}")
     if reference in ("banks", "bank_lines") and bank_fit_m <= 0:
         raise ValueError(f"reference {reference!r} needs bank_fit_m > 0")
     dem64 = np.asarray(dem, np.float64)
@@ -485,7 +528,8 @@ def measure_sections(
                     continue
                 line = piece
                 if rims is not None and rim_search_m > 0:
-                    line, _ = extend_to_rims(piece, rims, grid, rim_search_m)
+                    line, _ = extend_to_rims(piece, rims, grid, rim_search_m, dem64 if no_rim == "highest_ground" else None,
+                                             ground_segment_m)
                 lev = None
                 if reference in ("banks", "bank_lines"):
                     s, z, lev = _bank_drape(line, dem64, grid, step, ground_segment_m, bank_fit_m,

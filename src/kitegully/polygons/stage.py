@@ -18,7 +18,7 @@ from kitegully.io.raster import GridSpec
 from kitegully.polygons.breaklines import CURVATURES, detect_breaklines, low_sides
 from kitegully.polygons.conditioning import barrier_mask, fill_depth, gully_mask, polygons_from_labels, rasterize_lines
 from kitegully.polygons.dem_prep import prepare_dem
-from kitegully.polygons.morphometry import BRANCHES, REFERENCES, measure_sections
+from kitegully.polygons.morphometry import BRANCHES, NO_RIM, REFERENCES, measure_sections
 from kitegully.polygons.skeleton import skeleton_paths
 from kitegully.polygons.thalweg import thalweg_lines, topographic_convergence_index
 from kitegully.polygons.transects import clip_transects, make_transects, station_floor, transect_stations
@@ -128,6 +128,11 @@ class PolygonParams:
         (m) that the pre-incision surface across the gully is fitted to
         (:func:`kitegully.polygons.morphometry.bank_reference`) [I: one curvature window, the
         scale at which the stage already describes the surface around an edge].
+    no_rim : str
+        Where a section end that finds no rim within ``rim_search_m`` stays: ``outline`` (the
+        polygon edge, t deep inside the gully) or ``highest_ground`` (the highest point of the
+        ground profile within ``rim_search_m`` outside it) [I]
+        (:func:`kitegully.polygons.morphometry.extend_to_rims`).
     """
 
     cell_m: float = 0.5
@@ -170,6 +175,7 @@ class PolygonParams:
     prolong_axes: bool = False
     ground_segment_m: float = 0.0
     bank_fit_m: float = 0.0
+    no_rim: str = "outline"
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "PolygonParams":
@@ -185,7 +191,7 @@ class PolygonParams:
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
                                                                           "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"])
         m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"],
-                           optional=["ground_segment_m", "bank_fit_m"])
+                           optional=["ground_segment_m", "bank_fit_m", "no_rim"])
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
@@ -204,6 +210,7 @@ class PolygonParams:
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
             branches=m["branches"], rim_search_m=float(m["rim_search_m"]), prolong_axes=bool(m["prolong_axes"]),
             ground_segment_m=float(m.get("ground_segment_m", 0.0)), bank_fit_m=float(m.get("bank_fit_m", 0.0)),
+            no_rim=m.get("no_rim", "outline"),
         )
 
     def __post_init__(self) -> None:
@@ -213,6 +220,8 @@ class PolygonParams:
             raise InputError(f"polygons.morphometry.reference: must be one of {REFERENCES}, got {self.reference!r}")
         if self.branches not in BRANCHES:
             raise InputError(f"polygons.morphometry.branches: must be one of {BRANCHES}, got {self.branches!r}")
+        if self.no_rim not in NO_RIM:
+            raise InputError(f"polygons.morphometry.no_rim: must be one of {NO_RIM}, got {self.no_rim!r}")
         if self.reference in ("banks", "bank_lines") and not self.bank_fit_m > 0:
             raise InputError(f"polygons.morphometry.bank_fit_m: reference {self.reference!r} needs a bank length > 0 (m), got {self.bank_fit_m}")
         if self.ground_segment_m < 0:
@@ -281,7 +290,7 @@ def measure_morphometry(labels: np.ndarray, polygons: gpd.GeoDataFrame, dem: np.
     p = params
     return measure_sections(labels, polygons, dem, level, grid, p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha,
                             p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m,
-                            p.bank_fit_m)
+                            p.bank_fit_m, p.no_rim)
 
 
 def morphometry_rows(axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: pd.DataFrame, params: PolygonParams) -> list[tuple]:
