@@ -191,7 +191,7 @@ def volume_split(member: str, root: Path, reference: str | None = None, surface:
         z = np.where(np.isfinite(zt), zt, res.dem)
     _, sec, _ = measure_sections(res.labels[thr], res.polygons[thr], z, res.level, res.grid, p.section_spacing_m, ref,
                                  p.smooth_step_m, p.snakes_alpha, p.snakes_beta, p.branches, res.rims, p.rim_search_m, p.prolong_axes,
-                                 p.ground_segment_m, p.bank_fit_m if p.bank_fit_m > 0 else p.rim_search_m)
+                                 p.ground_segment_m, p.bank_fit_m if p.bank_fit_m > 0 else p.rim_search_m, no_rim=p.no_rim)
     inside = rasterize(res.polygons[thr].geometry, dtm.grid).astype(bool)
     grown = ndi.distance_transform_edt(~inside, sampling=dtm.grid.cell) <= p.rim_search_m
     ca = dtm.grid.cell ** 2
@@ -244,7 +244,7 @@ def main() -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     if args.volume_split:
         vs = pd.DataFrame([volume_split(m, Path(args.default_root if m == "default" else args.root), ref, surf)
-                           for m in args.members.split(",") for ref in ("line", "banks") for surf in ("dsm", "true_dtm")])
+                           for m in args.members.split(",") for ref in ("banks",) for surf in ("dsm", "true_dtm")])
         vs.to_csv(out.with_name(out.name + "_volume.csv"), index=False)
         text = "# Polygons: the total volume split into mapping and sections\n\n" + vs.to_markdown(index=False, floatfmt=".1f") + "\n"
         out.with_name(out.name + "_volume.md").write_text(text, encoding="utf-8")
