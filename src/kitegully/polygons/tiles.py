@@ -7,8 +7,9 @@ partition the stage grid, so each polygon has exactly one owner) — and one mer
 the parts in polygon order.
 
 A tile job reads only a window: the union of its polygons' bounding boxes plus
-:func:`margin_cells` (a section reaches ``rim_search_m`` beyond the polygon for its rim and
-``ground_segment_m`` beyond that for its ground profile, plus the bilinear drape's cell).
+:func:`margin_cells` (a section reaches ``rim_search_m`` beyond the polygon for its rim, ``bank_fit_m``
+beyond that for the bank reference and ``ground_segment_m`` beyond that for its ground profile, plus
+the bilinear drape's cell).
 Every polygon is measured on its own (:func:`kitegully.polygons.morphometry.measure_sections`
 uses only its label, its outline and the rasters along its sections), and the window maps
 map coordinates to cells exactly as the whole grid does (:class:`WindowGrid`: the whole
@@ -113,11 +114,14 @@ def owners(polygons: gpd.GeoDataFrame, grid: GridSpec, tiles: Iterable[Tile]) ->
 def margin_cells(params: PolygonParams, cell: float) -> int:
     """Cells a tile's window extends beyond its polygons' bounding boxes.
 
-    ``rim_search_m`` (section ends prolonged to the rim) + ``ground_segment_m`` (ground
-    profile drape prolonged at both ends) + one cell (bilinear drape), rounded up, plus 2
-    cells (the bounding box is taken one cell wide around the label).
+    ``rim_search_m`` (section ends prolonged to the rim or, with ``no_rim: highest_ground``, to
+    the highest ground within it) + ``bank_fit_m`` (the banks fitted beyond the ends, for the
+    ``banks`` / ``bank_lines`` references) + ``ground_segment_m`` (ground profile drape
+    prolonged at both ends) + one cell (bilinear drape), rounded up, plus 2 cells (the bounding
+    box is taken one cell wide around the label).
     """
-    return int(ceil((params.rim_search_m + params.ground_segment_m + cell) / cell - 1e-9)) + 2
+    bank = params.bank_fit_m if params.reference in ("banks", "bank_lines") else 0.0
+    return int(ceil((params.rim_search_m + bank + params.ground_segment_m + cell) / cell - 1e-9)) + 2
 
 
 def polygons_window(polygons: gpd.GeoDataFrame, grid: GridSpec, margin: int) -> tuple[int, int, int, int] | None:
