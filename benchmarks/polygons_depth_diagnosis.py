@@ -3,7 +3,9 @@
 
 For each member (default twin and the ensemble members), the stage runs once on the member's
 photogrammetric DSM; each of its t = 0.5 m cross-sections is then re-measured, with the *same*
-geometry (clipped section, ends prolonged to the rims, 4 m ground opening, line reference), on:
+geometry and the morphometry settings before session 9 (clipped section, ends prolonged to the rims
+or left on the outline, 4 m ground opening, ``line`` reference: the errors this script decomposes),
+on:
 
 - ``dsm``: the stage DEM (what the stage reports; checked against the stored depth);
 - ``true_dsm_minz`` / ``true_dtm_minz``: the twin's true DSM / ground brought to the stage grid by the
@@ -24,9 +26,12 @@ z0 = true DTM + D):
 
 Diagnosis only: it reads the truth, and nothing here feeds a setting of the stage.
 
+``--volume-split`` instead splits the total volume error of the site settings into mapping and
+sections (:func:`volume_split`).
+
 Usage::
 
-    .venv/bin/python benchmarks/polygons_depth_diagnosis.py [--members default,ens1] [--default-root /work/run10/results]
+    .venv/bin/python benchmarks/polygons_depth_diagnosis.py [--volume-split] [--members default,ens1] [--default-root /work/run10/results]
         [--root /work/wt/ensrun/results]
 
 Writes ``results/benchmarks/polygons_depth_diagnosis_sections.csv`` (per section) and
@@ -122,7 +127,7 @@ def diagnose(member: str, root: Path) -> pd.DataFrame:
         for name, (z, g) in surf.items():
             s, zz = _profile(line, z, g, step, p.ground_segment_m)
             prof[name] = (s, zz)
-            d, a = section_profile(s, zz, p.reference)
+            d, a = section_profile(s, zz, "line")
             row[f"depth_{name}"], row[f"area_{name}"] = d, a
         # truths along the reference line (0.2 m grid)
         s02, _, _, Dl = drape(line, D, dtm.grid, step)
