@@ -13,8 +13,8 @@ by fewer than two usable images or with a low correlation are masked.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
-from typing import Any, Mapping
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar, Mapping
 
 import cv2
 import numpy as np
@@ -25,6 +25,7 @@ from numba.typed import List
 
 from kitegully.dense.kernels import (multiview_ncc_stack, ncc_cost, sample_stack, sgm_aggregate,
                                      sgm_winner)
+from kitegully.dense.view_selection import select_views
 from kitegully.dense.views import PyramidCache, ViewSet
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.holes import fill_nearest
@@ -76,6 +77,14 @@ class MatchParams:
         refine window misses the ground. Each further pass searches again around the
         level-0 surface of the previous pass (masked cells take the nearest valid cell's
         elevation); the masking rules are the same in every pass.
+    max_views : int or None
+        At most this many images match a tile (block plus halo), chosen from those whose
+        frame meets it by :func:`kitegully.dense.view_selection.select_views` (coverage
+        of the tile, resolution at the DSM cell, angular diversity; geometry only).
+        ``None`` (default) uses every image. The cost of a tile is O(V) per cell and
+        label, while the noise of the mean pairwise NCC falls only as 1/sqrt(V) and
+        near-duplicate viewpoints add no parallax. Tiles seen by at most this many images
+        are matched exactly as without a cap.
     """
 
     levels: int = 4
@@ -92,17 +101,28 @@ class MatchParams:
     min_std_dn: float = 1.0
     nan_cost: float = 1.0
     final_passes: int = 1
+    max_views: int | None = None
+
+    OPTIONAL: ClassVar[tuple[str, ...]] = ("max_views",)  # keys a config section may leave out
+    REQUIRED: ClassVar[tuple[str, ...]] = ()  # set below: every other field
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "MatchParams":
-        p = cls(**{k: cfg[k] for k in cls.__dataclass_fields__ if k in cfg})
+        p = cls(**{f.name: cfg[f.name] for f in fields(cls) if f.name in cfg})
         if p.sgm_directions not in (4, 8):
             raise InputError(f"dense.matching.sgm_directions: must be 4 or 8, got {p.sgm_directions}")
         if p.min_views < 2:
             raise InputError("dense.matching.min_views: must be at least 2")
         if p.final_passes < 1:
             raise InputError("dense.matching.final_passes: must be at least 1")
+        if p.max_views is not None and (isinstance(p.max_views, bool) or not isinstance(p.max_views, (int, np.integer))
+                                        or p.max_views < p.min_views):
+            raise InputError(f"dense.matching.max_views: must be null or an integer >= min_views ({p.min_views}), "
+                             f"got {p.max_views!r}")
         return p
+
+
+MatchParams.REQUIRED = tuple(f.name for f in fields(MatchParams) if f.name not in MatchParams.OPTIONAL)
 
 
 @dataclass
@@ -237,7 +257,8 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     z_range
         (low, high) local elevation bounds of the search.
 
-    Cost: O(Σ_levels H_l·W_l·K_l·(V·w² + directions)) with K_l labels and V images.
+    Cost: O(Σ_levels H_l·W_l·K_l·(V·w² + directions)) with K_l labels and V images
+    (V ≤ ``params.max_views`` when set).
     """
     H, W = len(ys), len(xs)
     L = params.levels
@@ -252,6 +273,8 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     if len(idx) < params.min_views:
         return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
     zmid = 0.5 * (zlo + zhi)
+    # at most max_views images (all of them when the tile has no more): view_selection
+    idx = select_views(views, idx, (xmin, ymin, xmax, ymax), zmid, cell, params.max_views)
     hb = height_base_ratio(views, idx, zmid)
     Rs = np.ascontiguousarray([views.images[i].R for i in idx], dtype=np.float64)
     Cs = np.ascontiguousarray([views.images[i].C for i in idx], dtype=np.float64)

@@ -167,7 +167,7 @@ class DenseParams:
         for key, low in (("tile_cells", 16), ("overlap_cells", 0), ("max_cached_images", 2), ("figure_max_px", 100),
                          ("threads", 1)):
             checked_number(cfg, key, "dense", low, strict=False)
-        config_section(cfg["matching"], "dense.matching", MatchParams.__dataclass_fields__)
+        config_section(cfg["matching"], "dense.matching", MatchParams.REQUIRED, optional=MatchParams.OPTIONAL)
         return cls(
             cell_m=cfg["cell_m"], extent=ext, extent_percentile=cfg["extent_percentile"], tile_cells=cfg["tile_cells"],
             overlap_cells=cfg["overlap_cells"], max_cached_images=cfg["max_cached_images"],

@@ -100,7 +100,8 @@ class SurveyParams:
                 raise InputError("lowcost.survey.dense: dsm_method dense needs the dense section (tile_cells, overlap_cells, "
                                  "max_cached_images, matching)")
             d = config_section(cfg["dense"], "lowcost.survey.dense", ["tile_cells", "overlap_cells", "max_cached_images", "matching"])
-            config_section(d["matching"], "lowcost.survey.dense.matching", MatchParams.__dataclass_fields__)
+            config_section(d["matching"], "lowcost.survey.dense.matching", MatchParams.REQUIRED,
+                           optional=MatchParams.OPTIONAL)
             dense = {"tile_cells": int(d["tile_cells"]), "overlap_cells": int(d["overlap_cells"]),
                      "max_cached_images": int(d["max_cached_images"]), "matching": MatchParams.from_config(d["matching"])}
         for k in ("gamma", "dsm_cell_m", "ortho_upsample", "occlusion_tolerance_m"):
