@@ -47,17 +47,35 @@ from kitegully.dense.surface import dense_surface, tile_z_range
 from kitegully.dense.tiles import load_views_and_grid, matching_block
 from kitegully.dense.view_selection import select_views
 from kitegully.evaluate.dem import checkpoint_errors, error_stats, read_checkpoints, resample_to
+from kitegully.dense.views import PyramidCache
 from kitegully.io.raster import GridSpec
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def parse_caps(text: str) -> list[int | None]:
-    return [None if c.strip().lower() in ("none", "null") else int(c) for c in text.split(",")]
+def parse_variants(text: str) -> list[tuple[int | None, int | None]]:
+    """``cap[@cache]`` items: max_views (``none`` = no cap) and optionally max_cached_images."""
+    out = []
+    for item in text.split(","):
+        cap, _, cache = item.strip().partition("@")
+        out.append((None if cap.lower() in ("none", "null") else int(cap), int(cache) if cache else None))
+    return out
 
 
-def cap_name(cap: int | None) -> str:
-    return "uncapped" if cap is None else f"max_views={cap}"
+def cap_name(cap: int | None, cache: int | None = None) -> str:
+    return ("uncapped" if cap is None else f"max_views={cap}") + (f", cache {cache}" if cache else "")
+
+
+LOADS = [0]
+_base = PyramidCache._base
+
+
+def _counted_base(self, i):
+    LOADS[0] += 1
+    return _base(self, i)
+
+
+PyramidCache._base = _counted_base  # counts image reads (cache misses) per run
 
 
 def block_views(views, sub: GridSpec, params: DenseParams, caps) -> tuple[pd.DataFrame, set[int]]:
@@ -109,7 +127,8 @@ def main() -> None:
     ap.add_argument("--results", required=True, help="the site's results folder (read only)")
     ap.add_argument("--rows", default=None, help="DSM rows a:b of the window (default: all); a multiple of dense.tile_cells")
     ap.add_argument("--cols", default=None, help="DSM columns a:b of the window (default: all)")
-    ap.add_argument("--caps", default="none,20", help="comma-separated max_views values; none = no cap (the reference)")
+    ap.add_argument("--caps", default="none,20", help="comma-separated variants max_views[@max_cached_images]; none = no "
+                    "cap; the first is the reference; without @ the site's max_cached_images")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=1, help="ABBA repeats of the timed runs")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "out" / "dense_view_cap.md"))
@@ -130,8 +149,9 @@ def main() -> None:
         raise SystemExit(f"window origin ({r0}, {c0}) must be a multiple of dense.tile_cells ({T})")
     r1, c1 = min(r1, grid.height), min(c1, grid.width)
     sub = grid.window(r0, c0, r1 - r0, c1 - c0)
-    caps = parse_caps(args.caps)
-    names = [cap_name(c) for c in caps]
+    variants = parse_variants(args.caps)
+    caps = [v[0] for v in variants]
+    names = [cap_name(*v) for v in variants]
     print(f"{len(views.images)} images; window rows {r0}:{r1}, cols {c0}:{c1} ({sub.width * sub.height} cells, "
           f"{-(-sub.height // T) * -(-sub.width // T)} blocks of {T} + halo {O})", flush=True)
 
@@ -148,14 +168,17 @@ def main() -> None:
     for rep in range(args.repeats):
         order += list(range(len(caps))) if rep % 2 == 0 else list(range(len(caps)))[::-1]
     seconds = {n: [] for n in names}
+    loads = {}
     results = {}
     for k in order:
         mp = replace(params.matching, max_views=caps[k])
+        LOADS[0] = 0
         t0 = time.perf_counter()
-        r = dense_surface(views, sub, mp, T, O, params.max_cached_images)
+        r = dense_surface(views, sub, mp, T, O, variants[k][1] or params.max_cached_images)
         seconds[names[k]].append(time.perf_counter() - t0)
+        loads[names[k]] = LOADS[0]
         results[names[k]] = r
-        print(f"{names[k]}: {seconds[names[k]][-1]:.1f} s", flush=True)
+        print(f"{names[k]}: {seconds[names[k]][-1]:.1f} s, {LOADS[0]} image reads", flush=True)
 
     truth = read_truth(res / "twin" / "truth" / "dsm.tif", sub)
     cps = None
@@ -174,8 +197,9 @@ def main() -> None:
         t = float(np.median(seconds[n]))
         both = np.isfinite(r.dsm) & np.isfinite(ref.dsm)
         d = (r.dsm - ref.dsm)[both].astype(np.float64)
-        kept = blocks[f"kept_{n}"]
+        kept = blocks[f"kept_{cap_name(caps[names.index(n)])}"]
         row = {"variant": n, "views_per_block_median": float(kept.median()), "views_per_block_max": int(kept.max()),
+               "image_reads": loads[n],
                "matching_s": t, "cells_per_s": cells / t, "speed_ratio": t_ref / t,
                "valid_pct": 100 * float(np.isfinite(r.dsm).mean()), "coverage_of_seen_pct": 100 * r.coverage(),
                "diff_median_m": float(np.median(d)) if d.size else np.nan,
@@ -204,10 +228,12 @@ def main() -> None:
     lines = [f"# Dense matching with and without the view cap ({Path(args.site).stem})", "",
              f"Window rows {r0}:{r1}, cols {c0}:{c1} of the {grid.width} x {grid.height}-cell DSM grid ({cells} cells, "
              f"{len(blocks)} blocks of {T} cells + {O}-cell halo); {len(views.images)} images; {args.threads} threads; "
+             f"image cache {params.max_cached_images} pyramids unless stated; "
              f"runs {' '.join(names[k] for k in order)} (times: median of the runs); machine shared, so read the ratios.",
              "", table.to_markdown(index=False, floatfmt=".4g"), ""]
     for n, cap in zip(names[1:], caps[1:]):
         if cap is None:
+            lines.append(f"- {n}: identical to {ref_name} in {int(same[f'identical_{n}'].sum())} of {len(same)} blocks.")
             continue
         under = same[same.visible <= cap]
         over = same[same.visible > cap]

@@ -136,3 +136,17 @@ def test_cap_below_view_count_keeps_accuracy(slope_block):
         e = e[np.isfinite(e)]
         assert abs(e.mean()) <= 0.5 * GSD and e.std() <= 1.5 * GSD, (e.mean(), e.std())
     assert np.isfinite(capped.dsm).mean() >= np.isfinite(ref.dsm).mean() - 0.05
+
+
+def test_cache_smaller_than_the_views_warns_and_matches_the_same(slope_block, caplog):
+    views, imgs, _ = slope_block
+    ref = _surface(slope_block, PARAMS)
+    with caplog.at_level("WARNING", logger="kitegully.dense.surface"):
+        small = dense_surface(views, GRID, PARAMS, tile_cells=96, overlap_cells=16, max_cached_images=4, arrays=imgs)
+    assert "more than the 4 pyramids of dense.max_cached_images" in caplog.text
+    np.testing.assert_array_equal(small.dsm, ref.dsm)
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="kitegully.dense.surface"):
+        dense_surface(views, GRID, replace(PARAMS, max_views=4), tile_cells=96, overlap_cells=16, max_cached_images=4,
+                      arrays=imgs)
+    assert "max_cached_images" not in caplog.text

@@ -84,7 +84,9 @@ class MatchParams:
         ``None`` (default) uses every image. The cost of a tile is O(V) per cell and
         label, while the noise of the mean pairwise NCC falls only as 1/sqrt(V) and
         near-duplicate viewpoints add no parallax. Tiles seen by at most this many images
-        are matched exactly as without a cap.
+        are matched exactly as without a cap. [I] Keep it at most ``dense.max_cached_images``:
+        every pass reads a tile's images in the same order, so an LRU cache smaller than
+        that set misses on every read and each pass re-reads all of them.
     """
 
     levels: int = 4
@@ -127,11 +129,13 @@ MatchParams.REQUIRED = tuple(f.name for f in fields(MatchParams) if f.name not i
 
 @dataclass
 class TileResult:
-    """Surface of one tile at level 0: elevation (local), NCC and usable image count."""
+    """Surface of one tile at level 0: elevation (local), NCC and usable image count; and the
+    number of images the tile was matched with (after the ``max_views`` cap)."""
 
     z: np.ndarray
     ncc: np.ndarray
     nviews: np.ndarray
+    images: int = 0
 
 
 def view_levels(views: ViewSet, idx: list[int], z_ground: float, cell: float) -> np.ndarray:
@@ -302,7 +306,7 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
             good = seen & (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
             zf = np.where(good, z, np.nan)
             if not np.isfinite(zf).any():
-                return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16))
+                return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16), len(idx))
             zf = fill_nearest(zf)
             z_prev = ndimage.median_filter(zf, size=3, mode="nearest")
         else:
@@ -313,5 +317,5 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
             keep &= ~at_bound
             z = np.where(keep, z, np.nan).astype(np.float32)
             log.debug("tile level %d: %d labels, %d views, %.0f%% kept", lev, K, len(idx), 100 * keep.mean())
-            return TileResult(z, np.where(np.isfinite(ncc), ncc, np.nan).astype(np.float32), nv.astype(np.int16))
+            return TileResult(z, np.where(np.isfinite(ncc), ncc, np.nan).astype(np.float32), nv.astype(np.int16), len(idx))
     raise AssertionError("unreachable")

@@ -112,6 +112,7 @@ def dense_surface(views: ViewSet, grid: GridSpec, params: MatchParams, tile_cell
     local = grid.shifted(-views.offset[0], -views.offset[1])
     xs_all, ys_all = local.cell_centres(-O, -O, grid.height + T + 2 * O, grid.width + T + 2 * O)
     t0 = time.perf_counter()
+    warned = False
     starts = [(r, c) for r in range(0, grid.height, T) for c in range(0, grid.width, T)]
     for n, (r0, c0) in enumerate(starts):
         xs = xs_all[c0: c0 + T + 2 * O]
@@ -119,6 +120,13 @@ def dense_surface(views: ViewSet, grid: GridSpec, params: MatchParams, tile_cell
         box = (xs[0], ys[-1], xs[-1], ys[0])
         zr = tile_z_range(views, box, params.z_margin_m)
         res = match_tile(views, cache, xs, ys, grid.cell, zr, params)
+        if res.images > cache.max_images and not warned:
+            # the passes read the tile's images in the same order: an LRU cache smaller than
+            # that set misses on every read, so each pass re-reads and re-pyramids them all
+            log.warning("dense matching: a tile is matched with %d images, more than the %d pyramids of "
+                        "dense.max_cached_images: each of its passes re-reads them all (set dense.matching.max_views "
+                        "to at most the cache size, or raise the cache)", res.images, cache.max_images)
+            warned = True
         h = min(T, grid.height - r0)
         w = min(T, grid.width - c0)
         core = (slice(O, O + h), slice(O, O + w))
