@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -67,6 +67,18 @@ stereo: $(STAMP)
 # --tile-m 200" runs a corner instead (its table says NOT the full site).
 kamech-full: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/kamech_full.py --cores $(CORES) $(KAMECH_FULL_ARGS)
+
+# Dense matching with and without dense.matching.max_views (issue 21) in one run: a 1024 x 1024-cell
+# window of the full site's tile r002_c002 (needs a full-size run's georef/sfm under FULL_RESULTS, read
+# only; ~10 min) -> benchmarks/out/dense_view_cap_full.md; then the default twin's whole DSM -> _twin.md.
+FULL_RESULTS ?= results/kamech_full
+TWIN_RESULTS ?= results/kamech_twin
+dense-view-cap: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/dense_view_cap.py --site config/sites/kamech_full.yaml \
+		--results $(FULL_RESULTS) --rows 5888:6912 --cols 4864:5888 --caps none,20,none@64 --repeats 2 \
+		--out benchmarks/out/dense_view_cap_full.md
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/dense_view_cap.py --site config/sites/kamech_twin.yaml \
+		--results $(TWIN_RESULTS) --caps none,20 --out benchmarks/out/dense_view_cap_twin.md
 
 # Tiny twin's gully map untiled and with the tiled fill rules: products must be identical (~1-5 min).
 tiles-check: $(STAMP)
