@@ -26,6 +26,11 @@ collections", ICCV):
 The first view is the best-resolved, nadir-most view that sees the whole block (largest
 ``coverage · q · cos θ``); each next view maximises ``coverage gain · q · diversity``. With
 ``V ≤ max_views`` every view is kept and the matcher's input is unchanged.
+
+Measured (README, "Views per tile at full size"): on a full-size window the cap of 20 took
+the matcher from 12 600 to 89 000 cells/s, mostly because 20 views fit the 24-pyramid image
+cache that the tiles' 25–33 views overflowed on every pass; with the cache warm, 31 → 20
+views matched a block 1.5 × faster.
 """
 
 from __future__ import annotations
