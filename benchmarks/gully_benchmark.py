@@ -50,8 +50,12 @@ PYSHEDS_VENV_PINS = [PYSHEDS_PIN, "numba==0.61.2", "numpy==2.2.6"]
 CRS = "EPSG:32632"
 # the children import kitegully from here (``--against`` points them at a former revision)
 SRC = os.environ.get("KITEGULLY_BENCH_SRC", str(REPO / "src"))
-# main at the end of session 5 (before issue 21's speed work on the fill and the gully stage)
-FORMER = "3974773"
+# main at the end of session 8 (before session 9's speed work on the gully stage); session 6 compared
+# with 3974773 (main at the end of session 5), which no longer runs the sites' current gully settings
+FORMER = "55a02f9"
+# the 80 M-cell site of issue 21: its gully settings are the ones timed (the default twin's need
+# checkpoints for head_snap: relief and an orthophoto for gully.crowns, which the synthetic DEM has not)
+SITE = "kamech_full"
 
 
 def peak_self_gb() -> float:
@@ -116,16 +120,16 @@ def centrelines(params, side: int, cell: float, x_origin: float, y_origin: float
 
 # --------------------------------------------------------------------------- child: whole stage
 def site_gully_config() -> dict:
-    """The default site's ``gully:`` section: the children run with the rules' settings."""
+    """The full-size site's (:data:`SITE`) ``gully:`` section: the children run with its rules' settings."""
     import yaml
 
-    g = yaml.safe_load((REPO / "config" / "sites" / "kamech_twin.yaml").read_text())["gully"]
+    g = yaml.safe_load((REPO / "config" / "sites" / f"{SITE}.yaml").read_text())["gully"]
     g["crowns"] = {"enabled": False}  # the synthetic catchment has no orthophoto (gully.crowns needs one)
     return g
 
 
 def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> None:
-    """Whole gully mapping chain as the gully_map rule runs it, with the default site's
+    """Whole gully mapping chain as the gully_map rule runs it, with the full-size site's (:data:`SITE`)
     ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
     sys.path.insert(0, SRC)
     from kitegully.gully.pipeline import GullyParams, map_gullies, map_raster
@@ -136,11 +140,24 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     dem, grid = read_raster(dem_path)
     heads = np.load(heads_path)
     t_read = time.perf_counter() - t0
-    res = map_gullies(dem, grid, heads[0], heads[1], GullyParams.from_config(site_gully_config()), workers=threads)
-    t1 = time.perf_counter()
     out = Path(out_dir)
-    write_raster(out / "depth.tif", res.depth, grid)
+    # the four rasters the gully_map rule writes (session 6 timed depth and map only), the depth
+    # rasters as the rule writes them (on_depth: beside the fill where the code knows it)
+    params = GullyParams.from_config(site_gully_config())
+
+    def write_depth(s, d):
+        write_raster(out / "depth.tif", d, grid)
+        write_raster(out / "smoothed.tif", s, grid)
+
+    import inspect
+
+    early = "on_depth" in inspect.signature(map_gullies).parameters
+    res = map_gullies(dem, grid, heads[0], heads[1], params, workers=threads, **({"on_depth": write_depth} if early else {}))
+    t1 = time.perf_counter()
+    if not early:  # a former revision: after the mapping, as its rule did
+        write_depth(res.smoothed, res.depth)
     write_raster(out / "gully_map.tif", map_raster(res.gully, np.isfinite(dem)), grid, nodata=255)
+    write_raster(out / "gully_map_whole.tif", map_raster(res.gully_whole_patches, np.isfinite(dem)), grid, nodata=255)
     write_vector(res.lines, out / "gully_network.gpkg")
     write_vector(res.extracted_lines, out / "gully_network_mapped.gpkg")
     write_vector(res.polygons, out / "gully_polygons.gpkg")
@@ -154,7 +171,7 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
 
 
 def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
-    """The gully_sensitivity rule's work (its library function with the default site's settings), in a child process."""
+    """The gully_sensitivity rule's work (its library function with the full-size site's settings), in a child process."""
     sys.path.insert(0, SRC)
     from kitegully.gully.network import GullyNetwork
     from kitegully.gully.pipeline import GullyParams

@@ -86,3 +86,49 @@ def test_two_workers_give_the_same_products(mapped):
     t2 = sensitivity_table(*args, workers=2, known_depths={5.0: res1.depth})
     assert t1.equals(t2) and t1["sigma_m"].tolist() == [8.0, 8.0, 5.0, 5.0, 6.0, 6.0]
     assert t1["gully_area_m2"].nunique() > 1
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_on_depth_gets_the_depth_rasters_before_the_fill_is_waited_for(mapped, workers):
+    """``on_depth`` (the rule writes the depth rasters there, beside the fill) gets the
+    result's own smoothed and depth arrays, once, and the products do not change."""
+    grid, z, params, res1 = mapped
+    xs, ys = grid.cell_centres()
+    seen = []
+    res = map_gullies(z, grid, np.array([xs[30]]), np.array([ys[grid.height // 2]]), params, workers=workers,
+                      on_depth=lambda s, d: seen.append((s, d)))
+    assert len(seen) == 1 and seen[0][0] is res.smoothed and seen[0][1] is res.depth
+    assert np.array_equal(res.depth, res1.depth, equal_nan=True) and np.array_equal(res.gully, res1.gully)
+    assert "on_depth_s" in res.timings_s
+
+
+def test_depth_map_is_the_same_on_one_or_several_fft_threads(mapped):
+    """The sensitivity's parallel depth maps run their FFTs on one thread each: the values
+    are those of one smoothing on several threads (the rule's former way), bit for bit."""
+    from kitegully.gully.depth import depth_map
+
+    _, z, _, _ = mapped
+    for sigma in (1.0, 7.5):
+        one, two = depth_map(z, 0.5, sigma, 4.0, 1), depth_map(z, 0.5, sigma, 4.0, 3)
+        assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(one, two))
+
+
+def test_sensitivity_domain_may_be_made_beside_the_depth_maps(mapped):
+    """A callable domain (made once the depth maps have started) gives the table of the domain itself."""
+    grid, z, params, res = mapped
+    xs, ys = grid.cell_centres()
+    yc = ys[grid.height // 2]
+    reference = gpd.GeoDataFrame(geometry=[LineString([(xs[30], yc + 0.4), (xs[-1], yc + 0.4)])], crs=CRS)
+    domain = footprint(np.isfinite(z), grid, near=[*reference.geometry, *network_lines(res.network, grid).geometry])
+    calls = []
+
+    def make():
+        calls.append(1)
+        return domain
+
+    args = (z, grid, res.network, [5.0, 8.0, 3.0], [0.25], 1.0, 15.0, 8, 4.0)
+    for workers in (1, 2):
+        got = sensitivity_table(*args, reference=reference, domain=make, workers=workers, known_depths={5.0: res.depth})
+        assert got.equals(sensitivity_table(*args, reference=reference, domain=domain, workers=1,
+                                            known_depths={5.0: res.depth}))
+    assert len(calls) == 2

@@ -6,7 +6,7 @@ import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import geopandas as gpd
 import numpy as np
@@ -171,6 +171,7 @@ def map_gullies(
     depth: np.ndarray | None = None,
     incision: HeadDetectionParams | None = None,
     ortho: np.ndarray | None = None,
+    on_depth: Callable[[np.ndarray, np.ndarray], None] | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -201,6 +202,11 @@ def map_gullies(
         Parameters of the incision map for ``head_snap: incision`` (default: ``auto_heads``).
     ortho : ndarray (3, H, W), optional
         The orthophoto's R, G, B on the DEM grid (any unit; 0 = no data), for ``crowns``.
+    on_depth : callable, optional
+        Called as ``on_depth(smoothed, depth)`` once the depth map and patches are made,
+        before waiting for the fill: with ``workers`` > 1 it runs beside the fill branch
+        (e.g. the rule writes the two float rasters there, O(n) compression that would
+        otherwise follow the fill on one core). It must not modify the arrays.
 
     Returns
     -------
@@ -256,7 +262,8 @@ def map_gullies(
         return z_heads, n_holes, fz, n_raised, dirs, n_flat, n_left, time.perf_counter() - tb
 
     # The fill and flat resolution (compiled, serial, without the GIL) run on one core while
-    # the depth map's FFTs and the patch labelling run beside them: both cores are busy.
+    # the depth map's FFTs, the patch labelling and ``on_depth`` (the rule's writing of the
+    # depth rasters) run beside them: both cores are busy.
     with ThreadPoolExecutor(max_workers=1) as pool:
         flow = pool.submit(flow_branch) if workers > 1 else None
         if smoothed is None:
@@ -269,6 +276,10 @@ def map_gullies(
         t["patches_s"] = time.perf_counter() - t0
         log.info("patches: %d of %d kept (volume >= %.3g m3)", int(table["kept"].sum()), len(table),
                  params.min_patch_volume_m3)
+        if on_depth is not None:
+            t0 = time.perf_counter()
+            on_depth(smoothed, depth)
+            t["on_depth_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         z_heads, n_holes, filled, n_raised, dirs, n_flat, n_left, t_flow = (flow.result() if flow is not None
                                                                              else flow_branch())

@@ -51,6 +51,18 @@ def sensitivity_table(
     DEM), so it is reused; the buffer is computed once, the reference is clipped and
     buffered once (:class:`kitegully.evaluate.network.NetworkScorer`).
 
+    Parameters
+    ----------
+    domain : Polygon or callable, optional
+        Where the networks are scored (the DEM footprint), or a function of no arguments
+        that makes it: it is then called after the depth maps have started in their
+        threads, so that it runs beside them.
+    workers : int
+        Threads. With 2 or more, the depth maps still to make are smoothed in parallel
+        threads (up to ``workers`` at once, each FFT on one thread: the same values as one
+        FFT on several threads, tested) while the buffer, the domain and the thresholds of
+        the known σ are scored here.
+
     Returns
     -------
     DataFrame
@@ -62,23 +74,28 @@ def sensitivity_table(
     -----
     One FFT smoothing per σ (O(n log n)) and O(n) per threshold; depth maps given in
     ``known_depths`` (σ in m → depth map, e.g. the stage's own depth.tif) are reused.
+    Memory: the DEM, the known depth map and up to ``workers`` depth maps being made
+    (each about 6 float32 rasters at its peak).
     """
-    buf = buffer_mask(network.mask(), grid.cell, buffer_m)
-    scorer = NetworkScorer(reference, domain) if reference is not None else None
-
-    def depth_at(sigma: float) -> np.ndarray:
-        return depth_map(dem, grid.cell, sigma, truncate, workers)[1]
-
     known = known_depths or {}
-    # With 2+ workers the depth maps still to make are smoothed one after the other in a
-    # second thread while the thresholds of the known σ (then of the previous σ) are scored
-    # here: both cores stay busy, and at most two depth maps wait in memory.
     order = sorted(dict.fromkeys(float(s) for s in sigmas_m), key=lambda s: s not in known)
+    todo = [s for s in order if s not in known]
     rows_of: dict[float, list[dict]] = {}
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        pending = {s: pool.submit(depth_at, s) for s in order if s not in known} if workers > 1 else {}
+    parallel = workers > 1 and todo
+    with ThreadPoolExecutor(max_workers=max(1, min(workers, len(todo)))) as pool:
+        # the depth maps first (the longest work), then the buffer and domain beside them
+        pending = {s: pool.submit(depth_map, dem, grid.cell, s, truncate, 1) for s in todo} if parallel else {}
+        buf = buffer_mask(network.mask(), grid.cell, buffer_m)
+        if callable(domain):
+            domain = domain()
+        scorer = NetworkScorer(reference, domain) if reference is not None else None
         for sigma in order:
-            depth = known[sigma] if sigma in known else pending.pop(sigma).result() if sigma in pending else depth_at(sigma)
+            if sigma in known:
+                depth = known[sigma]
+            elif sigma in pending:
+                depth = pending.pop(sigma).result()[1]
+            else:
+                depth = depth_map(dem, grid.cell, sigma, truncate, workers)[1]
             rows_of[sigma] = _threshold_rows(depth, sigma, thresholds_m, grid, network, buf, min_volume_m3,
                                              connectivity, reference, scorer, tolerance_m, truth_mask)
             del depth
@@ -145,7 +162,7 @@ def gully_sensitivity(
     truth_mask : ndarray of bool, optional
         Truth gully cells (twins): area scores.
     workers : int
-        Threads of the FFT smoothing.
+        Threads: depth maps of several σ at once (:func:`sensitivity_table`).
 
     Returns
     -------
@@ -154,8 +171,10 @@ def gully_sensitivity(
     """
     domain = None
     if reference is not None:
-        # DEM footprint near the lines only: same clipping as the whole footprint, far cheaper
-        domain = footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(network, grid).geometry])
+        # DEM footprint near the lines only: same clipping as the whole footprint, far cheaper;
+        # made beside the depth maps (sensitivity_table calls it once they have started)
+        def domain():
+            return footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(network, grid).geometry])
     return sensitivity_table(
         dem, grid, network, sigmas_m, thresholds_m, mapping.min_patch_volume_m3, mapping.buffer_m, mapping.connectivity,
         mapping.truncate_sigmas, reference=reference, tolerance_m=tolerance_m, domain=domain, truth_mask=truth_mask,
