@@ -1,5 +1,7 @@
 """Rule gully_sensitivity: gully area, network and (twin) area scores over σ and the depth threshold."""
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from kitegully.evaluate.network import rasterize_polygons
@@ -13,8 +15,10 @@ from kitegully.logs import setup_script_logging
 
 log = setup_script_logging(snakemake.log[0])
 inp, crs, sens = snakemake.input, snakemake.params.crs, snakemake.params.sensitivity
-dem, grid = read_raster(inp.dem)
-depth, _ = read_raster(inp.depth)  # the stage's own depth map at sigma_m
+with ThreadPoolExecutor(max_workers=1) as pool:  # the two rasters decoded at once (GDAL releases the GIL)
+    later = pool.submit(read_raster, inp.depth)  # the stage's own depth map at sigma_m
+    dem, grid = read_raster(inp.dem)
+    depth, _ = later.result()
 reference = read_vector(inp.reference, crs=crs) if getattr(inp, "reference", None) else None
 truth = None
 if getattr(inp, "truth", None):
