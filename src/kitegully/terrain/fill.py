@@ -16,7 +16,8 @@ than its neighbour's final elevation + ε, so its own elevation is final) whose 
 neighbours are all at least its elevation + ε is expanded at once instead of waiting in
 the heap, and so are the slope cells found from it (after Zhou, Sun & Fu 2016; on a
 4 M-cell synthetic catchment 1.6 M cells skip the heap); the heap is 4-ary with key and cell
-stored side by side (one cache line per level).
+stored side by side (one cache line per level). A traced cell's open neighbours are gathered
+in one pass (session 9: 1.18x on the benchmark tile, same surface).
 """
 
 from __future__ import annotations
@@ -168,6 +169,7 @@ def _priority_flood(w, valid, eps, dr, dc):
     ptail = 0
     trace = np.empty(1024, dtype=np.int64)  # stack of slope cells to expand at once
     ntrace = 0
+    nb = np.empty(8, dtype=np.int64)
     nraised = 0
     # Seeds: valid cells on the grid edge or next to nodata (outlets). Every other valid
     # cell is inside the grid with 8 valid or closed neighbours: no bounds checks for it.
@@ -238,23 +240,27 @@ def _priority_flood(w, valid, eps, dr, dc):
                 ntrace -= 1
                 s_ = trace[ntrace]
                 ts = flat[s_] + eps
+                # the open neighbours, gathered once: expanded if none is lower than s_ + eps
+                nopen = 0
                 lower = False
                 for kk in range(8):
                     q = s_ + off[kk]
-                    if closed[q] == 0 and flat[q] < ts:
-                        lower = True
-                        break
+                    if closed[q] == 0:
+                        if flat[q] < ts:
+                            lower = True
+                            break
+                        nb[nopen] = q
+                        nopen += 1
                 if lower:
                     heap, nheap = _qpush(heap, nheap, flat[s_], s_)
                     continue
-                for kk in range(8):
-                    q = s_ + off[kk]
-                    if closed[q] == 0:
-                        closed[q] = 1
-                        if ntrace == trace.size:
-                            trace = _grow(trace, ntrace)
-                        trace[ntrace] = q
-                        ntrace += 1
+                if ntrace + nopen > trace.size:
+                    trace = _grow(trace, ntrace)
+                for kk in range(nopen):
+                    q = nb[kk]
+                    closed[q] = 1
+                    trace[ntrace] = q
+                    ntrace += 1
     return nraised
 
 
