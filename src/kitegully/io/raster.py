@@ -16,8 +16,10 @@ from typing import Iterator
 
 import numpy as np
 import rasterio
+import rasterio.shutil
 from affine import Affine
 from rasterio.crs import CRS
+from rasterio.io import MemoryFile
 from rasterio.windows import Window
 
 from kitegully import InputError
@@ -302,7 +304,10 @@ def write_raster(
 
     Written with GDAL's COG driver (one CreateCopy of an in-memory dataset: tiles of
     256 × 256, DEFLATE with the matching predictor, overviews halving down to one tile).
-    Cost: O(cells) time and one in-memory copy of the raster.
+    Cost: O(cells) time and one in-memory copy of the raster. Without ``mask`` the copy is
+    made by :func:`rasterio.shutil.copy` from a GDAL MEM dataset, which releases Python's
+    GIL while GDAL compresses (the same bytes as rasterio's COG writer, which holds it for
+    the whole write): other threads, e.g. the gully stage's fill branch, keep running.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -318,6 +323,17 @@ def write_raster(
     profile = _profile(grid, arr.shape[0], arr.dtype.name, nodata, cog=True)
     if overview_resampling:
         profile["overview_resampling"] = overview_resampling
+    if mask is None:
+        keys = ("width", "height", "count", "dtype", "crs", "transform", "nodata")
+        with MemoryFile() as mf, mf.open(driver="MEM", **{k: profile[k] for k in keys}) as mem:
+            mem.write(arr)
+            if band_names:
+                mem.descriptions = tuple(band_names)
+            if tags:
+                mem.update_tags(**tags)
+            opts = {k: v for k, v in profile.items() if k not in keys and k != "driver"}
+            rasterio.shutil.copy(mem, path, driver="COG", **opts)
+        return
     with rasterio.open(path, "w", **profile) as dst:
         dst.write(arr)
         if mask is not None:
