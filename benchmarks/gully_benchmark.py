@@ -251,10 +251,10 @@ def grass_fill(grass: str, tif: Path, work: Path) -> tuple[float, np.ndarray] | 
         r.in.gdal -o input={tif} output=dem --quiet
         g.region raster=dem
         t0=$(date +%s.%N)
-        r.fill.dir input=dem output=filled direction=dir --quiet
+        r.fill.dir input=dem output=filled direction=dir --quiet --overwrite
         t1=$(date +%s.%N)
         echo "FILLTIME $t0 $t1"
-        r.out.gdal input=filled output={out} type=Float64 --quiet
+        r.out.gdal input=filled output={out} type=Float64 --quiet --overwrite
         """))
     p = subprocess.run([grass, "--tmp-location", CRS, "--exec", "bash", str(script)], capture_output=True, text=True)
     line = [ln for ln in p.stdout.splitlines() if ln.startswith("FILLTIME")]
