@@ -5,6 +5,8 @@ reference gullies inside the catchment whose heads fall within the DEM are score
 unfiltered numbers are reported beside them.
 """
 
+from concurrent.futures import ThreadPoolExecutor
+
 from kitegully.gully.plots import validation_map
 from kitegully.gully import ValidationParams, catchment_outline, check_reference, score_network
 from kitegully.io.figures import save_figure
@@ -19,9 +21,11 @@ params = ValidationParams.from_config(snakemake.params.validation)
 reference = check_reference(read_vector(inp.reference, crs=crs), inp.reference)
 catchment = catchment_outline(read_vector(inp.catchment, crs=crs), inp.catchment) if getattr(inp, "catchment", None) else None
 gully, grid = read_raster(inp.gully_map)
-res = score_network(reference, read_vector(inp.mapped_network, crs=crs), gully != 255, grid, params, catchment)
+with ThreadPoolExecutor(max_workers=1) as pool:  # the figure's DEM is decoded while the network is scored
+    later = pool.submit(read_raster, inp.dem)
+    res = score_network(reference, read_vector(inp.mapped_network, crs=crs), gully != 255, grid, params, catchment)
+    dem, _ = later.result()
 write_table(res.table, out.table, floatfmt=".1f")
 write_table(res.tolerances, out.tolerances, floatfmt=".1f")
-dem, _ = read_raster(inp.dem)
 fig = validation_map(dem, gully == 1, grid, res.pieces, params.tolerance_m)
 save_figure(fig, out.figure, attribution=snakemake.params.attribution)
