@@ -121,7 +121,7 @@ polygons-benchmarks: $(STAMP)
 # Speed of the heavy stages (issue 21), each beside its reference in one run: the dense kernels
 # against the former revision's (benchmarks/out/dense_kernels_speed.md, ~6 min on a loaded machine),
 # the gully stage at 80 M cells against the former revision's and the fill against GRASS r.fill.dir
-# and pysheds (results/benchmarks/gully_benchmark.md, ~30 min loaded; installs grass-core with apt
+# and pysheds (results/benchmarks/gully_benchmark.md, ~30 min loaded, 7-9 min near idle; installs grass-core with apt
 # and pysheds in its own venv on first use).
 speed-benchmarks: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/dense_kernels_speed.py
