@@ -59,6 +59,8 @@ def test_spheres_and_folding_rule_are_placed(pole_scene):
     # the rule lies on the ground: its ends are within a few cm of the DEM surface
     z = surface_height(ps.render, ps.rule[:, 0], ps.rule[:, 1])
     assert np.abs(ps.rule[:, 2] - z).max() < 0.05
+    # laid beside the patch, inside the ring the photographer walks (not in the periphery)
+    assert np.hypot(*(ps.rule[:, :2] - ps.patch_centre).T).max() < ps.patch_reach_m + PoleWalk().standoff_m
     assert prepare_pole_scene(sc, 0.10, False, rng_for(1, "t", "r")).rule is None
 
 
@@ -102,3 +104,22 @@ def test_a_ring_wider_than_the_scene_follows_the_ground_edge_but_stays_off_the_p
     assert np.all(r <= np.maximum(edge, floor) + 1e-6)  # on the ground, or at the floor where the ground is nearer
     assert np.all(r >= floor - 1e-6)  # never on the patch
     assert np.isfinite(surface_height(ps.render, C[r < edge - 1e-6, 0], C[r < edge - 1e-6, 1])).all()
+
+
+def test_rule_is_laid_as_close_to_the_patch_as_it_fits():
+    """A 20 m flat scene with a 2 m-radius patch in its middle: the rule lands on the grass ring
+    around the patch (within 1.5 m of its edge), not anywhere in the 20 m square."""
+    from kitegully.io.raster import GridSpec
+    from kitegully.twin.polewalk import _paint_rule
+
+    g = GridSpec(0.0, 20.0, 0.05, 400, 400, "EPSG:32632")
+    xs, ys = g.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    centre = np.array([10.0, 10.0])
+    free = np.hypot(X - centre[0], Y - centre[1]) > 2.0
+    dem = np.zeros((400, 400))
+    tex = np.zeros((800, 800, 3), np.float32)
+    ends = _paint_rule(tex, g, free, dem, rng_for(4, "test", "rule_near"), centre)
+    d = np.hypot(*(ends[:, :2] - centre).T)
+    assert d.min() > 2.0 and d.max() <= 3.5
+    assert (tex[..., 0] > 0).sum() > 0  # painted

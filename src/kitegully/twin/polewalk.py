@@ -12,7 +12,8 @@ orthophoto) into those photographs:
   cannot hold a sphere: its bump is a cylinder under a cap) and keeps the true sphere
   centres instead; the orthophoto becomes the texture (upsampled to 1 cm, markers
   in-painted with the surrounding grass) and the folding rule is painted onto it, 2 cm wide,
-  yellow with black decimetre marks, on grass, clear of patch and markers.
+  yellow with black decimetre marks, on grass, clear of patch and markers, as close to the
+  patch as it fits (inside the ring the photographer walks).
 * :func:`walk_poses` places the camera ``pole_height_m`` above the ground on a rough
   circle around the eroded patch, aimed at the patch with jitter (oblique views).
 * :func:`photograph_walk` ray-casts each view (:mod:`kitegully.twin.render`), adds the
@@ -149,19 +150,45 @@ class PoleScene:
     diffuse_fraction: float
 
 
-def _paint_rule(tex: np.ndarray, grid: GridSpec, free: np.ndarray, dem: np.ndarray, rng: np.random.Generator):
+#: [I] Tries per distance limit when laying the rule, and the step by which the limit grows (m).
+_RULE_TRIES, _RULE_STEP_M = 100, 0.5
+
+
+def _rule_corners(grid: GridSpec, centre: np.ndarray, rng: np.random.Generator) -> Iterator[tuple[np.ndarray, float]]:
+    """Candidate corners of the rule and the distance from ``centre`` its points may reach.
+
+    [I] The operator lays the scale bar on grass as close to the eroded area as it fits
+    (001: the area of interest, "the eroded area and its direct surroundings", is where the
+    point density is high; the periphery, beyond the camera ring, is matched poorly and the
+    products are cropped to the ring): limits from 1 m (a leg's length) out in 0.5 m steps,
+    ``_RULE_TRIES`` uniform corners within each limit's disc, until the scene's corners.
+    """
+    h, w = grid.height, grid.width
+    lo = np.array([grid.x0 + 0.2, grid.y0 - h * grid.cell + 0.2])
+    hi = np.array([grid.x0 + w * grid.cell - 0.2, grid.y0 - 0.2])
+    far = float(np.hypot(*np.maximum(np.abs(lo - centre), np.abs(hi - centre))))
+    for limit in np.arange(1.0, far + _RULE_STEP_M, _RULE_STEP_M):
+        for _ in range(_RULE_TRIES):
+            rad, ang = limit * np.sqrt(rng.uniform()), rng.uniform(0, 2 * np.pi)
+            corner = np.clip(centre + rad * np.array([np.cos(ang), np.sin(ang)]), lo, hi)
+            yield corner, float(limit)
+
+
+def _paint_rule(tex: np.ndarray, grid: GridSpec, free: np.ndarray, dem: np.ndarray, rng: np.random.Generator,
+                centre: np.ndarray):
     """Lay a 2 m folding rule as two orthogonal 1 m legs on the slope; paint it on ``tex``.
 
     The rule is rigid and straight: its legs are 1 m long and orthogonal in 3-D, in the
     plane fitted to the DEM within 1 m of the corner (on a 35° slope a downslope leg
-    covers 0.82 m in plan).  ``tex`` is (rows, cols, 3) float at half the DEM cell.
-    Returns the (3, 3) points: end of leg A, corner, end of leg B.
+    covers 0.82 m in plan).  It lies on free grass as close to ``centre`` (the eroded
+    patch's centroid) as it fits (:func:`_rule_corners`).  ``tex`` is (rows, cols, 3) float
+    at half the DEM cell.  Returns the (3, 3) points: end of leg A, corner, end of leg B.
     """
     cell = grid.cell
     h, w = dem.shape
     xs, ys = grid.cell_centres()
-    for _ in range(500):
-        corner = np.array([rng.uniform(grid.x0 + 0.2, grid.x0 + w * cell - 0.2), rng.uniform(grid.y0 - h * cell + 0.2, grid.y0 - 0.2)])
+    centre = np.asarray(centre, float)
+    for corner, limit in _rule_corners(grid, centre, rng):
         r0, c0 = (int(v) for v in np.rint(grid.rowcol(corner[0], corner[1])))
         k = int(round(1.0 / cell))
         win = (slice(max(r0 - k, 0), min(r0 + k + 1, h)), slice(max(c0 - k, 0), min(c0 + k + 1, w)))
@@ -177,6 +204,8 @@ def _paint_rule(tex: np.ndarray, grid: GridSpec, free: np.ndarray, dem: np.ndarr
         ends = np.vstack([c3 + t1, c3, c3 + t2])
         s = np.linspace(0.0, 1.0, 101)
         pts = np.vstack([c3[:2] + s[:, None] * t1[:2], c3[:2] + s[:, None] * t2[:2]])
+        if np.hypot(pts[:, 0] - centre[0], pts[:, 1] - centre[1]).max() > limit:
+            continue
         r, c = grid.rowcol(pts[:, 0], pts[:, 1])
         r, c = np.rint(r).astype(int), np.rint(c).astype(int)
         if r.min() < 0 or c.min() < 0 or r.max() >= h or c.max() >= w or not free[r, c].all():
@@ -244,7 +273,7 @@ def prepare_pole_scene(scene: CloseRangeScene, sphere_radius_m: float, folding_r
     if folding_rule:
         clear = int(round(0.3 / g.cell))
         busy = ndimage.binary_dilation(eroded | mk, iterations=clear)
-        rule = _paint_rule(tex, g, ~busy, dem, rng)
+        rule = _paint_rule(tex, g, ~busy, dem, rng, centre)
     texture = np.clip(np.rint(tex * 255), 0, 255).astype(np.uint8).transpose(2, 0, 1)
     render = make_scene(dem.astype(np.float32), (g.x0, g.y0), g.cell, texture, (g.x0, g.y0), g.cell / 2, band_names=("R", "G", "B"))
     el, az = np.radians(scene.meta["sun_elevation_deg"]), np.radians(scene.meta["sun_azimuth_deg"])
