@@ -55,7 +55,7 @@ def soil_texture(rng: np.random.Generator, extent_m: tuple[float, float, float, 
 def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray, np.ndarray], np.ndarray],
                        texture: Texture, z_start: float = 0.0, iterations: int = 8,
                        noise_dn: float = 0.0, rng: np.random.Generator | None = None,
-                       window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+                       window: tuple[int, int, int, int] | None = None, marks=None) -> np.ndarray:
     """Render an 8-bit-scaled float image (0–255) of a textured height field.
 
     Parameters
@@ -76,6 +76,10 @@ def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray,
         Render only this pixel window (end exclusive); the rest of the frame is NaN
         (no data). The stage renders only the part of the frame that sees the box:
         identical pixels there, a fraction of the cost.
+    marks : kitegully.stereo.measure.PrintedMarks, optional
+        Printed frame marks: their plates are added to ``height`` and the print replaces the
+        texture where a pixel's ground point lies on a plate (disc edge anti-aliased over one
+        ground pixel, ``distance / f``).
 
     Returns
     -------
@@ -92,6 +96,8 @@ def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray,
     v, u = np.mgrid[y0:y1, x0:x1].astype(np.float64)
     d = camera.rays_camera(u, v) @ pose.R  # camera → world directions
     C = pose.C
+    if marks is not None:
+        height = marks.with_plates(height)
     t = (z_start - C[2]) / d[..., 2]
     for _ in range(iterations):
         x, y = C[0] + t * d[..., 0], C[1] + t * d[..., 1]
@@ -100,6 +106,8 @@ def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray,
     mx = ((x - texture.x0) / texture.cell - 0.5).astype(np.float32)
     my = ((texture.y0 - y) / texture.cell - 0.5).astype(np.float32)
     img = cv2.remap(texture.values, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0) * 255.0
+    if marks is not None:
+        img = marks.paint(img.astype(np.float64), x, y, t / camera.f).astype(np.float32)
     if noise_dn > 0:
         img = img + (rng if rng is not None else np.random.default_rng(0)).normal(0.0, noise_dn, img.shape).astype(np.float32)
     if window is None:
