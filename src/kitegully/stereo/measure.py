@@ -233,7 +233,7 @@ def locate_marks(image: np.ndarray, predicted_uv: np.ndarray, radius_px: np.ndar
             _, _, _, (pu, pv) = cv2.minMaxLoc(ncc)
             found = _centroid(img, np.array([x0 + pu + t, y0 + pv + t], float), float(r))
         if found is None or not found[2] > MARK_DETECTION_SIGMA * max(found[3], 1e-6):
-            why = "its window leaves the image" if found is None else (f"the brightest disc there has a contrast of {found[2]:.1f} DN against "
+            why = "its window leaves the image or its rendered part" if found is None else (f"the brightest disc there has a contrast of {found[2]:.1f} DN against "
                                                                         f"{found[3]:.1f} DN of noise, below {MARK_DETECTION_SIGMA:g} σ")
             raise InputError(f"frame mark {i + 1} not found in the {side} image within {gate:.0f} px of its predicted position "
                              f"({p[0]:.0f}, {p[1]:.0f}): {why}")
