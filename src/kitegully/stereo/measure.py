@@ -2,8 +2,8 @@
 
 Frame marks (absolute orientation). Each of the 10 marks is a printed target: a white disc of
 diameter ``D`` in the middle of a black square plate of side ``plate_ratio·D``
-(:class:`MarkDesign`). :class:`PrintedMarks` puts them into the twin's scene (a plate height
-for the renderer, a reflectance for each pixel's ground point). :func:`locate_marks` finds
+(:class:`MarkDesign`). :class:`PrintedMarks` puts them into the twin's scene (plates
+ray-cast by the renderer, a reflectance for each pixel that sees one). :func:`locate_marks` finds
 them in a photograph as target-measuring software does:
 
 1. *prediction*: each mark's surveyed coordinates projected through the calibrated camera at
@@ -35,8 +35,6 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 
 from kitegully import InputError
@@ -89,34 +87,37 @@ class PrintedMarks:
     def half_plate_m(self) -> float:
         return 0.5 * self.design.plate_ratio * self.design.diameter_m
 
-    def _plate_index(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Index of the plate under each (x, y), −1 where none. O(points · marks)."""
-        idx = np.full(np.shape(x), -1, np.int32)
+    def intersect(self, C: np.ndarray, d: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ray-cast the plates: rays ``C + t·d`` (``d`` … × 3 world directions) whose plate hit is nearer than ``t``.
+
+        Each plate is an opaque square (side ``plate_ratio·D``) through its mark, parallel to the plane of
+        slope ``dz_dy``; its top is intersected exactly (no fixed-point iteration, which fails at the
+        plate's 1 cm step when the step shifts the ray by more than the plate's margin around the disc).
+
+        Returns
+        -------
+        (ndarray, ndarray)
+            The nearer ray parameter and the index of the plate hit (−1: none). O(rays · marks).
+        """
+        t = np.array(t, float, copy=True)
+        idx = np.full(t.shape, -1, np.int32)
         h = self.half_plate_m
-        for i, (cx, cy, _) in enumerate(self.xyz):
-            idx[(np.abs(x - cx) <= h) & (np.abs(y - cy) <= h)] = i
-        return idx
+        for i, (cx, cy, cz) in enumerate(self.xyz):
+            # z = cz + dz_dy (y − cy) along the ray: C_z + s d_z = cz + dz_dy (C_y + s d_y − cy)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = (cz + self.dz_dy * (C[1] - cy) - C[2]) / (d[..., 2] - self.dz_dy * d[..., 1])
+            x, y = C[0] + s * d[..., 0], C[1] + s * d[..., 1]
+            hit = (s > 0) & (s < t) & (np.abs(x - cx) <= h) & (np.abs(y - cy) <= h)
+            t[hit] = s[hit]
+            idx[hit] = i
+        return t, idx
 
-    def with_plates(self, height: Callable) -> Callable:
-        """The scene's height function with the mark plates on it (plate top through the mark centre)."""
-
-        def h(x, y):
-            z = np.asarray(height(x, y), float).copy() * np.ones(np.shape(x))
-            idx = self._plate_index(x, y)
-            on = idx >= 0
-            if on.any():
-                c = self.xyz[idx[on]]
-                z[on] = c[:, 2] + self.dz_dy * (y[on] - c[:, 1])
-            return z
-        return h
-
-    def paint(self, image: np.ndarray, x: np.ndarray, y: np.ndarray, ground_px_m: np.ndarray) -> np.ndarray:
-        """Overwrite the pixels whose ground point lies on a plate with the print (0–255 scale), in place.
+    def paint(self, image: np.ndarray, x: np.ndarray, y: np.ndarray, ground_px_m: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """Overwrite the pixels whose ray hits a plate (``idx`` ≥ 0, from :meth:`intersect`) with the print (0–255), in place.
 
         The disc edge is a linear ramp one ground pixel wide: the area integral of a box pixel over a
         straight edge, so the image of the disc is anti-aliased as a sensor's would be.
         """
-        idx = self._plate_index(x, y)
         on = idx >= 0
         if on.any():
             c = self.xyz[idx[on]]

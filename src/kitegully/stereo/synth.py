@@ -77,9 +77,9 @@ def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray,
         (no data). The stage renders only the part of the frame that sees the box:
         identical pixels there, a fraction of the cost.
     marks : kitegully.stereo.measure.PrintedMarks, optional
-        Printed frame marks: their plates are added to ``height`` and the print replaces the
-        texture where a pixel's ground point lies on a plate (disc edge anti-aliased over one
-        ground pixel, ``distance / f``).
+        Printed frame marks: each pixel's ray is also intersected with their plates (opaque, on
+        top of the surface) and the print replaces the texture where it hits one (disc edge
+        anti-aliased over one ground pixel, ``distance / f``).
 
     Returns
     -------
@@ -96,18 +96,18 @@ def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray,
     v, u = np.mgrid[y0:y1, x0:x1].astype(np.float64)
     d = camera.rays_camera(u, v) @ pose.R  # camera → world directions
     C = pose.C
-    if marks is not None:
-        height = marks.with_plates(height)
     t = (z_start - C[2]) / d[..., 2]
     for _ in range(iterations):
         x, y = C[0] + t * d[..., 0], C[1] + t * d[..., 1]
         t = (height(x, y) - C[2]) / d[..., 2]
+    if marks is not None:
+        t, on_plate = marks.intersect(C, d, t)  # the plates are opaque and lie on top: exact ray-plane hits
     x, y = C[0] + t * d[..., 0], C[1] + t * d[..., 1]
     mx = ((x - texture.x0) / texture.cell - 0.5).astype(np.float32)
     my = ((texture.y0 - y) / texture.cell - 0.5).astype(np.float32)
     img = cv2.remap(texture.values, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0) * 255.0
     if marks is not None:
-        img = marks.paint(img.astype(np.float64), x, y, t / camera.f).astype(np.float32)
+        img = marks.paint(img.astype(np.float64), x, y, t / camera.f, on_plate).astype(np.float32)
     if noise_dn > 0:
         img = img + (rng if rng is not None else np.random.default_rng(0)).normal(0.0, noise_dn, img.shape).astype(np.float32)
     if window is None:
