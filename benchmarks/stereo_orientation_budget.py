@@ -157,7 +157,7 @@ def main() -> None:
     lines += ["", f"Redrawn after a failed relative orientation: {len(FAILED_DRAWS)} draws."]
     sm, sud = reorientation_spread(2.7, 0.8, proc, a.seed)
     lines += ["", f"Two pairs at L = 9.1 m (H 2.7, B 0.8) oriented on independent measurements of the 10 frame marks "
-              f"({proc['mark_sigma_px']} px, exact matching): DoD box mean σ = {sm:.3f} mm (MAE √(2/π)·σ = {np.sqrt(2 / np.pi) * sm:.3f} mm), "
+              f"({proc['mark_sigma_px']:.4g} px, exact matching): DoD box mean σ = {sm:.3f} mm (MAE √(2/π)·σ = {np.sqrt(2 / np.pi) * sm:.3f} mm), "
               f"upstream − downstream half difference on the 10° box σ = {sud:.3f} mm."]
     out = REPO / "benchmarks" / "out"
     out.mkdir(parents=True, exist_ok=True)
