@@ -213,7 +213,8 @@ def locate_marks(image: np.ndarray, predicted_uv: np.ndarray, radius_px: np.ndar
     P = np.asarray(predicted_uv, float)
     R = np.asarray(radius_px, float)
     if len(P) < 2:
-        raise InputError(f"frame marks: {len(P)} predicted in the {side} image; an absolute orientation needs at least 3")
+        raise InputError(f"frame marks: {len(P)} predicted in the {side} image; locating needs at least 2 "
+                         "(the search gate is half their smallest spacing)")
     dd = np.linalg.norm(P[:, None] - P[None], axis=2)
     dd[np.diag_indices(len(P))] = np.inf
     gate = 0.5 * float(dd.min())  # [I] half the smallest spacing: the gate never reaches a neighbour's disc
