@@ -28,9 +28,9 @@ def tiny(cfg):
     c["calibration_test"]["H_m"] = [2.0, 4.0]
     c["dry_box"].update(setups=[[4.7, 0.8], [4.7, 0.63]], removals=2, removal_H_m=4.7, removal_B_m=0.8)
     c["rain"].update(bulk_densities=[0.91], duration_min=10.0, interval_min=10.0, H_m=4.7, B_m=0.8)
-    c["wind"].update(H_m=3.0, B_m=1.0)
-    # at L = 28 m one re-orientation on the frame marks moves the box by ~0.4 mm, more than 2 removals (0.67 mm):
-    # the tiny run checks the removal maths with one orientation for all epochs
+    c["wind"].update(H_m=3.0, B_m=1.0, mark_diameter_mm=10.0)  # the tray's 2 mm marks would be 3.6 px across at H 3 m
+    # the tiny run checks the removal maths with one orientation for all epochs (with marks located in the
+    # photographs a re-orientation moves the box by only ~0.01 mm; at an assumed 0.2 px it was ~0.4 mm at L = 28 m)
     c["processing"]["reorient_each_pair"] = False
     return c
 

@@ -36,7 +36,8 @@ def _normalised(camera: Camera, uv: np.ndarray) -> np.ndarray:
 
 
 def relative_orientation(cam_left: Camera, cam_right: Camera, uv_left: np.ndarray, uv_right: np.ndarray,
-                         base_m: float, threshold_px: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                         base_m: float, threshold_px: float = 1.0,
+                         approx: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Relative orientation from matched points (coplanarity condition), scaled to ``base_m``.
 
     Parameters
@@ -49,6 +50,12 @@ def relative_orientation(cam_left: Camera, cam_right: Camera, uv_left: np.ndarra
         Known base length (m); the coplanarity condition fixes the base direction only.
     threshold_px : float
         RANSAC inlier threshold (px).
+    approx : (R, T), optional
+        Approximate relative orientation (e.g. the rig's nominal set-up). Given, the least-squares
+        adjustment of the coplanarity condition starts from it instead of the decomposition of the
+        RANSAC essential matrix: over a nearly flat scene (a soil box) the essential matrix has two
+        nearly equally good decompositions, and the base's sign is not observable in the residuals,
+        so photogrammetric software adjusts from approximate values.
 
     Returns
     -------
@@ -67,7 +74,10 @@ def relative_orientation(cam_left: Camera, cam_right: Camera, uv_left: np.ndarra
     E, mask = cv2.findEssentialMat(xl, xr, np.eye(3), method=cv2.RANSAC, prob=0.9999, threshold=threshold_px / f)
     if E is None or E.shape != (3, 3):
         raise InputError("relative orientation: the matched points admit no unique essential matrix (degenerate geometry)")
-    _, R, t, mask = cv2.recoverPose(E, xl, xr, np.eye(3), mask=mask)
+    if approx is None:
+        _, R, t, mask = cv2.recoverPose(E, xl, xr, np.eye(3), mask=mask)
+    else:
+        R, t = np.asarray(approx[0], float), np.asarray(approx[1], float).ravel()
     inl = np.ravel(mask).astype(bool)
     R, t = _refine_coplanarity(R, np.ravel(t), xl[inl], xr[inl])
     return R, t / np.linalg.norm(t) * base_m, inl

@@ -12,8 +12,10 @@ Entry points, one per rule, named after what they make:
 
 Every pair is made in two separate steps: a *twin* step renders the two photographs of
 the true surface through the true cameras (:func:`_render_pair`), and a *processing* step
-sees only what the paper had — the photographs, the calibrated cameras, measured tie points
-and frame marks with their stated precision — and returns a DEM (:class:`PairProcessor`).
+sees only what the paper had — the photographs, the calibrated cameras and the surveyed
+coordinates of the 10 printed frame marks — measures tie points (SIFT) and the marks
+(template + weighted centroid, :mod:`kitegully.stereo.measure`) in the photographs and returns
+a DEM (:class:`PairProcessor.from_images`).
 Only the evaluation (MAE against the point gauge or the gravimetric depth) reads the
 reference, as the paper's did.
 """
@@ -42,8 +44,11 @@ from kitegully.stereo.calibration import (ControlField, calibrate_camera, calibr
                                           simulate_observations)
 from kitegully.stereo.matching import MatchParams, disparity_to_points, grid_dem, match_epipolar, triangulate_points
 from kitegully.stereo.metrics import fit_A_vs_M, fit_mae_vs_L, mae, mre
-from kitegully.stereo.rectify import rectify_pair, relative_orientation
-from kitegully.stereo.rig import D2H_NOMINAL_F_MM, D2H_PIXEL_MM, StereoRig, delta_z_m, paper_cameras, paper_rig, stereo_L_m
+from kitegully.stereo.rectify import rectify_pair, relative_orientation, relative_orientation_from_poses
+from kitegully.stereo.measure import (MarkDesign, PrintedMarks, coplanarity_residuals_px, locate_marks, predict_marks,
+                                      sift_tie_points)
+from kitegully.stereo.rig import (D2H_NOMINAL_F_MM, D2H_PIXEL_MM, StereoRig, delta_z_m, look_at_pose, paper_cameras, paper_rig,
+                                  stereo_L_m)
 from kitegully.stereo.synth import render_heightfield, soil_texture
 from kitegully.twin.camera import Camera, Pose
 
@@ -101,10 +106,14 @@ class StereoParams:
         [P] 5 heights 2.0–6.0 m at B = 1.0 m.
     processing.image_noise_dn : float
         Image noise (DN of 255) [I] 1 DN, a well exposed 12-bit raw scaled to 8 bit.
-    processing.tie_points, processing.tie_sigma_px : int, float
-        Tie points of the relative orientation and their precision. [I] 300 at 0.2 px.
-    processing.mark_sigma_px, processing.mark_sigma_mm : float
-        Image precision of the 10 frame marks (px) and accuracy of their coordinates (mm). [I] 0.2 px, 0.1 mm.
+    processing.mark_diameter_mm : float
+        Diameter of the printed white disc of each frame mark (on a black plate 2.4 × as wide,
+        :class:`kitegully.stereo.measure.MarkDesign`). [I] 10 mm: ≥ 10 px across at the highest
+        set-up (11.6 px at H 4.7 m, 0.86 mm ground pixel), enough for a centroid of every pixel
+        of the disc (close-range practice asks for ≥ 5 px). Tie points and marks are measured in
+        the photographs (SIFT; template + weighted centroid); their precision is what the images give.
+    processing.mark_sigma_mm : float
+        Accuracy of the surveyed frame-mark coordinates (mm). [I] 0.1 mm.
     processing.manual_sigma_px : float
         Precision of manual point matching of a nail head (px). [I] 0.3 px.
     processing.reorient_each_pair : bool
@@ -152,6 +161,10 @@ class StereoParams:
         half a wavelength; sand ρ_b 1.5 g/cm³.
     wind.cell_mm : float
         DEM cell of the tray (mm). [I] 2 mm: the ground pixel is 0.11 mm at H = 0.6 m.
+    wind.mark_diameter_mm : float
+        Disc diameter of the tray's frame marks (mm). [I] 2 mm: 18 px at H 0.6 m (0.11 mm ground
+        pixel), and the marks with their plates stay inside both frames, which span only ±0.09 m
+        across the base at that height.
     """
 
     calibration: Mapping[str, Any]
@@ -164,13 +177,14 @@ class StereoParams:
     KEYS = {
         "calibration": ("stations", "weighted_control", "H_m", "target_sigma_px", "field_sigma_mm", "convergent_offset_m", "n_convergent"),
         "calibration_test": ("H_m", "B_m"),
-        "processing": ("image_noise_dn", "tie_points", "tie_sigma_px", "mark_sigma_px", "mark_sigma_mm", "manual_sigma_px", "reorient_each_pair",
+        "processing": ("image_noise_dn", "mark_diameter_mm", "mark_sigma_mm", "manual_sigma_px", "reorient_each_pair",
                        "cell_mm", "matching"),
         "dry_box": ("setups", "removals", "removal_ml", "bulk_density", "removal_H_m", "removal_B_m"),
         "rain": ("bulk_densities", "intensity_mm_h", "duration_min", "interval_min", "slope_deg", "H_m", "B_m",
                  "interrill_erodibility", "seal_depth_mm", "seal_density", "settle_min", "ksat_mm_h", "manning_n",
                  "rill_erodibility_s_m", "critical_shear_pa"),
-        "wind": ("H_m", "B_m", "duration_min", "deflation_mm", "ripple_mm", "ripple_wavelength_mm", "sand_density", "cell_mm"),
+        "wind": ("H_m", "B_m", "duration_min", "deflation_mm", "ripple_mm", "ripple_wavelength_mm", "sand_density", "cell_mm",
+                 "mark_diameter_mm"),
     }
 
     @classmethod
@@ -198,7 +212,7 @@ class StereoParams:
             _floats(self.calibration_test["H_m"], "stereo.calibration_test.H_m")
         if self.processing:
             MatchParams(**self.processing["matching"])
-            _positive("stereo.processing", cell_mm=self.processing["cell_mm"], tie_points=self.processing["tie_points"])
+            _positive("stereo.processing", cell_mm=self.processing["cell_mm"], mark_diameter_mm=self.processing["mark_diameter_mm"])
         if self.dry_box:
             for s in self.dry_box["setups"]:
                 H, B = _floats(s, "stereo.dry_box.setups item", 2)
@@ -221,10 +235,15 @@ def _relief(x, y):
 
 
 def _frame_marks(box=BOX) -> np.ndarray:
-    """The 10 absolute-orientation marks on the box frame (m), 2 cm outside the soil, 1 cm above it."""
+    """The 10 absolute-orientation marks on the box frame (m), 2 cm outside the soil, 1 cm above it.
+
+    Six at the corners and the middle of the long sides, four on the short sides at ±0.2 of the
+    box length from its middle (±0.1 m on the 0.5 m box).
+    """
     x0, y0, x1, y1 = box
+    yc, dy = 0.5 * (y0 + y1), 0.2 * (y1 - y0)
     return np.array([[x, y, 0.01] for x in (x0 - 0.02, 0.5 * (x0 + x1), x1 + 0.02) for y in (y0 - 0.02, y1 + 0.02)]
-                    + [[x0 - 0.02, y, 0.01] for y in (-0.1, 0.1)] + [[x1 + 0.02, y, 0.01] for y in (-0.1, 0.1)])
+                    + [[x0 - 0.02, y, 0.01] for y in (yc - dy, yc + dy)] + [[x1 + 0.02, y, 0.01] for y in (yc - dy, yc + dy)])
 
 
 def _nails(rng: np.random.Generator, box=BOX, n: int = 20) -> np.ndarray:
@@ -242,13 +261,17 @@ def _window(cam: Camera, pose: Pose, pts: np.ndarray, margin_px: int = 160) -> t
             int(np.nanmax(uv[:, 0])) + margin_px, int(np.nanmax(uv[:, 1])) + margin_px)
 
 
-def _render_pair(rig: StereoRig, height: Callable, texture, noise_dn: float, rng, extent_pts: np.ndarray):
-    """Twin step: the two photographs of ``height`` (only the window that sees ``extent_pts`` is rendered)."""
-    wl = _window(rig.left, rig.pose_left, extent_pts)
-    wr = _window(rig.right, rig.pose_right, extent_pts)
+def _render_pair(rig: StereoRig, height: Callable, texture, noise_dn: float, rng, extent_pts: np.ndarray, marks: PrintedMarks):
+    """Twin step: the two photographs of ``height`` with the printed frame marks on their plates.
+
+    Only the window that sees ``extent_pts`` and the mark plates is rendered.
+    """
+    ext = np.vstack([extent_pts, marks.corners()])
+    wl = _window(rig.left, rig.pose_left, ext)
+    wr = _window(rig.right, rig.pose_right, ext)
     # [I] 5 fixed-point iterations: the ray-surface error shrinks by ~slope·tan(view angle) < 0.1 per iteration
-    L = render_heightfield(rig.left, rig.pose_left, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wl)
-    R = render_heightfield(rig.right, rig.pose_right, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wr)
+    L = render_heightfield(rig.left, rig.pose_left, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wl, marks=marks)
+    R = render_heightfield(rig.right, rig.pose_right, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wr, marks=marks)
     return L, R
 
 
@@ -258,29 +281,112 @@ class PairProcessor:
 
     Built from what is observed: the calibrated cameras, tie points measured in both images
     (pixels), the 10 frame marks measured in both images and their surveyed coordinates,
-    the base length and the nominal height.
+    the base length and the nominal height. :meth:`from_images` measures the tie points and
+    the marks in the photographs themselves; the constructor takes measured positions.
+
+    Attributes
+    ----------
+    info : dict
+        What the measurement gave: ``ties_matched`` (SIFT matches passing the ratio test),
+        ``ties_inliers`` (kept by the coplanarity RANSAC), ``tie_sampson_rms_px`` (RMS Sampson
+        distance of the inliers to the adjusted coplanarity condition ≈ their per-coordinate
+        precision), ``mark_abs_rms_mm`` (RMS 3-D residual of the similarity on the marks),
+        ``marks_uv`` (left and right positions) and ``mark_sigma_noise_px`` (median centroid
+        precision from the image noise) when measured in images.
     """
 
     def __init__(self, cams: Mapping[str, Camera], tie_l, tie_r, marks_l, marks_r, marks_xyz, B_m: float, H_m: float,
-                 match: MatchParams):
-        R, T, _ = relative_orientation(cams["left"], cams["right"], tie_l, tie_r, B_m)
+                 match: MatchParams, centre=(0.0, 0.0)):
+        tie_l, tie_r = np.asarray(tie_l, float), np.asarray(tie_r, float)
+        # approximate values: the rig's nominal set-up (base B along x at height H, both cameras aimed at the box)
+        nl, nr = (look_at_pose(np.array([centre[0] + sx, centre[1], H_m]), np.array([centre[0], centre[1], 0.0]))
+                  for sx in (-0.5 * B_m, 0.5 * B_m))
+        R, T, inl = relative_orientation(cams["left"], cams["right"], tie_l, tie_r, B_m,
+                                         approx=relative_orientation_from_poses(nl, nr))
+        if inl.sum() < 8:
+            raise InputError(f"relative orientation: only {int(inl.sum())} of {len(inl)} tie points agree with one coplanarity "
+                             "condition; at least 8 are needed")
+        res = coplanarity_residuals_px(cams["left"], cams["right"], R, T, tie_l[inl], tie_r[inl])
         self.rect = rectify_pair(cams["left"], cams["right"], R, T, (H_m - 0.3, H_m + 0.3))
         self.model_pose = Pose(np.eye(3), np.zeros(3))
-        ml, mr = self.rect.rectify_points(marks_l, "left"), self.rect.rectify_points(marks_r, "right")
-        self.to_world = umeyama(triangulate_points(self.rect, ml, mr, self.model_pose), marks_xyz)
-        dt = self.rect.rectify_points(tie_l, "left")[:, 0] - self.rect.rectify_points(tie_r, "right")[:, 0]
-        self.d_range = (float(dt.min() - 10.0), float(dt.max() + 10.0))
+        self.marks_xyz = np.asarray(marks_xyz, float)
+        self.to_world, abs_rms = self._absolute(marks_l, marks_r)
+        dt = self.rect.rectify_points(tie_l[inl], "left")[:, 0] - self.rect.rectify_points(tie_r[inl], "right")[:, 0]
+        # [I] the search range is the inlier ties' disparities ± 10 px, never wider than the depth range H ± 0.3 m
+        # given to the rectification (a false match along an epipolar line passes the coplanarity RANSAC)
+        lo, hi = sorted(np.ravel(self.rect.disparity_for_depth(np.array([H_m + 0.3, H_m - 0.3]))))
+        self.d_range = (float(max(dt.min() - 10.0, lo)), float(min(dt.max() + 10.0, hi)))
         self.cams = cams
         self.match = match
-        self.marks_xyz = np.asarray(marks_xyz, float)
+        self.B_m, self.H_m = float(B_m), float(H_m)
+        self.info = {"ties_matched": int(len(inl)), "ties_inliers": int(inl.sum()),
+                     "tie_sampson_rms_px": float(np.sqrt(np.mean(res ** 2))), "mark_abs_rms_mm": abs_rms}
+
+    def _absolute(self, marks_l, marks_r):
+        """Similarity model → world on the frame marks, and the RMS of its 3-D residuals (mm)."""
+        ml, mr = self.rect.rectify_points(marks_l, "left"), self.rect.rectify_points(marks_r, "right")
+        P = triangulate_points(self.rect, ml, mr, self.model_pose)
+        sim = umeyama(P, self.marks_xyz)
+        return sim, 1e3 * float(np.sqrt(np.mean(np.sum((sim.apply(P) - self.marks_xyz) ** 2, axis=1))))
+
+    @staticmethod
+    def measure_marks(cams: Mapping[str, Camera], img_l, img_r, marks_xyz, diameter_m: float, B_m: float, H_m: float,
+                      centre=(0.0, 0.0)):
+        """Locate the printed marks in both photographs, predicted from the rig's nominal pose (H, B, aimed at ``centre``)."""
+        cx, cy = centre
+        out = []
+        for side, img, sx in (("left", img_l, -0.5 * B_m), ("right", img_r, 0.5 * B_m)):
+            nominal = look_at_pose(np.array([cx + sx, cy, H_m]), np.array([cx, cy, 0.0]))
+            uv, r = predict_marks(cams[side], nominal, marks_xyz, diameter_m)
+            out.append(locate_marks(img, uv, r, side))
+        return out
+
+    @classmethod
+    def from_images(cls, cams: Mapping[str, Camera], img_l, img_r, marks_xyz, diameter_m: float, B_m: float, H_m: float,
+                    match: MatchParams, centre=(0.0, 0.0)) -> "PairProcessor":
+        """Measure SIFT tie points and the printed frame marks in a pair of photographs and orient it.
+
+        Parameters
+        ----------
+        cams : mapping
+            Calibrated ``left`` and ``right`` cameras.
+        img_l, img_r : ndarray
+            The photographs (0–255, NaN = no data).
+        marks_xyz : ndarray (N, 3)
+            Surveyed coordinates of the marks (m).
+        diameter_m : float
+            Printed disc diameter (m), for the template and the centroid window.
+        B_m, H_m : float
+            Nominal base and height of the rig (m).
+        match : MatchParams
+        centre : (float, float)
+            Point the rig is aimed at (m).
+
+        Returns
+        -------
+        PairProcessor
+        """
+        tl, tr = sift_tie_points(img_l, img_r)
+        ml, mr = cls.measure_marks(cams, img_l, img_r, marks_xyz, diameter_m, B_m, H_m, centre)
+        pp = cls(cams, tl, tr, ml.uv, mr.uv, marks_xyz, B_m, H_m, match, centre)
+        pp.diameter_m, pp.centre = float(diameter_m), centre
+        pp.info.update(marks_uv=(ml.uv, mr.uv), mark_sigma_noise_px=float(np.median(np.r_[ml.sigma_px, mr.sigma_px])))
+        return pp
 
     def reoriented(self, marks_l, marks_r) -> "PairProcessor":
         """A copy whose absolute orientation comes from a new image measurement of the frame marks (same survey)."""
         import copy
 
         new = copy.copy(self)
-        a, b = self.rect.rectify_points(marks_l, "left"), self.rect.rectify_points(marks_r, "right")
-        new.to_world = umeyama(triangulate_points(self.rect, a, b, self.model_pose), self.marks_xyz)
+        new.to_world, abs_rms = self._absolute(marks_l, marks_r)
+        new.info = dict(self.info, mark_abs_rms_mm=abs_rms, marks_uv=(np.asarray(marks_l), np.asarray(marks_r)))
+        return new
+
+    def reoriented_from_images(self, img_l, img_r) -> "PairProcessor":
+        """A copy oriented on the frame marks located anew in this pair's photographs (same relative orientation)."""
+        ml, mr = self.measure_marks(self.cams, img_l, img_r, self.marks_xyz, self.diameter_m, self.B_m, self.H_m, self.centre)
+        new = self.reoriented(ml.uv, mr.uv)
+        new.info["mark_sigma_noise_px"] = float(np.median(np.r_[ml.sigma_px, mr.sigma_px]))
         return new
 
     def points(self, uv_l, uv_r) -> np.ndarray:
@@ -323,18 +429,24 @@ class PairProcessor:
                 min(w, int(uv[:, 0].max()) + margin_px), min(h, int(uv[:, 1].max()) + margin_px))
 
 
-def _measure_tie_and_marks(rig: StereoRig, rng, proc: Mapping[str, Any], box=BOX, z_range=(0.0, 0.1)):
-    """Twin step: image measurements of tie points (on the box and its frame) and of the 10 frame marks."""
-    n = int(proc["tie_points"])
-    tie = np.column_stack([rng.uniform(box[0], box[2], n), rng.uniform(box[1], box[3], n), rng.uniform(*z_range, n)])
-    sl, sm = proc["tie_sigma_px"], proc["mark_sigma_px"]
-    tl = rig.left.project(tie, rig.pose_left) + rng.normal(0, sl, (n, 2))
-    tr = rig.right.project(tie, rig.pose_right) + rng.normal(0, sl, (n, 2))
-    marks = _frame_marks(box)
-    ml = rig.left.project(marks, rig.pose_left) + rng.normal(0, sm, (len(marks), 2))
-    mr = rig.right.project(marks, rig.pose_right) + rng.normal(0, sm, (len(marks), 2))
-    surveyed = marks + rng.normal(0, proc["mark_sigma_mm"] * 1e-3, marks.shape)
-    return tl, tr, ml, mr, surveyed
+def _survey(marks_xyz: np.ndarray, rng, proc: Mapping[str, Any]) -> np.ndarray:
+    """Twin step: the surveyed coordinates of the frame marks (true + N(0, ``mark_sigma_mm``) per coordinate)."""
+    return marks_xyz + rng.normal(0, proc["mark_sigma_mm"] * 1e-3, marks_xyz.shape)
+
+
+def mark_error_px(pp: "PairProcessor", truth: StereoRig, marks_xyz: np.ndarray) -> float:
+    """Evaluation: RMS (px, per coordinate, both images) of the located marks minus their true projections."""
+    ml, mr = pp.info["marks_uv"]
+    e = np.r_[ml - truth.left.project(marks_xyz, truth.pose_left), mr - truth.right.project(marks_xyz, truth.pose_right)]
+    return float(np.sqrt(np.mean(e ** 2)))
+
+
+def _pair_columns(pp: "PairProcessor", truth: StereoRig, marks_xyz: np.ndarray) -> dict[str, float]:
+    """The measurement columns of one pair: ties, mark precision from the noise, residuals, error against the truth."""
+    i = pp.info
+    return {"ties_matched": i["ties_matched"], "ties_inliers": i["ties_inliers"], "tie_sampson_rms_px": i["tie_sampson_rms_px"],
+            "mark_sigma_noise_px": i["mark_sigma_noise_px"], "mark_abs_rms_mm": i["mark_abs_rms_mm"],
+            "mark_error_px": mark_error_px(pp, truth, marks_xyz)}
 
 
 def matching_residual_px(rect, disp, truth: StereoRig, height: Callable, grid: GridSpec, step_m: float = 0.002) -> dict[str, float]:
@@ -419,13 +531,6 @@ def error_decomposition(dem: np.ndarray, ref: np.ndarray, grid: GridSpec) -> dic
             "plane_mae_mm": 1e3 * float(np.mean(np.abs(plane))), "residual_mae_mm": 1e3 * float(np.mean(np.abs(e - plane)))}
 
 
-def _measure_marks(rig: StereoRig, marks: np.ndarray, rng, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Twin step: the frame marks measured in both photographs of one pair (pixels, σ = ``sigma_px``)."""
-    n = len(marks)
-    return (rig.left.project(marks, rig.pose_left) + rng.normal(0, sigma_px, (n, 2)),
-            rig.right.project(marks, rig.pose_right) + rng.normal(0, sigma_px, (n, 2)))
-
-
 def _box_grid(cell_m: float, box=BOX, share: float = 0.8) -> GridSpec:
     """Grid over the central ``share`` of the box area (the walls shade the rest, paper sect. 2)."""
     s = np.sqrt(share)
@@ -439,13 +544,6 @@ def _cell_truth(height: Callable, grid: GridSpec, sub: int = 6) -> np.ndarray:
     X, Y = np.meshgrid(*grid.cell_centres())
     off = (np.arange(sub) + 0.5) / sub - 0.5
     return np.mean([height(X + a * grid.cell, Y + b * grid.cell) for a in off for b in off], axis=0)
-
-
-def _setup(H: float, B: float, cams: Mapping[str, Camera], params: StereoParams, rng, box=BOX, z_range=(0.0, 0.1), centre=(0.0, 0.0)):
-    truth = paper_rig(H, B, centre_xy=centre)
-    tl, tr, ml, mr, marks = _measure_tie_and_marks(truth, rng, params.processing, box, z_range)
-    match = MatchParams(**params.processing["matching"])
-    return truth, PairProcessor(cams, tl, tr, ml, mr, marks, B, H, match)
 
 
 def _load_cameras(path: str | Path) -> dict[str, Camera]:
@@ -619,11 +717,15 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     grid = _box_grid(proc["cell_mm"] * 1e-3)
     ref = _cell_truth(_relief, grid)
     extent = np.array([[x, y, z] for x in (BOX[0], BOX[2]) for y in (BOX[1], BOX[3]) for z in (-0.01, 0.01)])  # the soil, not the frame
+    diameter = proc["mark_diameter_mm"] * 1e-3
+    marks = PrintedMarks(_frame_marks(), MarkDesign(diameter))
+    match = MatchParams(**proc["matching"])
     rows = []
     for H, B in (tuple(float(v) for v in s) for s in db["setups"]):
         rng = rng_for(seed, "stereo", "dry_box", f"{H}-{B}")
-        truth, pp = _setup(H, B, cams, params, rng)
-        L_img, R_img = _render_pair(truth, _relief, texture, proc["image_noise_dn"], rng, extent)
+        truth = paper_rig(H, B)
+        L_img, R_img = _render_pair(truth, _relief, texture, proc["image_noise_dn"], rng, extent, marks)
+        pp = PairProcessor.from_images(cams, L_img, R_img, _survey(marks.xyz, rng, proc), diameter, B, H, match)
         dem, n, disp = pp.dem(L_img, R_img, grid, return_disparity=True)
         ok = dem.valid
         # evaluation: the achieved matching precision δ (px) and the DEM error split into plane + rest
@@ -642,8 +744,11 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
                      "surface_mean_error_mm": 1e3 * float(np.mean(dem.data[ok] - ref[ok])), "dem_cover_pct": 100 * float(ok.mean()),
                      "dz_1px_mm": dz_model, "sigma_d_px": prec["sigma_d_px"], "bias_d_px": prec["bias_d_px"],
                      "y_parallax_rms_px": prec["y_parallax_rms_px"], "surface_tilt_error_mm_per_m": dec["tilt_mm_per_m"],
-                     "surface_plane_mae_mm": dec["plane_mae_mm"], "surface_residual_mae_mm": dec["residual_mae_mm"]})
-        log.info("dry box H %.2f B %.2f: point MAE %.3f mm, surface MAE %.3f mm", H, B, rows[-1]["point_mae_mm"], rows[-1]["surface_mae_mm"])
+                     "surface_plane_mae_mm": dec["plane_mae_mm"], "surface_residual_mae_mm": dec["residual_mae_mm"],
+                     **_pair_columns(pp, truth, marks.xyz)})
+        log.info("dry box H %.2f B %.2f: point MAE %.3f mm, surface MAE %.3f mm; %d tie points (Sampson RMS %.3f px), "
+                 "marks %.4f px from the truth, similarity residual %.3f mm", H, B, rows[-1]["point_mae_mm"], rows[-1]["surface_mae_mm"],
+                 pp.info["ties_inliers"], pp.info["tie_sampson_rms_px"], rows[-1]["mark_error_px"], pp.info["mark_abs_rms_mm"])
     tab = pd.DataFrame(rows)
     a_pt, r2_pt = fit_mae_vs_L(tab["L_m"], tab["point_mae_mm"])
     a_s, r2_s = fit_mae_vs_L(tab["L_m"], tab["surface_mae_mm"])
@@ -664,9 +769,9 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     a_pl, r2_pl = fit_mae_vs_L(tab["L_m"], tab["surface_plane_mae_mm"])
     tab["a_surface_residual_mm_per_m"], tab["r2_surface_residual"] = a_res, r2_res
     tab["a_surface_plane_mm_per_m"], tab["r2_surface_plane"] = a_pl, r2_pl
-    # [I] what the absolute orientation on the 10 frame marks alone predicts for the box-mean height:
-    # each mark's height from a disparity measured to √2·σ_mark px, averaged over 10 marks
-    tab["dz_model_a_marks_offset_mm_per_m"] = float(np.sqrt(2 / np.pi) * k * np.sqrt(2) * proc["mark_sigma_px"] / np.sqrt(10))
+    # [I] what the image measurement of the 10 frame marks alone predicts for the box-mean height:
+    # each mark's height from a disparity measured to √2·σ_mark px (σ_mark: the marks' measured error), averaged over 10 marks
+    tab["dz_model_a_marks_offset_mm_per_m"] = float(np.sqrt(2 / np.pi) * k * np.sqrt(2) * np.median(tab["mark_error_px"]) / np.sqrt(10))
     log.info("dry box: δ = %.3f px; surface a = %.4f (plane part %.4f, rest %.4f) vs δz model %.4f mm/m",
              delta, a_s, a_pl, a_res, float(np.sqrt(2 / np.pi) * k * delta))
     write_table(tab, out["mae_vs_L"])
@@ -691,7 +796,8 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     # 16 removals at L = 9.1 m
     H, B = float(db["removal_H_m"]), float(db["removal_B_m"])
     rng = rng_for(seed, "stereo", "removals")
-    truth, pp = _setup(H, B, cams, params, rng)
+    truth = paper_rig(H, B)
+    surveyed = _survey(marks.xyz, rng, proc)
     S_cm2 = (BOX[2] - BOX[0]) * (BOX[3] - BOX[1]) * 1e4
     rho = float(db["bulk_density"])
     V_m3 = float(db["removal_ml"]) * 1e-6
@@ -714,12 +820,16 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
 
     # [I] scraping soil off exposes new soil: each state has its own texture, so the matching
     # errors of two epochs are independent (the same texture would cancel them in the DoD)
-    d0, _ = pp.dem(*_render_pair(truth, surface(0), texture, proc["image_noise_dn"], rng, extent), grid)
-    rrows = []
+    imgs0 = _render_pair(truth, surface(0), texture, proc["image_noise_dn"], rng, extent, marks)
+    pp = PairProcessor.from_images(cams, *imgs0, surveyed, diameter, B, H, match)
+    d0, _ = pp.dem(*imgs0, grid)
+    rrows, marks_uv = [], [np.hstack(pp.info["marks_uv"])]
     for k in range(1, int(db["removals"]) + 1):
         tex_k = soil_texture(rng_for(seed, "stereo", "texture_removal", k), TEXTURE_EXTENT)
-        ppk = pp.reoriented(*_measure_marks(truth, _frame_marks(), rng, proc["mark_sigma_px"])) if proc["reorient_each_pair"] else pp
-        dk, _ = ppk.dem(*_render_pair(truth, surface(k), tex_k, proc["image_noise_dn"], rng, extent), grid)
+        imgs = _render_pair(truth, surface(k), tex_k, proc["image_noise_dn"], rng, extent, marks)
+        ppk = pp.reoriented_from_images(*imgs) if proc["reorient_each_pair"] else pp
+        marks_uv.append(np.hstack(ppk.info["marks_uv"]))
+        dk, _ = ppk.dem(*imgs, grid)
         ok = d0.valid & dk.valid
         mass_g = rho * k * V_m3 * 1e6 + rng.normal(0, 0.1)  # balance read to 0.1 g [I]
         M = 10 * mass_g / (rho * S_cm2)
@@ -729,6 +839,11 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
         if k == int(db["removals"]):
             _dod_figure(dk.data - d0.data, grid, f"Dry box, {k} removals (L = {stereo_L_m(H, B):.1f} m)", out["dod_png"])
     rem = pd.DataFrame(rrows)
+    # repeatability of the mark measurement: the rig does not move between removals, so each mark's
+    # position scatters over the 17 pairs by the measurement alone (std per coordinate, RMS over marks and images)
+    rem["mark_repeatability_px"] = float(np.sqrt(np.mean(np.std(np.array(marks_uv), axis=0, ddof=1) ** 2)))
+    for key, v in _pair_columns(pp, truth, marks.xyz).items():
+        rem[f"first_pair_{key}"] = v
     b, r2 = fit_A_vs_M(rem["M_s_mm"], rem["A_s_mm"])
     rem["b_fit"], rem["r2_fit"] = b, r2
     rem["MAE_mm"], rem["MRE_pct"] = mae(rem["M_s_mm"], rem["A_s_mm"]), mre(rem["M_s_mm"], rem["A_s_mm"])
@@ -828,6 +943,8 @@ def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     tau_max = float(runoff_detachment_kg_m2_h(np.array([BOX[3] - BOX[1]]), rn["intensity_mm_h"], rn["ksat_mm_h"], rn["slope_deg"],
                                               rn["manning_n"], rn["rill_erodibility_s_m"], rn["critical_shear_pa"])[0][0])
     box_rate = float(np.mean(erosion_rate(yy)))  # kg/m²/h over the whole box: what leaves it as sediment
+    diameter = proc["mark_diameter_mm"] * 1e-3
+    match = MatchParams(**proc["matching"])
     times = np.arange(0, rn["duration_min"] + 1e-9, rn["interval_min"])
     runs, series = [], []
     for i, rho in enumerate(_floats(rn["bulk_densities"], "stereo.rain.bulk_densities")):
@@ -835,27 +952,25 @@ def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
         s_max = settlement_mm(rho, rn["seal_depth_mm"], rn["seal_density"])
         truth = paper_rig(rn["H_m"], rn["B_m"])
         # the box slopes down towards +y (y = −0.25 m is upstream), 10°
-        marks = _frame_marks() + np.c_[np.zeros((10, 2)), -tan * _frame_marks()[:, 1]]
-        tl, tr, ml, mr, surveyed = _measure_tie_and_marks(truth, rng, proc, BOX, (-0.05, 0.1))
-        pp = PairProcessor(cams, tl, tr, ml, mr, surveyed, rn["B_m"], rn["H_m"], MatchParams(**proc["matching"]))
-        # replace the marks of the flat box by the sloping frame's (same ids, measured the same way)
-        ml = truth.left.project(marks, truth.pose_left) + rng.normal(0, proc["mark_sigma_px"], (10, 2))
-        mr = truth.right.project(marks, truth.pose_right) + rng.normal(0, proc["mark_sigma_px"], (10, 2))
-        pp.marks_xyz = marks + rng.normal(0, proc["mark_sigma_mm"] * 1e-3, marks.shape)
-        pp = pp.reoriented(ml, mr)
+        # the frame slopes with the box: its marks 1 cm above the sloping soil, on plates parallel to it
+        marks = PrintedMarks(_frame_marks() + np.c_[np.zeros((10, 2)), -tan * _frame_marks()[:, 1]], MarkDesign(diameter), dz_dy=-tan)
+        surveyed = _survey(marks.xyz, rng, proc)
 
         def surface(t_min, rho=rho, s_max=s_max):
             settle = s_max * (1 - np.exp(-t_min / rn["settle_min"])) * 1e-3
             # m of soil at ρ_b: uniform interrill detachment + flow detachment growing with the runoff from the upslope wall
             return lambda x, y: -tan * y + _relief(x, y) - settle - erosion_rate(y) * t_min / 60.0 / (rho * 1e3)
 
-        d0, _ = pp.dem(*_render_pair(truth, surface(0.0), texture, proc["image_noise_dn"], rng, extent), grid)
+        imgs0 = _render_pair(truth, surface(0.0), texture, proc["image_noise_dn"], rng, extent, marks)
+        pp = PairProcessor.from_images(cams, *imgs0, surveyed, diameter, rn["B_m"], rn["H_m"], match)
+        d0, _ = pp.dem(*imgs0, grid)
         Ms, As, up_down = [], [], None
         for t in times[1:]:
             # [I] splash and wash rearrange the surface grains: a new texture per pair
             tex_t = soil_texture(rng_for(seed, "stereo", "texture_rain", f"{rho}", int(t)), TEXTURE_EXTENT)
-            ppt = pp.reoriented(*_measure_marks(truth, marks, rng, proc["mark_sigma_px"])) if proc["reorient_each_pair"] else pp
-            dt_, _ = ppt.dem(*_render_pair(truth, surface(float(t)), tex_t, proc["image_noise_dn"], rng, extent), grid)
+            imgs = _render_pair(truth, surface(float(t)), tex_t, proc["image_noise_dn"], rng, extent, marks)
+            ppt = pp.reoriented_from_images(*imgs) if proc["reorient_each_pair"] else pp
+            dt_, _ = ppt.dem(*imgs, grid)
             ok = d0.valid & dt_.valid
             mass = box_rate * 1e3 / 1e4 * S_cm2 * t / 60.0 + rng.normal(0, 0.1)  # g of oven-dry sediment
             M = 10 * mass / (rho * S_cm2)
@@ -877,7 +992,8 @@ def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
                      "pairs": len(times), "M_s_final_mm": Ms[-1], "A_s_final_mm": As[-1],
                      "MAE_mm": mae(Ms, As), "MRE_pct": mre(Ms, As),
                      "MAE_paper_mm": PAPER["rain"].get(rho, (np.nan, np.nan))[0], "MRE_paper_pct": PAPER["rain"].get(rho, (np.nan, np.nan))[1],
-                     "upstream_minus_downstream_mm": up_down, "upstream_minus_downstream_paper_mm": PAPER["upstream_minus_downstream_mm"]})
+                     "upstream_minus_downstream_mm": up_down, "upstream_minus_downstream_paper_mm": PAPER["upstream_minus_downstream_mm"],
+                     **{f"first_pair_{k}": v for k, v in _pair_columns(pp, truth, marks.xyz).items()}})
         log.info("rain ρ_b %.2f: MAE %.3f mm, MRE %.1f %%", rho, runs[-1]["MAE_mm"], runs[-1]["MRE_pct"])
     write_table(pd.DataFrame(runs), out["rain_runs"])
     write_table(pd.DataFrame(series), out["rain_series"])
@@ -914,12 +1030,16 @@ def measure_wind(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
         return lambda x, y: 0.5 * amp * np.sin(2 * np.pi * (x - shift) / lam + 0.3 * np.sin(2 * np.pi * y / 0.05)) - (defl if after else 0.0)
 
     rng = rng_for(seed, "stereo", "wind")
-    truth, pp = _setup(H, B, cams, params, rng, box=box, z_range=(-0.003, 0.01))
+    truth = paper_rig(H, B)
+    diameter = wd["mark_diameter_mm"] * 1e-3
+    marks = PrintedMarks(_frame_marks(box), MarkDesign(diameter))
     grid = _box_grid(wd["cell_mm"] * 1e-3, box)
     extent = np.array([[x, y, z] for x in (box[0], box[2]) for y in (box[1], box[3]) for z in (-0.003, 0.003)])
-    d0, _ = pp.dem(*_render_pair(truth, surface(False), texture, proc["image_noise_dn"], rng, extent), grid)
+    imgs0 = _render_pair(truth, surface(False), texture, proc["image_noise_dn"], rng, extent, marks)
+    pp = PairProcessor.from_images(cams, *imgs0, _survey(marks.xyz, rng, proc), diameter, B, H, MatchParams(**proc["matching"]))
+    d0, _ = pp.dem(*imgs0, grid)
     texture1 = soil_texture(rng_for(seed, "stereo", "texture_sand_after"), (-0.12, -0.12, 0.12, 0.12), **sand)  # [I] new grains
-    d1, _ = pp.dem(*_render_pair(truth, surface(True), texture1, proc["image_noise_dn"], rng, extent), grid)
+    d1, _ = pp.dem(*_render_pair(truth, surface(True), texture1, proc["image_noise_dn"], rng, extent, marks), grid)
     nails = _nails(rng, box)
     gauge_before = _cell_truth(surface(False), grid)
     gauge_after = _cell_truth(surface(True), grid)
@@ -934,7 +1054,7 @@ def measure_wind(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     row = {"H_m": H, "B_m": B, "L_m": float(stereo_L_m(H, B)), "nails": int(ok.sum()), "MAE_nails_mm": mae(M_i, A_i),
            "M_s_mm": M_s, "A_s_mm": A_s, "surface_abs_error_mm": abs(A_s - M_s),
            "dod_mae_vs_gauge_mm": 1e3 * mae((gauge_before - gauge_after)[both], (d0.data - d1.data)[both]),
-           "MAE_paper_mm": PAPER["wind_mae_mm"]}
+           "MAE_paper_mm": PAPER["wind_mae_mm"], **_pair_columns(pp, truth, marks.xyz)}
     write_table(pd.DataFrame([row]), out["wind_run"])
     _dod_figure(d1.data - d0.data, grid, "Wind tunnel, 45 min at 4.5 m/s", out["dod_png"])
     log.info("wind: MAE at nails %.3f mm", row["MAE_nails_mm"])

@@ -55,7 +55,7 @@ def soil_texture(rng: np.random.Generator, extent_m: tuple[float, float, float, 
 def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray, np.ndarray], np.ndarray],
                        texture: Texture, z_start: float = 0.0, iterations: int = 8,
                        noise_dn: float = 0.0, rng: np.random.Generator | None = None,
-                       window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+                       window: tuple[int, int, int, int] | None = None, marks=None) -> np.ndarray:
     """Render an 8-bit-scaled float image (0–255) of a textured height field.
 
     Parameters
@@ -76,6 +76,10 @@ def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray,
         Render only this pixel window (end exclusive); the rest of the frame is NaN
         (no data). The stage renders only the part of the frame that sees the box:
         identical pixels there, a fraction of the cost.
+    marks : kitegully.stereo.measure.PrintedMarks, optional
+        Printed frame marks: each pixel's ray is also intersected with their plates (opaque, on
+        top of the surface) and the print replaces the texture where it hits one (disc edge
+        anti-aliased over one ground pixel, ``distance / f``).
 
     Returns
     -------
@@ -96,10 +100,14 @@ def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray,
     for _ in range(iterations):
         x, y = C[0] + t * d[..., 0], C[1] + t * d[..., 1]
         t = (height(x, y) - C[2]) / d[..., 2]
+    if marks is not None:
+        t, on_plate = marks.intersect(C, d, t)  # the plates are opaque and lie on top: exact ray-plane hits
     x, y = C[0] + t * d[..., 0], C[1] + t * d[..., 1]
     mx = ((x - texture.x0) / texture.cell - 0.5).astype(np.float32)
     my = ((texture.y0 - y) / texture.cell - 0.5).astype(np.float32)
     img = cv2.remap(texture.values, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0) * 255.0
+    if marks is not None:
+        img = marks.paint(img.astype(np.float64), x, y, t / camera.f, on_plate).astype(np.float32)
     if noise_dn > 0:
         img = img + (rng if rng is not None else np.random.default_rng(0)).normal(0.0, noise_dn, img.shape).astype(np.float32)
     if window is None:
