@@ -89,3 +89,12 @@ def test_5mm_variant_has_the_paper_pixel_and_flight():
     s = cfg["lowcost"]["survey"]
     assert s["dsm_cell_m"] == 0.025 and s["dsm_cell_m"] / s["ortho_upsample"] == pytest.approx(0.005)   # [P] 2.5 cm, 5 mm
     assert cfg["site"]["name"] == "lowcost_twin_5mm" and cfg["lowcost"]["sfm"] == base["lowcost"]["sfm"]
+
+
+def test_override_files_merge_key_by_key_as_snakemake():
+    base = {"a": {"b": 1, "c": {"d": 2, "e": [1, 2]}}, "f": 3}
+    out = merge_config(base, {"a": {"c": {"e": [9]}}, "g": 4})
+    assert out == {"a": {"b": 1, "c": {"d": 2, "e": [9]}}, "f": 3, "g": 4}
+    assert base["a"]["c"]["e"] == [1, 2]                           # the base is not changed
+    from kitegully.config import main
+    assert main([str(BASE), str(FIVE)]) == 0                        # what make lowcost-5mm checks first
