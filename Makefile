@@ -97,8 +97,8 @@ lowcost: $(STAMP)
 	$(BIN)/snakemake --cores $(CORES) --configfile config/sites/lowcost_twin.yaml $(SNAKE_ARGS)
 
 # The same survey at the paper's ~5 mm pixels (16 MP photos, 2.5 cm DSM, 5 mm mosaics):
-# config/sites/lowcost_twin_5mm.yaml over lowcost_twin.yaml, results/lowcost_twin_5mm/. About 45 min
-# of CPU and < 4 GB extrapolated (README "Low-cost NIR survey"); lowcost-5mm-cost measures the steps
+# config/sites/lowcost_twin_5mm.yaml over lowcost_twin.yaml, results/lowcost_twin_5mm/. At most about
+# 1 h of CPU and 5 GB, extrapolated (README "Low-cost NIR survey"); lowcost-5mm-cost measures the steps
 # on 6 full-size photos and writes the extrapolation (results/benchmarks/lowcost_5mm_cost.md).
 LOWCOST_5MM := config/sites/lowcost_twin.yaml config/sites/lowcost_twin_5mm.yaml
 lowcost-5mm: $(STAMP)
