@@ -2,7 +2,7 @@
 full-size photos, extrapolated to the whole site.
 
     PYTHONPATH=src .venv/bin/python benchmarks/lowcost_5mm_cost.py \\
-        --site config/sites/lowcost_twin.yaml --override config/sites/lowcost_twin_5mm.yaml
+        --site config/sites/lowcost_twin.yaml --override config/sites/variants/lowcost_twin_5mm.yaml
 
 Two phases, each its own process so that each peak memory (``ru_maxrss``) is its own:
 
@@ -309,7 +309,7 @@ def extrapolate(cfg: dict, rows: pd.DataFrame, counts: dict) -> pd.DataFrame:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--site", default="config/sites/lowcost_twin.yaml")
-    ap.add_argument("--override", default="config/sites/lowcost_twin_5mm.yaml")
+    ap.add_argument("--override", default="config/sites/variants/lowcost_twin_5mm.yaml")
     ap.add_argument("--photos", type=int, default=6)
     ap.add_argument("--work", default="results/benchmarks/lowcost_5mm_work")
     ap.add_argument("--out", default="results/benchmarks/lowcost_5mm_cost")

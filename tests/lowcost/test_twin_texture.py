@@ -15,7 +15,7 @@ from kitegully.lowcost.twin_site import (BANDS, CLASS_CODES, LowcostTwinParams, 
 from kitegully.seeds import rng_for
 
 ROOT = Path(__file__).resolve().parents[2]
-BASE, FIVE = ROOT / "config/sites/lowcost_twin.yaml", ROOT / "config/sites/lowcost_twin_5mm.yaml"
+BASE, FIVE = ROOT / "config/sites/lowcost_twin.yaml", ROOT / "config/sites/variants/lowcost_twin_5mm.yaml"
 
 
 def _reference_texture(p, grid, cls, targets, seed):
