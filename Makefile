@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -95,6 +95,19 @@ polygons-tiles-check: $(STAMP)
 lowcost: $(STAMP)
 	@$(BIN)/python -m kitegully.config config/sites/lowcost_twin.yaml
 	$(BIN)/snakemake --cores $(CORES) --configfile config/sites/lowcost_twin.yaml $(SNAKE_ARGS)
+
+# The same survey at the paper's ~5 mm pixels (16 MP photos, 2.5 cm DSM, 5 mm mosaics):
+# config/sites/variants/lowcost_twin_5mm.yaml over lowcost_twin.yaml, results/lowcost_twin_5mm/. At most about
+# 1 h of CPU and 5 GB, extrapolated (README "Low-cost NIR survey"); lowcost-5mm-cost measures the steps
+# on 6 full-size photos and writes the extrapolation (results/benchmarks/lowcost_5mm_cost.md).
+LOWCOST_5MM := config/sites/lowcost_twin.yaml config/sites/variants/lowcost_twin_5mm.yaml
+lowcost-5mm: $(STAMP)
+	@$(BIN)/python -m kitegully.config $(LOWCOST_5MM)
+	$(BIN)/snakemake --cores $(CORES) --configfile $(LOWCOST_5MM) $(SNAKE_ARGS)
+
+lowcost-5mm-cost: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/lowcost_5mm_cost.py --site config/sites/lowcost_twin.yaml \
+		--override config/sites/variants/lowcost_twin_5mm.yaml --photos 6
 
 # Close-range SfM of all OBIA scenes (issue 20; the default run builds closerange.scenes, one
 # scene): pole photos -> SfM -> 2 cm orthophotos -> OBIA, results/<site>/obia/closerange_sfm.csv

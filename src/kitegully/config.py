@@ -240,6 +240,15 @@ def _check_site_crs(config: Mapping[str, Any], sources: Iterable[str | Path]) ->
     site_crs(crs, f"{where}: site.crs")
 
 
+def merge_config(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """``over`` on ``base``, mappings merged key by key, as Snakemake merges several
+    ``--configfile`` files (an override file names only the keys that differ)."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = merge_config(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) else v
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m kitegully.config SITE.yaml ...``: validate config files, print one line."""
     import sys
@@ -250,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
         merged: dict[str, Any] = load_yaml(base)
         files = files or [merged["default_site"]]
         for f in files:
-            merged.update(load_yaml(f))
+            merged = merge_config(merged, load_yaml(f))
         validate_config(merged, sources=files)
     except InputError as exc:
         print(f"Invalid configuration: {exc}", file=sys.stderr)

@@ -71,6 +71,42 @@ def _mip_levels(texture: np.ndarray, min_size: int = 8) -> list[np.ndarray]:
     return levels
 
 
+def _mip_shapes(rows: int, cols: int, min_size: int = 8) -> list[tuple[int, int]]:
+    """(rows, cols) of each level of :func:`_mip_levels`'s pyramid."""
+    shapes = [(rows, cols)]
+    while min(shapes[-1]) >= 2 * min_size:
+        shapes.append((shapes[-1][0] // 2, shapes[-1][1] // 2))
+    return shapes
+
+
+def _mip_flat(texture: np.ndarray, min_size: int = 8, chunk_cells: int = 1 << 22) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_mip_levels`'s pyramid written straight into one flat uint8 buffer.
+
+    Returns the buffer (levels as (rows, cols, bands) one after the other), each level's
+    offset and its (rows, cols). Equal, byte for byte, to concatenating
+    :func:`_mip_levels`; level 0 is transposed and each level reduced about
+    ``chunk_cells`` cells at a time, so the only memory beyond the buffer (4/3 of the
+    texture) is a chunk. O(texture cells).
+    """
+    nb, rows, cols = texture.shape
+    shapes = _mip_shapes(rows, cols, min_size)
+    sizes = [r * c * nb for r, c in shapes]
+    offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
+    flat = np.empty(int(sum(sizes)), dtype=np.uint8)
+    step = max(1, chunk_cells // max(cols, 1))
+    prev = flat[: sizes[0]].reshape(rows, cols, nb)
+    for r0 in range(0, rows, step):
+        prev[r0:r0 + step] = np.moveaxis(texture[:, r0:r0 + step], 0, -1)
+    for (r, c), off, size in zip(shapes[1:], offsets[1:], sizes[1:]):
+        cur = flat[off:off + size].reshape(r, c, nb)
+        for r0 in range(0, r, step):
+            r1 = min(r0 + step, r)
+            x = prev[2 * r0:2 * r1, : 2 * c].astype(np.uint16)
+            cur[r0:r1] = ((x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2] + 2) // 4).astype(np.uint8)
+        prev = cur
+    return flat, offsets, np.array(shapes, dtype=np.int64).reshape(-1, 2)
+
+
 def make_scene(
     dsm: np.ndarray,
     dsm_origin: tuple[float, float],
@@ -96,7 +132,9 @@ def make_scene(
     block
         Block size (cells) of the empty-space-skipping maximum grid.
 
-    Memory: the DSM (float32), 4/3 of the texture (uint8 pyramid) and a small block grid.
+    Memory: the DSM (float32), 4/3 of the texture (uint8 pyramid, built in place in one
+    buffer: no more than the caller's texture and this pyramid at any time) and a small
+    block grid.
     """
     dsm = np.ascontiguousarray(dsm, dtype=np.float32)
     if texture.ndim == 2:
@@ -121,10 +159,7 @@ def make_scene(
     finite = dsm[np.isfinite(dsm)]
     if finite.size == 0:
         raise ValueError("DSM has no valid cells")
-    levels = _mip_levels(np.asarray(texture, dtype=np.uint8))
-    offsets = np.cumsum([0] + [lv.size for lv in levels[:-1]]).astype(np.int64)
-    shapes = np.array([lv.shape[:2] for lv in levels], dtype=np.int64)
-    flat = np.concatenate([lv.ravel() for lv in levels])
+    flat, offsets, shapes = _mip_flat(np.asarray(texture, dtype=np.uint8))
     return Scene(
         dsm=dsm,
         x0=float(dsm_origin[0]),
