@@ -25,7 +25,7 @@ land-cover classes and user polygons.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -50,15 +50,45 @@ log = logging.getLogger(__name__)
 class MaskGroup:
     """One budget row's cells: ``name`` (``mask`` or ``mask:value``) and a boolean map.
 
+    ``local`` is the map on the block ``rows, cols`` of a grid of ``shape`` (the whole grid
+    when ``shape`` is None): a polygon of a ``by`` column covers a few hundred cells of a
+    tile of millions, and a full map per polygon (2688 gully polygons × 5.3 M cells on a
+    full-size tile: 14 GB) is what the block avoids. ``mask`` gives the full map.
     ``order`` places the row among its mask's rows (the ``by`` value's rank of a vector
     mask, the class value of a raster mask; -inf for the union): tiles of a site (issue 21)
     merge their rows in the order of the untiled table.
     """
 
     name: str
-    mask: np.ndarray
+    local: np.ndarray
     source: str
     order: float = float("-inf")
+    rows: slice = field(default_factory=lambda: slice(None))
+    cols: slice = field(default_factory=lambda: slice(None))
+    shape: tuple[int, int] | None = None
+
+    @property
+    def mask(self) -> np.ndarray:
+        """The group's cells on the whole grid (allocates a full boolean map for a block group)."""
+        if self.shape is None:
+            return self.local
+        out = np.zeros(self.shape, bool)
+        out[self.rows, self.cols] = self.local
+        return out
+
+    def block(self, a: np.ndarray) -> np.ndarray:
+        """``a`` (on the whole grid) on the group's block; ``a[g.mask]`` == ``g.block(a)[g.local]``, same order."""
+        return a[self.rows, self.cols]
+
+
+def _bounds_block(bounds: tuple[float, float, float, float], grid: GridSpec) -> tuple[slice, slice]:
+    """Rows and columns of the cells whose centres can lie inside ``bounds`` (one cell of margin, clipped)."""
+    xmin, ymin, xmax, ymax = bounds
+    c0 = int(np.clip(np.floor((xmin - grid.x0) / grid.cell) - 1, 0, grid.width))
+    c1 = int(np.clip(np.ceil((xmax - grid.x0) / grid.cell) + 1, c0, grid.width))
+    r0 = int(np.clip(np.floor((grid.y0 - ymax) / grid.cell) - 1, 0, grid.height))
+    r1 = int(np.clip(np.ceil((grid.y0 - ymin) / grid.cell) + 1, r0, grid.height))
+    return slice(r0, r1), slice(c0, c1)
 
 
 def _vector_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
@@ -73,9 +103,15 @@ def _vector_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
         if by not in gdf.columns:
             raise InputError(f"{spec['file']}: mask '{name}' has no column '{by}' (columns: {', '.join(map(str, gdf.columns))})")
         for i, (value, part) in enumerate(gdf.groupby(by, sort=True)):
-            m = features.rasterize(((g, 1) for g in part.geometry), out_shape=shape, transform=grid.transform,
-                                   fill=0, dtype="uint8").astype(bool)
-            out.append(MaskGroup(f"{name}:{value}", m, str(spec["file"]), float(i)))
+            rs, cs = _bounds_block(tuple(part.total_bounds), grid)
+            h, w = rs.stop - rs.start, cs.stop - cs.start
+            if h and w:
+                sub = grid.window(rs.start, cs.start, h, w)
+                m = features.rasterize(((g, 1) for g in part.geometry), out_shape=(h, w), transform=sub.transform,
+                                       fill=0, dtype="uint8").astype(bool)
+            else:
+                m = np.zeros((h, w), bool)
+            out.append(MaskGroup(f"{name}:{value}", m, str(spec["file"]), float(i), rs, cs, shape))
     return out
 
 
@@ -118,7 +154,7 @@ def mask_groups(specs: Sequence[Mapping[str, Any]], grid: GridSpec) -> list[Mask
             raise InputError(f"{spec['file']}: mask '{spec['name']}' file not found")
         kind = spec.get("kind") or ("raster" if str(spec["file"]).lower().endswith((".tif", ".tiff")) else "vector")
         groups = _raster_groups(spec, grid) if kind == "raster" else _vector_groups(spec, grid)
-        log.info("mask %s: %d groups, union %.0f m²", spec["name"], len(groups) - 1, groups[0].mask.sum() * grid.cell**2)
+        log.info("mask %s: %d groups, union %.0f m²", spec["name"], len(groups) - 1, groups[0].local.sum() * grid.cell**2)
         out += groups
     return out
 
@@ -129,7 +165,7 @@ def unstable_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGrou
     out = np.zeros(shape, bool)
     for g in groups:
         if g.name in flagged:
-            out |= g.mask
+            out[g.rows, g.cols] |= g.local
     return out
 
 
@@ -329,10 +365,11 @@ def compute_budgets(dod: np.ndarray, sigma: np.ndarray, detected: Mapping[str, n
     valid = np.isfinite(dod)
     rows = []
     for g in groups:
-        inside = g.mask & valid
+        inside = g.local & g.block(valid)
+        d, s = g.block(dod), g.block(sigma)
         for method, det in [("raw", valid), *detected.items()]:
             row = dict(mask=g.name, method=method, mask_area_m2=float(inside.sum() * cell * cell))
-            row.update(budget_row(dod, sigma, inside & det, cell, vg, coreg_sd_m))
+            row.update(budget_row(d, s, inside & g.block(det), cell, vg, coreg_sd_m))
             rows.append(row)
     cols = ["mask", "method", "erosion_m3", "deposition_m3", "net_m3", "net_sd_m3", "net_sd_independent_m3",
             "net_sd_correlated_m3", "net_sd_coregistration_m3", "area_m2", "mask_area_m2", "mean_dh_m"]

@@ -157,7 +157,7 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
     budget = pd.read_csv(budget_csv)
     groups = bg.mask_groups(masks, grid)
     ok = np.isfinite(dod) & np.isfinite(true)
-    tn = {g.name: float(np.sum(true[g.mask & ok]) * grid.cell**2) for g in groups}
+    tn = {g.name: float(np.sum(g.block(true)[g.local & g.block(ok)]) * grid.cell**2) for g in groups}
     budget["true_net_m3"] = budget["mask"].map(tn)
     budget["error_m3"] = budget["net_m3"] - budget["true_net_m3"]
     budget["error_pct"] = 100 * budget["error_m3"] / budget["true_net_m3"].abs()

@@ -282,10 +282,11 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     sums = np.zeros((len(groups), len(METHODS), 4))
     area = np.zeros(len(groups), np.int64)
     for i, g in enumerate(groups):
-        inside = g.mask & valid
+        inside = g.local & g.block(valid)
         area[i] = int(inside.sum())
+        d, sg = g.block(dod), g.block(sigma)
         for j, (m, det) in enumerate([("raw", valid), *detected.items()]):
-            sums[i, j] = bg.budget_sums(dod, sigma, inside & det)
+            sums[i, j] = bg.budget_sums(d, sg, inside & g.block(det))
     order = np.array([[-1 if g.name == "site" else spec_of[g.name.split(":")[0]], g.order] for g in groups], float)
     np.savez_compressed(out_npz, r0=t.r0, c0=t.c0, z1=z1[cr, cc], z2=z2[cr, cc].astype(np.float32), dod=dod, sigma=sigma,
                         stable0=stable0, **{f"det_{m}": d for m, d in detected.items()}, n_void=n_void,
