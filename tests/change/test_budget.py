@@ -121,3 +121,26 @@ def test_polygon_groups_are_blocks_equal_to_full_rasterisation(tmp_path):
     full = bg.compute_budgets(dod, sigma, det, [bg.MaskGroup(x.name, x.mask, x.source, x.order) for x in groups], g.cell, None)
     pd_testing = pytest.importorskip("pandas.testing")
     pd_testing.assert_frame_equal(blocks, full)                   # same cells in the same order: equal sums, not just close
+
+
+def test_masks_on_a_window_equal_the_whole_grid_cropped(tmp_path):
+    """A polygon much larger than a tile, with many holes, clipped to the tile: the same cells as rasterised on the whole grid."""
+    from rasterio import features
+    from shapely.geometry import Polygon
+    g, *_ = pair(SD)
+    x0, y0, c = g.x0, g.y0, g.cell
+    rng = rng_for(5, "test", "holes")
+    holes = []
+    for _ in range(60):
+        hx, hy = x0 + rng.uniform(5, g.width * c - 5), y0 - rng.uniform(5, g.height * c - 5)
+        r = rng.uniform(0.2, 2.0)
+        holes.append([(hx - r, hy - r), (hx + r, hy - r * 0.7), (hx + r * 0.6, hy + r), (hx - r, hy + r * 0.9)])
+    holes = [h for k, h in enumerate(holes) if all(Polygon(h).disjoint(Polygon(o)) for o in holes[:k])]
+    outer = [(x0 - 30, y0 + 30), (x0 + g.width * c + 30, y0 + 25), (x0 + g.width * c + 20, y0 - g.height * c - 30), (x0 - 25, y0 - g.height * c - 20)]
+    gpd.GeoDataFrame({"k": [1]}, geometry=[Polygon(outer, holes)], crs=CRS).to_file(tmp_path / "big.gpkg")
+    whole = features.rasterize([(Polygon(outer, holes), 1)], out_shape=(g.height, g.width), transform=g.transform, fill=0, dtype="uint8").astype(bool)
+    spec = [{"name": "bare", "file": str(tmp_path / "big.gpkg"), "by": "k"}]
+    for r0, c0, h, w in ((0, 0, g.height, g.width), (7, 11, 33, 41), (g.height - 20, g.width - 25, 20, 25)):
+        groups = bg.mask_groups(spec, g.window(r0, c0, h, w))
+        np.testing.assert_array_equal(groups[1].mask, whole[r0:r0 + h, c0:c0 + w])
+        np.testing.assert_array_equal(groups[2].mask, whole[r0:r0 + h, c0:c0 + w])

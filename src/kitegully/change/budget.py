@@ -31,6 +31,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+import shapely
 from rasterio import features
 from scipy import optimize
 from scipy.spatial.distance import pdist
@@ -91,26 +92,52 @@ def _bounds_block(bounds: tuple[float, float, float, float], grid: GridSpec) -> 
     return slice(r0, r1), slice(c0, c1)
 
 
+def _clipped_to_grid(gdf: Any, grid: GridSpec) -> np.ndarray:
+    """The layer's geometries clipped to the grid plus one cell (empty where they miss it).
+
+    A cell centre lies half a cell inside the grid's edge, so a centre is inside a clipped
+    polygon exactly when it is inside the polygon: the rasterised cells are the same. What
+    the clip saves: GDAL fills a polygon scanline by scanline over all its edges, and one
+    bare-soil polygon of the full-size site has 2.55 M vertices and 78 000 holes, most of them
+    far outside a 500 m tile (clipped: 0.2 M vertices, 3 + 5 s instead of minutes).
+    """
+    xmin, ymin, xmax, ymax = grid.bounds
+    m = grid.cell
+    geoms = np.asarray(gdf.geometry.values, dtype=object)
+    out = np.full(len(geoms), shapely.Polygon(), dtype=object)
+    hit = shapely.intersects(geoms, shapely.box(xmin - m, ymin - m, xmax + m, ymax + m))
+    if hit.any():
+        out[hit] = shapely.clip_by_rect(geoms[hit], xmin - m, ymin - m, xmax + m, ymax + m)
+    return out
+
+
+def _rasterise(geoms: Sequence[Any], grid: GridSpec) -> np.ndarray:
+    shape = (grid.height, grid.width)
+    shapes = [(g, 1) for g in geoms if not g.is_empty]
+    if not shapes:
+        return np.zeros(shape, bool)
+    return features.rasterize(shapes, out_shape=shape, transform=grid.transform, fill=0, dtype="uint8").astype(bool)
+
+
 def _vector_groups(spec: Mapping[str, Any], grid: GridSpec) -> list[MaskGroup]:
     gdf = read_vector(spec["file"], crs=grid.crs)
     name, by = spec["name"], spec.get("by")
     gdf = gdf[gdf.geometry.notna() & ~gdf.geometry.is_empty]
     shape = (grid.height, grid.width)
-    union = features.rasterize(((g, 1) for g in gdf.geometry), out_shape=shape, transform=grid.transform,
-                               fill=0, dtype="uint8").astype(bool) if len(gdf) else np.zeros(shape, bool)
-    out = [MaskGroup(name, union, str(spec["file"]))]
+    clipped = _clipped_to_grid(gdf, grid)
+    out = [MaskGroup(name, _rasterise(clipped, grid), str(spec["file"]))]
     if by:
         if by not in gdf.columns:
             raise InputError(f"{spec['file']}: mask '{name}' has no column '{by}' (columns: {', '.join(map(str, gdf.columns))})")
-        for i, (value, part) in enumerate(gdf.groupby(by, sort=True)):
-            rs, cs = _bounds_block(tuple(part.total_bounds), grid)
-            h, w = rs.stop - rs.start, cs.stop - cs.start
-            if h and w:
-                sub = grid.window(rs.start, cs.start, h, w)
-                m = features.rasterize(((g, 1) for g in part.geometry), out_shape=(h, w), transform=sub.transform,
-                                       fill=0, dtype="uint8").astype(bool)
+        grouped = gdf.groupby(by, sort=True)
+        for i, (value, _) in enumerate(grouped):
+            part = [g for g in clipped[grouped.indices[value]] if not g.is_empty]
+            if part:
+                rs, cs = _bounds_block(tuple(shapely.total_bounds(part)), grid)
             else:
-                m = np.zeros((h, w), bool)
+                rs, cs = slice(0, 0), slice(0, 0)
+            h, w = rs.stop - rs.start, cs.stop - cs.start
+            m = _rasterise(part, grid.window(rs.start, cs.start, h, w)) if h and w else np.zeros((h, w), bool)
             out.append(MaskGroup(f"{name}:{value}", m, str(spec["file"]), float(i), rs, cs, shape))
     return out
 
