@@ -361,7 +361,9 @@ def triangulate_rule(
     Returns
     -------
     (result or None, why).  The result has ``leg_a_m, leg_b_m, scale_error_pct, corner_xyz,
-    end_a_xyz, end_b_xyz, angle_deg, photos_corner, photos_a, photos_b, rms_px``.
+    end_a_xyz, end_b_xyz, angle_deg, photos_corner, photos_a, photos_b, rms_px`` and the photo
+    indices whose rays made each point (``photo_ids_corner, photo_ids_a, photo_ids_b``; the
+    corner's views, indices into ``views``: ``view_ids_corner``).
     """
     if not views:
         return None, "no photo shows two joined straight strips of the rule's paint"
@@ -379,7 +381,7 @@ def triangulate_rule(
     why = ""
     for corner, members in groups:
         corner = _angular_point(O[members], D[members], corner)
-        ends, n_end, rays_used = [], [], [(O[members], D[members], corner)]
+        ends, n_end, rays_used, used = [], [], [(O[members], D[members], corner)], []
         for k in (0, 1):
             vs = [views[m] for m in members if views[m].end_seen[k]]
             if len(vs) < min_rays_end:
@@ -391,6 +393,7 @@ def triangulate_rule(
                 break
             ends.append(g[0])
             n_end.append(len(g[1]))
+            used.append([int(vs[i].photo) for i in g[1]])
             rays_used.append((Oe[g[1]], De[g[1]], g[0]))
         if len(ends) < 2:
             why = f"a corner seen in {len(members)} photos, but its leg ends are not both seen in {min_rays_end} photos"
@@ -419,6 +422,8 @@ def triangulate_rule(
             "corner_xyz": corner.tolist(), "end_a_xyz": ends[0].tolist(), "end_b_xyz": ends[1].tolist(),
             "angle_deg": angle, "photos_corner": int(len(members)), "photos_a": n_end[0], "photos_b": n_end[1],
             "rms_px": float(np.sqrt(np.mean(res ** 2))),
+            "photo_ids_corner": [int(views[m].photo) for m in members], "photo_ids_a": used[0], "photo_ids_b": used[1],
+            "view_ids_corner": [int(m) for m in members],
         }, ""
     return None, why
 
