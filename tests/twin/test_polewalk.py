@@ -163,12 +163,15 @@ def test_composited_rule_is_straight_and_ends_where_it_ends():
     uv = cam.project(rule, pose)
     vv, uu = np.nonzero(yellow)
     P = np.column_stack([uu, vv]).astype(float)
-    d = np.stack([np.abs(np.cross(uv[k] - uv[1], P - uv[1])) / np.linalg.norm(uv[k] - uv[1]) for k in (0, 2)]).min(axis=0)
+    def cross2(a, b):
+        return a[0] * b[:, 1] - a[1] * b[:, 0]
+
+    d = np.stack([np.abs(cross2(uv[k] - uv[1], P - uv[1])) / np.linalg.norm(uv[k] - uv[1]) for k in (0, 2)]).min(axis=0)
     assert d.max() < 4.0  # 2 cm at ~4 m = 4 px wide: within its half width + 2 px
     for k in (0, 2):
         e = (uv[k] - uv[1]) / np.linalg.norm(uv[k] - uv[1])
         t = (P - uv[1]) @ e
-        on_leg = np.abs(np.cross(e, P - uv[1])) < 2.5
+        on_leg = np.abs(cross2(e, P - uv[1])) < 2.5
         assert t[on_leg].max() == pytest.approx(np.linalg.norm(uv[k] - uv[1]), abs=1.5)
     # behind the terrain (depth nearer than the rule) it is not drawn
     refl2 = np.full((300, 400, 3), 0.3, np.float32)
