@@ -90,7 +90,7 @@ def views_of_scene(st, method: str):
         wmax = rp.strip_width_px(ph.camera.f, p.rule_strip_width_m, p.pole_height_m)
         window = int(np.ceil(4.0 * wmax)) | 1
         f, mask = rp.photo_paint_share(st.images[ph.name], p.rule_paint_rgb, 2.2, window, 0.25)
-        views += rp.find_rule_views(f, mask, k, wmax, window, rng)
+        views += rp.find_rule_views(f, mask, k, wmax, window, rng, gap_px=5.0 * wmax if method.startswith("baseline") else None)
     return views
 
 
@@ -190,9 +190,13 @@ def main() -> None:
     ap.add_argument("--method", default="current", help="label of the outputs; ending in 'rigid': re-rendered photos")
     ap.add_argument("--photos", default=None, help="re-rendered photos (folder with scene_NN/), else the stored ones")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "out"))
+    ap.add_argument("--compare", action="store_true", help="only write closerange_rule_diagnosis.md from the two runs' JSON")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
+    if a.compare:
+        compare(out)
+        return
     summs, dfs = [], []
     for sc in a.scenes:
         st = load_scene(Path(a.results), sc, REPO / "results" / "kamech_twin" / "closerange_rule",
@@ -215,6 +219,56 @@ def main() -> None:
     L += ["", "Per photo and end (rule views within 10 px of the true corner; along + = beyond the true end):", ""]
     L.append(views.to_markdown(index=False, floatfmt=".2f") if len(views) else "(none)")
     (out / f"closerange_rule_diagnosis_{a.method}.md").write_text("\n".join(L) + "\n")
+
+
+def compare(out: Path, runs: tuple[str, ...] = ("baseline", "baseline_rigid", "new_rigid")) -> None:
+    """``closerange_rule_diagnosis.md``: per scene, the stored photos (draped paint) next to the rigid rule's, old and new code."""
+    R = [{s["scene"]: s for s in pd.read_json(out / f"closerange_rule_diagnosis_{m}.json").to_dict("records")} for m in runs]
+    va = pd.read_csv(out / f"closerange_rule_diagnosis_{runs[0]}_views.csv")
+
+    def legs(s, k):
+        v = s.get(k)
+        return "–" if not isinstance(v, list) else " / ".join(f"{x:.3f}" for x in v)
+
+    def n(s):
+        return "–" if not isinstance(s.get("n_corner"), (int, float)) or s.get("n_corner") != s.get("n_corner") else \
+            f"{int(s['n_corner'])}/{int(s['n_a'])}/{int(s['n_b'])}"
+
+    def pct(s):
+        v = s.get("scale_pct")
+        return "not found" if v is None or v != v else f"{v:.2f}"
+
+    L = ["# Folding rule: where the scale error came from (issue 20; evaluation against the twin's truth)", "",
+         "`benchmarks/closerange_rule_diagnosis.py` on the stored session-9 `make closerange` products (COLMAP model, sphere",
+         "similarity re-derived as the stage does it, DEM), legs A / B in the pipeline's labels, metres:", "",
+         f"* **{runs[0]}**: the stored photos (rule painted on the grass texture) and main's rule code;",
+         "  *painted legs*: the 3-D distances corner → ends of the paint as the photos show it (plan position of the twin's",
+         "  rule at the rendered surface's height); *true cameras*: the located corner/ends of the same photos triangulated",
+         "  with the true poses (localisation error only); *SfM cameras on true points*: the true painted points projected",
+         "  with the SfM cameras and triangulated (camera error only);",
+         f"* **{runs[1]}**: the same photos with the rule's neighbourhood re-rendered as the rigid rule resting on the ground",
+         "  (`benchmarks/closerange_rule_rerender.py`; legs exactly 1 m), main's rule code;",
+         f"* **{runs[2]}**: those photos, this branch's rule code (gap bridged within a segment: a strip width + 2 px, was a",
+         "  decimetre).", "",
+         f"| scene | {runs[0]}: scale % | legs | painted legs | legs, true cameras | legs, SfM cameras on true points | "
+         f"photos corner/A/B | {runs[1]}: scale % | legs | photos | {runs[2]}: scale % | legs | legs, true cameras | photos |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for sc in R[0]:
+        a, b, c = R[0][sc], R[1].get(sc, {}), R[2].get(sc, {})
+        L.append(f"| {sc} | {pct(a)} | {legs(a, 'legs_m')} | {legs(a, 'painted_legs_pipeline_order_m')} | {legs(a, 'truecam_legs_m')} | "
+                 f"{legs(a, 'sfmcam_legs_m')} | {n(a)} | {pct(b)} | {legs(b, 'legs_m')} | {n(b)} | {pct(c)} | {legs(c, 'legs_m')} | "
+                 f"{legs(c, 'truecam_legs_m')} | {n(c)} |")
+    L += ["", f"{runs[0]}, per end over the rule's views (an L within 10 px of the true corner in the photo): the end located",
+          "along its leg minus the painted end projected with the true camera (cm on the ground, + = beyond the end),",
+          "across it (px); 'used' = the rays the pipeline grouped for that end.", "",
+          "| scene | end | views | used | along cm, median of used | along cm, min / max of all | across px, median |",
+          "|---|---|---|---|---|---|---|"]
+    for sc, g in va.groupby("scene"):
+        for e in ("A", "B"):
+            used = g[g[f"{e}_used"]]
+            L.append(f"| {sc} | {e} | {len(g)} | {len(used)} | {used[f'{e}_along_cm'].median():.1f} | "
+                     f"{g[f'{e}_along_cm'].min():.1f} / {g[f'{e}_along_cm'].max():.1f} | {g[f'{e}_across_px'].median():.1f} |")
+    (out / "closerange_rule_diagnosis.md").write_text("\n".join(L) + "\n")
 
 
 if __name__ == "__main__":

@@ -219,7 +219,7 @@ def _end_along(f: np.ndarray, origin: np.ndarray, d: np.ndarray, far: float, hal
 
 def find_rule_views(
     f: np.ndarray, mask: np.ndarray, photo: int, width_max_px: float, window_px: int, rng: np.random.Generator,
-    max_segments: int = 8,
+    max_segments: int = 8, gap_px: float | None = None,
 ) -> list[RuleView]:
     """Candidate "L"s of the rule in one photo (see module doc, step 2).
 
@@ -235,6 +235,8 @@ def find_rule_views(
     width_max_px : widest the strip can appear (:func:`strip_width_px`).
     window_px : the background window (an end closer than half of it to the border is not seen).
     rng : RANSAC stream.  max_segments : segments extracted per photo.
+    gap_px : longest gap in the paint bridged within a segment (default ``width_max_px + 2``, see the code;
+        ``5 · width_max_px`` before session 10, kept for the benchmark's comparison).
 
     Returns
     -------
@@ -245,9 +247,13 @@ def find_rule_views(
     tol = 0.5 * width_max_px + 1.0  # half the widest strip + 1 px of blur
     join = 2.0 * width_max_px + 2.0
     min_len = 3.0 * width_max_px  # a 1 m leg is 50 strip widths; seen end-on from the far side still ~12 px
-    # paint is interrupted by the black marks and, where the strip is narrower than a pixel,
-    # by aliasing: gaps up to one mark spacing (1 dm = 5 strip widths) at the nearest distance are bridged
-    gap = 5.0 * width_max_px
+    # the paint is interrupted only by the black marks, 1 cm long (half a strip width): at the
+    # nearest distance <= width_max_px / 2, plus 1 px of blur at each side; bridge twice that,
+    # a strip width + 2 px.  (It was one mark *spacing*, a decimetre = 5 strip widths, for the
+    # aliasing drop-outs of the session-9 twin's texture-painted rule; a rigid rule composited
+    # with coverage, like a lens's blurred image, has none, and a decimetre of bridging joined
+    # the rule with yellow grass beyond its corner: scene 03, benchmarks/closerange_rule_diagnosis.py.)
+    gap = width_max_px + 2.0 if gap_px is None else float(gap_px)
     rr, cc = np.nonzero(mask)
     if len(rr) < min_len:
         return []
