@@ -17,8 +17,9 @@ strip is 1–5 px wide and its black decimetre marks are visible.  So:
    noise (1 DN read, shot noise ~3 DN at 200 DN) moves ``f`` by a few hundredths only.
 2. **Two joined segments per photo** (:func:`find_rule_views`): straight segments of paint
    pixels are extracted one after the other (RANSAC scored by the heaviest run without a
-   gap longer than a decimetre mark spacing at the nearest distance: the marks and, where
-   the strip is narrower than a pixel, aliasing interrupt the paint), then weighted least
+   gap longer than a strip width + 2 px at the nearest distance: only the 1 cm black marks,
+   half a strip width, interrupt a rule's paint; a decimetre's bridging, before session 10,
+   joined yellow grass in line beyond the corner to a leg), then weighted least
    squares; two segments are an "L" when their lines meet at more than 30° (:data:`MIN_LINE_ANGLE_DEG`:
    sharper crossings do not fix the corner) at a point each segment reaches (within twice
    the widest strip).  The corner is
@@ -48,7 +49,7 @@ The photos are the photographer's files (4:4:4 JPEG) where they are the SfM's pi
 not the SfM's prepared 4:2:0 copies, whose halved chroma erases the colour of a 1–2 px strip
 (:func:`kitegully.closerange.stage._original_photos`).
 
-Known bias: the twin paints a 5 mm black half-mark at each leg's end (the decimetre marks
+Known bias: the twin draws a 5 mm black half-mark at each leg's end (the decimetre marks
 are centred on the decimetres), so the paint ends 5 mm before the rule: the legs measure up
 to 0.5 % short.  Not corrected.
 
