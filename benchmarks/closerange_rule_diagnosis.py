@@ -104,7 +104,7 @@ def diagnose(st, method: str):
     P = painted_rule(st, rigid=method.endswith("rigid"))  # A, corner, B (twin labels)
     C = P[1]
     rows = []
-    for v in views:
+    for vi, v in enumerate(views):
         k = v.photo
         pose = st.poses[k]
         uvC = st.camera.project(C[None], pose)[0]
@@ -126,7 +126,7 @@ def diagnose(st, method: str):
             name = "AB"[lab]
             row.update({
                 f"{name}_true_leg": "AB"[j], f"{name}_seen": bool(v.end_seen[lab]),
-                f"{name}_used": k in (res or {}).get(f"photo_ids_{name.lower()}", []),
+                f"{name}_used": vi in (res or {}).get("view_ids_corner", []) and k in (res or {}).get(f"photo_ids_{name.lower()}", []),
                 f"{name}_along_px": along, f"{name}_across_px": across, f"{name}_along_cm": 100.0 * along / lenpx[j],
                 f"{name}_leg_px": float(lenpx[j]), f"{name}_range_m": dist,
                 f"{name}_true_inside": bool(st.camera.in_image(uvE[j][None], 0.5 * (int(np.ceil(4 * rp.strip_width_px(800, .02, 3))) | 1))[0]),
