@@ -50,7 +50,7 @@ def _photos(n=6, radius=5.0, height=3.0, width=640, rows=480, f=800.0):
     return photos
 
 
-def _render(photo: OrientedPhoto, rng: np.random.Generator, rule: bool = True, ss: int = 2) -> np.ndarray:
+def _render(photo: OrientedPhoto, rng: np.random.Generator, rule: bool = True, ss: int = 2, clutter=None) -> np.ndarray:
     """Ray-cast the sloping ground: mottled grass, the painted 2 cm L with black decimetre marks (as the twin paints it)."""
     cam = photo.camera
     off = (np.arange(ss) + 0.5) / ss - 0.5
@@ -69,6 +69,8 @@ def _render(photo: OrientedPhoto, rng: np.random.Generator, rule: bool = True, s
                 for on, mark in rule_cells(X, Y, corner, (t1, t2)):
                     col[on] = PAINT
                     col[mark] = 0.08
+            if clutter is not None:  # yellow things on the ground that are not the rule (dry grass)
+                col[clutter(X, Y)] = PAINT
             acc += col
     img = acc / (ss * ss) * 255.0 + rng.normal(0.0, 2.0, acc.shape)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
@@ -143,6 +145,41 @@ def test_legs_measured_to_one_percent_in_rendered_views():
     assert res["scale_error_pct"] < 1.0
     corner, _, _ = _rule()
     assert np.linalg.norm(np.array(res["corner_xyz"]) - corner) < 0.01
+
+
+def test_yellow_grass_in_line_with_a_leg_beyond_the_corner_is_not_bridged_into_it():
+    """A synthetic photo of the rule with known corner and ends, and a 20 cm yellow stalk in line with leg B, 9 cm
+    behind the corner.  Only the marks (1 cm) interrupt a rule's paint, so a gap of a strip width + 2 px is
+    bridged: the stalk stays a separate segment, the L is found, its corner and leg ends where the rule's are
+    (the ends within the 5 mm black half mark + a pixel).  Bridging a decimetre (main before session 10) joined
+    the stalk to leg B, whose segment then ran through the corner: no L (scene 03 of the twin)."""
+    from kitegully.closerange.rule_photos import strip_width_px
+
+    corner, t1, t2 = _rule()
+    e = t2[:2] / np.linalg.norm(t2[:2])
+
+    def stalk(X, Y):
+        along = (X - corner[0]) * e[0] + (Y - corner[1]) * e[1]
+        across = -(X - corner[0]) * e[1] + (Y - corner[1]) * e[0]
+        return (along <= -0.10) & (along >= -0.30) & (np.abs(across) <= 0.01)
+
+    ph = _photos()[0]
+    img = _render(ph, np.random.default_rng(5), clutter=stalk)
+    uv = ph.camera.project_camera(np.vstack([corner, corner + t1, corner + t2, corner - 0.10 * t2]) @ ph.R.T + ph.t)
+    wmax = strip_width_px(ph.camera.f, 0.02, 3.0)
+    gap = np.linalg.norm(uv[3] - uv[0]) - 0.01 / 0.10 * np.linalg.norm(uv[3] - uv[0])  # paint-free stretch, px
+    assert wmax + 2.0 < gap < 5.0 * wmax  # bridged by a decimetre's gap, not by a strip width's
+    f, mask = photo_paint_share(img, PAINT, 1.0, int(np.ceil(4 * wmax)) | 1)
+    views = find_rule_views(f, mask, 0, wmax, int(np.ceil(4 * wmax)) | 1, np.random.default_rng(0))
+    near = [v for v in views if np.linalg.norm(v.corner_uv - uv[0]) < 1.5]
+    assert len(near) == 1
+    v = near[0]
+    for true_end in uv[1:3]:
+        d = np.linalg.norm(v.end_uv - true_end, axis=1).min()
+        px_per_cm = np.linalg.norm(true_end - uv[0]) / 100.0
+        assert d < 0.5 * px_per_cm + 1.0
+    old = find_rule_views(f, mask, 0, wmax, int(np.ceil(4 * wmax)) | 1, np.random.default_rng(0), gap_px=5.0 * wmax)
+    assert not [v for v in old if np.linalg.norm(v.corner_uv - uv[0]) < 1.5]
 
 
 def test_no_photo_sees_the_rule():

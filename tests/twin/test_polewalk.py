@@ -56,9 +56,11 @@ def test_spheres_and_folding_rule_are_placed(pole_scene):
     a, corner, b = ps.rule
     assert np.linalg.norm(a - corner) == pytest.approx(1.0) and np.linalg.norm(b - corner) == pytest.approx(1.0)
     assert np.dot(a - corner, b - corner) == pytest.approx(0.0, abs=1e-9)  # orthogonal legs
-    # the rule lies on the ground: its ends are within a few cm of the DEM surface
-    z = surface_height(ps.render, ps.rule[:, 0], ps.rule[:, 1])
-    assert np.abs(ps.rule[:, 2] - z).max() < 0.05
+    # the rigid rule rests on the ground: above the surface all along its legs, touching it
+    s = np.linspace(0.0, 1.0, 201)[:, None]
+    P = np.vstack([corner + s * (a - corner), corner + s * (b - corner)])
+    gap = P[:, 2] - surface_height(ps.render, P[:, 0], P[:, 1])
+    assert gap.min() > 0.0 and gap.min() < 0.01
     # laid beside the patch, inside the ring the photographer walks (not in the periphery)
     assert np.hypot(*(ps.rule[:, :2] - ps.patch_centre).T).max() < ps.patch_reach_m + PoleWalk().standoff_m
     assert prepare_pole_scene(sc, 0.10, False, rng_for(1, "t", "r")).rule is None
@@ -110,7 +112,7 @@ def test_rule_is_laid_as_close_to_the_patch_as_it_fits():
     """A 20 m flat scene with a 2 m-radius patch in its middle: the rule lands on the grass ring
     around the patch (within 1.5 m of its edge), not anywhere in the 20 m square."""
     from kitegully.io.raster import GridSpec
-    from kitegully.twin.polewalk import _paint_rule
+    from kitegully.twin.polewalk import _lay_rule
 
     g = GridSpec(0.0, 20.0, 0.05, 400, 400, "EPSG:32632")
     xs, ys = g.cell_centres()
@@ -118,8 +120,60 @@ def test_rule_is_laid_as_close_to_the_patch_as_it_fits():
     centre = np.array([10.0, 10.0])
     free = np.hypot(X - centre[0], Y - centre[1]) > 2.0
     dem = np.zeros((400, 400))
-    tex = np.zeros((800, 800, 3), np.float32)
-    ends = _paint_rule(tex, g, free, dem, rng_for(4, "test", "rule_near"), centre)
+    ends = _lay_rule(g, free, dem, rng_for(4, "test", "rule_near"), centre)
     d = np.hypot(*(ends[:, :2] - centre).T)
     assert d.min() > 2.0 and d.max() <= 3.5
-    assert (tex[..., 0] > 0).sum() > 0  # painted
+    assert ends[:, 2] == pytest.approx(0.003)  # the top of a 3 mm rule on flat ground
+
+
+def test_rigid_rule_rests_on_the_highest_tussocks_not_draped():
+    """Flat ground with three 10 cm tussocks under the rule: the rule rests on them (a plane
+    10 cm up, touching all three) instead of following the ground as a painted strip did."""
+    from kitegully.io.raster import GridSpec
+    from kitegully.twin.polewalk import resting_plane
+
+    g = GridSpec(0.0, 4.0, 0.02, 200, 200, "EPSG:32632")
+    xs, ys = g.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    dem = 0.02 * np.sin(7 * X) * np.cos(5 * Y)  # grass relief, +-2 cm
+    corner = np.array([1.0, 1.0])
+    for p in ([1.0, 1.0], [2.0, 1.0], [1.0, 2.0]):  # under the corner and both ends (phi = 0, leg B to +y)
+        dem = np.maximum(dem, 0.10 - 2.0 * np.hypot(X - p[0], Y - p[1]))
+    ga, gb, z0 = resting_plane(dem, g, corner, 0.0, 1.0, 0.0, 0.0)
+    # level, on the tussocks' tops (their peaks fall between cell centres: the DEM's maximum)
+    assert abs(ga) < 0.01 and abs(gb) < 0.01 and z0 == pytest.approx(dem.max(), abs=0.002)
+    assert z0 > 0.05  # not down on the +-2 cm grass as a draped strip
+
+
+def test_composited_rule_is_straight_and_ends_where_it_ends():
+    """A rigid rule 2 cm above a flat grey ground, seen from 4 m: its yellow pixels lie on the
+    straight image of each leg and stop at the projected end (within a pixel)."""
+    from kitegully.twin.camera import Camera, Pose
+    from kitegully.twin.polewalk import composite_rule, look_at
+
+    cam = Camera(width=400, height=300, f=800.0, cx=199.5, cy=149.5)
+    C = np.array([0.5, -3.0, 3.0])
+    pose = Pose(look_at(C, np.array([0.5, 0.5, 0.0])), C)
+    rule = np.array([[1.0, 0.0, 0.02], [0.0, 0.0, 0.02], [0.0, 1.0, 0.02]])
+    refl = np.full((300, 400, 3), 0.3, np.float32)
+    depth = np.full((300, 400), np.nan, np.float32)
+    composite_rule(refl, depth, cam, pose, rule, np.array([0.0, 0.0, 1.0]), 0.3)
+    yellow = (refl[..., 0] - refl[..., 2] > 0.2)
+    assert yellow.sum() > 100
+    uv = cam.project(rule, pose)
+    vv, uu = np.nonzero(yellow)
+    P = np.column_stack([uu, vv]).astype(float)
+    def cross2(a, b):
+        return a[0] * b[:, 1] - a[1] * b[:, 0]
+
+    d = np.stack([np.abs(cross2(uv[k] - uv[1], P - uv[1])) / np.linalg.norm(uv[k] - uv[1]) for k in (0, 2)]).min(axis=0)
+    assert d.max() < 4.0  # 2 cm at ~4 m = 4 px wide: within its half width + 2 px
+    for k in (0, 2):
+        e = (uv[k] - uv[1]) / np.linalg.norm(uv[k] - uv[1])
+        t = (P - uv[1]) @ e
+        on_leg = np.abs(cross2(e, P - uv[1])) < 2.5
+        assert t[on_leg].max() == pytest.approx(np.linalg.norm(uv[k] - uv[1]), abs=1.5)
+    # behind the terrain (depth nearer than the rule) it is not drawn
+    refl2 = np.full((300, 400, 3), 0.3, np.float32)
+    composite_rule(refl2, np.full((300, 400), 1.0, np.float32), cam, pose, rule, np.array([0.0, 0.0, 1.0]), 0.3)
+    assert np.allclose(refl2, 0.3)

@@ -17,8 +17,9 @@ strip is 1–5 px wide and its black decimetre marks are visible.  So:
    noise (1 DN read, shot noise ~3 DN at 200 DN) moves ``f`` by a few hundredths only.
 2. **Two joined segments per photo** (:func:`find_rule_views`): straight segments of paint
    pixels are extracted one after the other (RANSAC scored by the heaviest run without a
-   gap longer than a decimetre mark spacing at the nearest distance: the marks and, where
-   the strip is narrower than a pixel, aliasing interrupt the paint), then weighted least
+   gap longer than a strip width + 2 px at the nearest distance: only the 1 cm black marks,
+   half a strip width, interrupt a rule's paint; a decimetre's bridging, before session 10,
+   joined yellow grass in line beyond the corner to a leg), then weighted least
    squares; two segments are an "L" when their lines meet at more than 30° (:data:`MIN_LINE_ANGLE_DEG`:
    sharper crossings do not fix the corner) at a point each segment reaches (within twice
    the widest strip).  The corner is
@@ -48,7 +49,7 @@ The photos are the photographer's files (4:4:4 JPEG) where they are the SfM's pi
 not the SfM's prepared 4:2:0 copies, whose halved chroma erases the colour of a 1–2 px strip
 (:func:`kitegully.closerange.stage._original_photos`).
 
-Known bias: the twin paints a 5 mm black half-mark at each leg's end (the decimetre marks
+Known bias: the twin draws a 5 mm black half-mark at each leg's end (the decimetre marks
 are centred on the decimetres), so the paint ends 5 mm before the rule: the legs measure up
 to 0.5 % short.  Not corrected.
 
@@ -219,7 +220,7 @@ def _end_along(f: np.ndarray, origin: np.ndarray, d: np.ndarray, far: float, hal
 
 def find_rule_views(
     f: np.ndarray, mask: np.ndarray, photo: int, width_max_px: float, window_px: int, rng: np.random.Generator,
-    max_segments: int = 8,
+    max_segments: int = 8, gap_px: float | None = None,
 ) -> list[RuleView]:
     """Candidate "L"s of the rule in one photo (see module doc, step 2).
 
@@ -235,6 +236,8 @@ def find_rule_views(
     width_max_px : widest the strip can appear (:func:`strip_width_px`).
     window_px : the background window (an end closer than half of it to the border is not seen).
     rng : RANSAC stream.  max_segments : segments extracted per photo.
+    gap_px : longest gap in the paint bridged within a segment (default ``width_max_px + 2``, see the code;
+        ``5 · width_max_px`` before session 10, kept for the benchmark's comparison).
 
     Returns
     -------
@@ -245,9 +248,13 @@ def find_rule_views(
     tol = 0.5 * width_max_px + 1.0  # half the widest strip + 1 px of blur
     join = 2.0 * width_max_px + 2.0
     min_len = 3.0 * width_max_px  # a 1 m leg is 50 strip widths; seen end-on from the far side still ~12 px
-    # paint is interrupted by the black marks and, where the strip is narrower than a pixel,
-    # by aliasing: gaps up to one mark spacing (1 dm = 5 strip widths) at the nearest distance are bridged
-    gap = 5.0 * width_max_px
+    # the paint is interrupted only by the black marks, 1 cm long (half a strip width): at the
+    # nearest distance <= width_max_px / 2, plus 1 px of blur at each side; bridge twice that,
+    # a strip width + 2 px.  (It was one mark *spacing*, a decimetre = 5 strip widths, for the
+    # aliasing drop-outs of the session-9 twin's texture-painted rule; a rigid rule composited
+    # with coverage, like a lens's blurred image, has none, and a decimetre of bridging joined
+    # the rule with yellow grass beyond its corner: scene 03, benchmarks/closerange_rule_diagnosis.py.)
+    gap = width_max_px + 2.0 if gap_px is None else float(gap_px)
     rr, cc = np.nonzero(mask)
     if len(rr) < min_len:
         return []
@@ -361,7 +368,9 @@ def triangulate_rule(
     Returns
     -------
     (result or None, why).  The result has ``leg_a_m, leg_b_m, scale_error_pct, corner_xyz,
-    end_a_xyz, end_b_xyz, angle_deg, photos_corner, photos_a, photos_b, rms_px``.
+    end_a_xyz, end_b_xyz, angle_deg, photos_corner, photos_a, photos_b, rms_px`` and the photo
+    indices whose rays made each point (``photo_ids_corner, photo_ids_a, photo_ids_b``; the
+    corner's views, indices into ``views``: ``view_ids_corner``).
     """
     if not views:
         return None, "no photo shows two joined straight strips of the rule's paint"
@@ -379,7 +388,7 @@ def triangulate_rule(
     why = ""
     for corner, members in groups:
         corner = _angular_point(O[members], D[members], corner)
-        ends, n_end, rays_used = [], [], [(O[members], D[members], corner)]
+        ends, n_end, rays_used, used = [], [], [(O[members], D[members], corner)], []
         for k in (0, 1):
             vs = [views[m] for m in members if views[m].end_seen[k]]
             if len(vs) < min_rays_end:
@@ -391,6 +400,7 @@ def triangulate_rule(
                 break
             ends.append(g[0])
             n_end.append(len(g[1]))
+            used.append([int(vs[i].photo) for i in g[1]])
             rays_used.append((Oe[g[1]], De[g[1]], g[0]))
         if len(ends) < 2:
             why = f"a corner seen in {len(members)} photos, but its leg ends are not both seen in {min_rays_end} photos"
@@ -419,6 +429,8 @@ def triangulate_rule(
             "corner_xyz": corner.tolist(), "end_a_xyz": ends[0].tolist(), "end_b_xyz": ends[1].tolist(),
             "angle_deg": angle, "photos_corner": int(len(members)), "photos_a": n_end[0], "photos_b": n_end[1],
             "rms_px": float(np.sqrt(np.mean(res ** 2))),
+            "photo_ids_corner": [int(views[m].photo) for m in members], "photo_ids_a": used[0], "photo_ids_b": used[1],
+            "view_ids_corner": [int(m) for m in members],
         }, ""
     return None, why
 

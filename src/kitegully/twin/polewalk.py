@@ -11,14 +11,16 @@ orthophoto) into those photographs:
 * :func:`prepare_pole_scene` removes the scene's heightfield marker bumps (a heightfield
   cannot hold a sphere: its bump is a cylinder under a cap) and keeps the true sphere
   centres instead; the orthophoto becomes the texture (upsampled to 1 cm, markers
-  in-painted with the surrounding grass) and the folding rule is painted onto it, 2 cm wide,
-  yellow with black decimetre marks, on grass, clear of patch and markers, as close to the
-  patch as it fits (inside the ring the photographer walks).
+  in-painted with the surrounding grass); the folding rule is laid as a rigid L resting on the
+  ground (:func:`resting_plane`), 2 cm wide, yellow with black decimetre marks, on grass, clear
+  of patch and markers, as close to the patch as it fits (inside the ring the photographer
+  walks).
 * :func:`walk_poses` places the camera ``pole_height_m`` above the ground on a rough
   circle around the eroded patch, aimed at the patch with jitter (oblique views).
 * :func:`photograph_walk` ray-casts each view (:mod:`kitegully.twin.render`), adds the
   spheres analytically (:func:`composite_spheres`: exact ray-sphere intersection,
-  supersampled, occluded by the terrain depth, Lambert-shaded by the scene's sun) and
+  supersampled, occluded by the terrain depth, Lambert-shaded by the scene's sun), the rule
+  likewise (:func:`composite_rule`: two flat strips on its resting plane) and
   applies vignetting and noise (:func:`kitegully.twin.render.photograph`).
 
 The orthophoto texture is already tone-encoded (gamma) and carries the scene's cast
@@ -174,15 +176,74 @@ def _rule_corners(grid: GridSpec, centre: np.ndarray, rng: np.random.Generator) 
             yield corner, float(limit)
 
 
-def _paint_rule(tex: np.ndarray, grid: GridSpec, free: np.ndarray, dem: np.ndarray, rng: np.random.Generator,
-                centre: np.ndarray):
-    """Lay a 2 m folding rule as two orthogonal 1 m legs on the slope; paint it on ``tex``.
+#: [P] the folding rule's strip: 2 cm wide, 3 mm thick, yellow with a 1 cm black mark centred on each
+#: decimetre (half marks at the corner and the ends); colours tone-encoded, full light.
+RULE_WIDTH_M, RULE_THICKNESS_M, RULE_MARK_M = 0.02, 0.003, 0.01
+RULE_YELLOW, RULE_BLACK = (0.93, 0.80, 0.20), (0.08, 0.08, 0.08)
 
-    The rule is rigid and straight: its legs are 1 m long and orthogonal in 3-D, in the
-    plane fitted to the DEM within 1 m of the corner (on a 35° slope a downslope leg
-    covers 0.82 m in plan).  It lies on free grass as close to ``centre`` (the eroded
-    patch's centroid) as it fits (:func:`_rule_corners`).  ``tex`` is (rows, cols, 3) float
-    at half the DEM cell.  Returns the (3, 3) points: end of leg A, corner, end of leg B.
+
+def _bilinear(dem: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear DEM height at map points (the ray caster's surface, cell centres at integers)."""
+    r, c = grid.rowcol(x, y)
+    return ndimage.map_coordinates(dem, [np.ravel(r), np.ravel(c)], order=1, mode="nearest")
+
+
+def _legs(phi: float, sign: float, ga: float, gb: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit 3-D legs of the rule in the plane of slopes ``(ga, gb)``: leg A at plan azimuth ``phi``, B = ±n × A; and n."""
+    normal = np.array([-ga, -gb, 1.0]) / np.sqrt(ga * ga + gb * gb + 1.0)
+    t1 = np.array([np.cos(phi), np.sin(phi), ga * np.cos(phi) + gb * np.sin(phi)])
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(normal, t1) * sign, normal
+
+
+def resting_plane(dem: np.ndarray, grid: GridSpec, corner: np.ndarray, phi: float, sign: float, ga: float, gb: float,
+                  iterations: int = 2) -> tuple[float, float, float]:
+    """Plane ``z = corner_z + ga·dx + gb·dy`` on which a rigid L rule rests on the ground: ``(ga, gb, corner_z)``.
+
+    A rigid rule laid on grass does not follow the tussocks: it rests on the highest points
+    under it.  The plane is the lowest one above the surface under the rule's two strips
+    (sampled every centimetre along the legs, at its centre line and both edges): the
+    linear programme ``min Σ (plane − surface)`` subject to ``plane >= surface``, whose
+    solution touches the ground at (generically) three points, as a rigid body comes to
+    rest.  The strips' plan footprint depends on the plane's tilt (legs of 1 m in 3-D), so
+    it is re-solved ``iterations`` times from the previous plane (start: the least-squares
+    plane ``ga, gb``).  O(iterations · samples) plus a 3-variable LP.
+    """
+    from scipy.optimize import linprog
+
+    corner = np.asarray(corner, float)
+    s = np.arange(-0.5 * RULE_WIDTH_M, 1.0 + 1e-9, 0.01)
+    c0 = float(_bilinear(dem, grid, corner[:1], corner[1:])[0])
+    for _ in range(iterations):
+        t1, t2, _n = _legs(phi, sign, ga, gb)
+        pts = []
+        for u, v in ((t1, t2), (t2, t1)):
+            for a in (-0.5 * RULE_WIDTH_M, 0.0, 0.5 * RULE_WIDTH_M):
+                pts.append(s[:, None] * u[None, :2] + a * v[None, :2])
+        d = np.vstack(pts)
+        h = _bilinear(dem, grid, corner[0] + d[:, 0], corner[1] + d[:, 1])
+        A = np.column_stack([d, np.ones(len(d))])
+        res = linprog(A.sum(axis=0), A_ub=-A, b_ub=-h, bounds=[(None, None)] * 3, method="highs")
+        if not res.success:  # cannot happen for an L (its samples are not collinear); keep the last plane
+            break
+        ga, gb, c0 = (float(x) for x in res.x)
+    return ga, gb, c0
+
+
+def _lay_rule(grid: GridSpec, free: np.ndarray, dem: np.ndarray, rng: np.random.Generator, centre: np.ndarray) -> np.ndarray:
+    """Lay a rigid 2 m folding rule as two orthogonal 1 m legs resting on the ground; return its points.
+
+    The rule is rigid and straight: its legs are 1 m long and orthogonal in 3-D.  Its
+    place: on free grass as close to ``centre`` (the eroded patch's centroid) as it fits
+    (:func:`_rule_corners`), with leg A at a random plan azimuth in the plane fitted to the
+    DEM within 1 m of the corner (on a 35° slope a downslope leg covers 0.82 m in plan) and
+    leg B turned by ±90° in that plane.  Its height and tilt: the plane it comes to rest on
+    (:func:`resting_plane`), the top of the 3 mm strip being the measured surface.  It is
+    drawn into each photo as a 3-D object (:func:`composite_rule`), not painted onto the
+    terrain's texture: painted, it followed the grass tussocks (±10 cm in scene 05), so the
+    photographed legs were 0.98–1.06 m long in 3-D and bent in the photos (issue 20,
+    ``benchmarks/closerange_rule_diagnosis.py``).  Returns the (3, 3) points on the strip's
+    top centre line: end of leg A, corner, end of leg B.
     """
     cell = grid.cell
     h, w = dem.shape
@@ -195,37 +256,83 @@ def _paint_rule(tex: np.ndarray, grid: GridSpec, free: np.ndarray, dem: np.ndarr
         X, Y = np.meshgrid(xs[win[1]] - corner[0], ys[win[0]] - corner[1])
         A = np.column_stack([X.ravel(), Y.ravel(), np.ones(X.size)])
         ga, gb, gc = np.linalg.lstsq(A, dem[win].ravel(), rcond=None)[0]
-        normal = np.array([-ga, -gb, 1.0]) / np.sqrt(ga * ga + gb * gb + 1.0)
         phi = rng.uniform(0, 2 * np.pi)
-        t1 = np.array([np.cos(phi), np.sin(phi), ga * np.cos(phi) + gb * np.sin(phi)])
-        t1 /= np.linalg.norm(t1)
-        t2 = np.cross(normal, t1) * (1 if rng.uniform() < 0.5 else -1)
-        c3 = np.array([corner[0], corner[1], gc + 0.003])  # on the fitted plane, 3 mm thick rule
-        ends = np.vstack([c3 + t1, c3, c3 + t2])
+        sign = 1.0 if rng.uniform() < 0.5 else -1.0
+        t1, t2, _n = _legs(phi, sign, ga, gb)
         s = np.linspace(0.0, 1.0, 101)
-        pts = np.vstack([c3[:2] + s[:, None] * t1[:2], c3[:2] + s[:, None] * t2[:2]])
+        pts = np.vstack([corner[:2] + s[:, None] * t1[:2], corner[:2] + s[:, None] * t2[:2]])
         if np.hypot(pts[:, 0] - centre[0], pts[:, 1] - centre[1]).max() > limit:
             continue
         r, c = grid.rowcol(pts[:, 0], pts[:, 1])
         r, c = np.rint(r).astype(int), np.rint(c).astype(int)
         if r.min() < 0 or c.min() < 0 or r.max() >= h or c.max() >= w or not free[r, c].all():
             continue
-        # paint at texture resolution: 2 cm wide, yellow, a black mark every decimetre of the leg
-        tcell = cell / 2
-        th, tw = tex.shape[:2]
-        TX, TY = np.meshgrid(grid.x0 + (np.arange(tw) + 0.5) * tcell, grid.y0 - (np.arange(th) + 0.5) * tcell)
-        for t in (t1, t2):
-            e = t[:2] / np.linalg.norm(t[:2])
-            plan_len = float(np.linalg.norm(t[:2]))
-            along = (TX - corner[0]) * e[0] + (TY - corner[1]) * e[1]
-            across = -(TX - corner[0]) * e[1] + (TY - corner[1]) * e[0]
-            on = (along >= -0.01) & (along <= plan_len) & (np.abs(across) <= 0.01)
-            leg = along / plan_len  # metres along the (sloping) leg
-            mark = on & (np.abs(leg - np.round(leg, 1)) <= 0.005)
-            tex[on] = (0.93, 0.80, 0.20)
-            tex[mark] = (0.08, 0.08, 0.08)
-        return ends
+        ga, gb, z0 = resting_plane(dem, grid, corner, phi, sign, float(ga), float(gb))
+        t1, t2, _n = _legs(phi, sign, ga, gb)
+        c3 = np.array([corner[0], corner[1], z0 + RULE_THICKNESS_M])
+        return np.vstack([c3 + t1, c3, c3 + t2])
     raise InputError("folding rule: no 1 m x 1 m spot on grass clear of the patch and the markers in the scene")
+
+
+def composite_rule(
+    refl: np.ndarray, depth: np.ndarray, camera: Camera, pose: Pose, rule: np.ndarray, sun: np.ndarray, diffuse: float,
+    supersampling: int = 4,
+) -> np.ndarray:
+    """Draw the rigid folding rule into a rendered image (in place and returned), occluded by the terrain.
+
+    ``rule`` is (3, 3): end of leg A, corner, end of leg B on the strip's top centre line.
+    Each leg is a flat strip ``RULE_WIDTH_M`` wide from half a width behind the corner to
+    its end, yellow with a black ``RULE_MARK_M`` mark centred on each decimetre.  Each pixel
+    of the legs' bounding box gets ``s × s`` rays; a ray hits a strip where it meets the
+    rule's plane inside the strip nearer than the terrain depth (as
+    :func:`composite_spheres`); the paint is Lambert-shaded by the scene's sun in linear
+    light and re-encoded.  O(s² · bounding-box pixels).
+    """
+    a_end, C, b_end = (np.asarray(p, float) for p in rule)
+    ua, ub = a_end - C, b_end - C
+    la, lb = np.linalg.norm(ua), np.linalg.norm(ub)
+    ua, ub = ua / la, ub / lb
+    n = np.cross(ua, ub)
+    n /= np.linalg.norm(n)
+    if n[2] < 0:
+        n = -n
+    hw = 0.5 * RULE_WIDTH_M
+    legs = [(ua, np.cross(n, ua), la), (ub, np.cross(n, ub), lb)]
+    corners = np.vstack([[C + s * u + q * v for s in (-hw, L) for q in (-hw, hw)] for u, v, L in legs])
+    uv = camera.project(corners, pose)
+    if not np.isfinite(uv).all():
+        return refl
+    h, w = refl.shape[:2]
+    u0, v0 = (int(np.floor(x)) - 2 for x in uv.min(axis=0))
+    u1, v1 = (int(np.ceil(x)) + 2 for x in uv.max(axis=0))
+    u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w - 1), min(v1, h - 1)
+    if u1 < u0 or v1 < v0:
+        return refl
+    offs = (np.arange(supersampling) + 0.5) / supersampling - 0.5
+    uu, vv = np.meshgrid(np.arange(u0, u1 + 1), np.arange(v0, v1 + 1))
+    su, sv = np.broadcast_arrays(uu[..., None, None] + offs[None, None, None, :], vv[..., None, None] + offs[None, None, :, None])
+    su, sv = su.reshape(*uu.shape, -1), sv.reshape(*uu.shape, -1)
+    d = camera.rays_camera(su, sv) @ pose.R
+    den = d @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((C - pose.C) @ n) / den
+    H = pose.C + t[..., None] * d - C
+    tz = depth[v0:v1 + 1, u0:u1 + 1][..., None]
+    visible = (t > 0) & np.isfinite(t) & (~np.isfinite(tz) | (t < tz + 1e-3))
+    col = np.zeros(t.shape + (3,))
+    hit = np.zeros(t.shape, bool)
+    for u, v, L in legs:  # leg B last: it wins in the corner square (both are the same plane there)
+        along, across = H @ u, H @ v
+        on = visible & (along >= -hw) & (along <= L) & (np.abs(across) <= hw)
+        mark = np.abs(along - np.round(along, 1)) <= 0.5 * RULE_MARK_M
+        col = np.where(on[..., None], np.where(mark[..., None], RULE_BLACK, RULE_YELLOW), col)
+        hit |= on
+    shade = (diffuse + (1.0 - diffuse) * max(float(n @ sun), 0.0)) ** (1.0 / SCENE_GAMMA)
+    cover = hit.mean(axis=-1)
+    mean = np.where(hit[..., None], col, 0.0).sum(axis=-2) / np.maximum(hit.sum(axis=-1), 1)[..., None]
+    patch = refl[v0:v1 + 1, u0:u1 + 1]
+    patch[:] = (1 - cover[..., None]) * patch + cover[..., None] * (shade * mean)
+    return refl
 
 
 def prepare_pole_scene(scene: CloseRangeScene, sphere_radius_m: float, folding_rule: bool, rng: np.random.Generator) -> PoleScene:
@@ -273,7 +380,7 @@ def prepare_pole_scene(scene: CloseRangeScene, sphere_radius_m: float, folding_r
     if folding_rule:
         clear = int(round(0.3 / g.cell))
         busy = ndimage.binary_dilation(eroded | mk, iterations=clear)
-        rule = _paint_rule(tex, g, ~busy, dem, rng, centre)
+        rule = _lay_rule(g, ~busy, dem, rng, centre)
     texture = np.clip(np.rint(tex * 255), 0, 255).astype(np.uint8).transpose(2, 0, 1)
     render = make_scene(dem.astype(np.float32), (g.x0, g.y0), g.cell, texture, (g.x0, g.y0), g.cell / 2, band_names=("R", "G", "B"))
     el, az = np.radians(scene.meta["sun_elevation_deg"]), np.radians(scene.meta["sun_azimuth_deg"])
@@ -432,6 +539,8 @@ def photograph_walk(
         refl, depth = render_reflectance(pscene.render, cam, pose, (0, 1, 2), walk.supersampling, bg)
         composite_spheres(refl, depth, cam, pose, pscene.spheres, pscene.sphere_radius_m, pscene.sphere_dn,
                           pscene.sun, pscene.diffuse_fraction)
+        if pscene.rule is not None:
+            composite_rule(refl, depth, cam, pose, pscene.rule, pscene.sun, pscene.diffuse_fraction)
         img, _ = photograph(refl, cam, fx, rng)
         if (i + 1) % 10 == 0 or i + 1 == len(poses):
             log.info("pole walk: rendered %d/%d photos", i + 1, len(poses))
