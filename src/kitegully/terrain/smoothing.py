@@ -144,6 +144,41 @@ def _conv2(a: np.ndarray, kernel: np.ndarray, work: np.ndarray, workers: int) ->
     return a
 
 
+def _correct_edge_strips(z: np.ndarray, zs: np.ndarray, den: np.ndarray, off: np.ndarray, kernel: np.ndarray,
+                         axis: int, dtype, workers: int) -> None:
+    """The edge correction ``zs −= (G*ĝ / den)·(x̄ − x)`` along ``axis`` of a grid without nodata, in its edge strips.
+
+    The centroid offset ``off`` = x̄ − x is zero (up to FFT rounding, |off| < 1e-11 cell)
+    wherever the kernel window lies inside the grid, i.e. beyond one kernel radius r from
+    the two edges across ``axis``. Only the r rows (columns) at each edge are corrected,
+    and their smoothed gradient needs the gradient within 2r of the edge only (the
+    convolution reaches r), which needs the DEM within 2r + 1: two strips of 2r instead
+    of two whole-grid 2-D convolutions. Mathematically the same correction (the kernel
+    never reaches beyond the strip); the FFT of a strip rounds differently from that of
+    the whole grid, so values differ in the float32 rounding (see ``edge_strips`` of
+    :func:`gaussian_smooth_fft`). Skipping the interior leaves out terms below
+    1e-11 m, far below float32's resolution of the result. O(r·L·log) for L cells along the edge.
+    """
+    n = z.shape[axis]
+    r = kernel.size // 2
+    for lo, hi in ((0, r), (n - r, n)):
+        s0, s1 = max(0, lo - r), min(n, hi + r)  # gradient cells the smoothing of [lo, hi) reaches
+        g0, g1 = max(0, s0 - 1), min(n, s1 + 1)  # DEM cells that gradient reads
+        zsl = z[g0:g1] if axis == 0 else z[:, g0:g1]
+        g = np.empty(zsl.shape, dtype=dtype)
+        _one_sided_gradient(zsl, axis, out=g)
+        g = np.ascontiguousarray(g[s0 - g0 : s1 - g0] if axis == 0 else g[:, s0 - g0 : s1 - g0])
+        _conv2(g, kernel, np.empty_like(g), workers)
+        cut = slice(lo - s0, hi - s0)
+        a = g[cut] if axis == 0 else g[:, cut]
+        sl = (slice(lo, hi), slice(None)) if axis == 0 else (slice(None), slice(lo, hi))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            a /= den[sl]
+        a *= off[lo:hi, None] if axis == 0 else off[None, lo:hi]
+        with np.errstate(invalid="ignore"):
+            zs[sl] -= a if a.dtype == np.float32 else a.astype(np.float32)
+
+
 def gaussian_smooth_fft(
     z: np.ndarray,
     sigma_cells: float,
@@ -152,6 +187,7 @@ def gaussian_smooth_fft(
     min_weight: float = 1e-3,
     linear_edges: bool = True,
     dtype: type = np.float32,
+    edge_strips: bool = True,
 ) -> np.ndarray:
     """Smooth a DEM with a Gaussian by FFT convolution; NaN cells are ignored.
 
@@ -175,6 +211,13 @@ def gaussian_smooth_fft(
         at the edge of a 2 % slope with σ = 10 m, enough for a false gully). The
         correction subtracts ``ĝ·(x̄ − x)`` with ``ĝ`` the smoothed gradient of the DEM;
         it is exact on planes and zero where the window is full.
+    edge_strips : bool
+        With no nodata, compute the edge correction only in the strips where it is not
+        zero (:func:`_correct_edge_strips`; grids at least 4 kernel radii across). It
+        equals the whole-grid correction up to float32 rounding of the FFT sums: the
+        smoothed surface differs by at most 1e-4 m, in < 1 % of the cells (within two
+        float32 steps of an elevation of a few hundred metres; tested). ``False``: the
+        whole-grid correction (session 9's values bit for bit).
     dtype : numpy float type
         Precision of the FFT work arrays. float32 (default) halves time and memory; on
         valid cells it differs from float64 by < 2e-5 m (the float32 resolution of
@@ -236,22 +279,27 @@ def gaussian_smooth_fft(
     if linear_edges:
         # Smoothed gradient of the DEM (per cell), zero where a neighbour is missing.
         for axis in (0, 1):
-            _one_sided_gradient(z, axis, out=a)
-            _conv2(a, kernel, work, workers)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                a /= den
-            # Centroid offset (x̄ − x) along this axis, in cells.
+            n = h if axis == 0 else w
+            radius = kernel.size // 2
             if full:
-                n = h if axis == 0 else w
+                # Centroid offset (x̄ − x) along this axis, in cells: separable, 1-D.
                 idx = np.arange(n, dtype=np.float64)
                 num1 = np.empty(n)
                 wt1 = np.empty(n)
                 _convolve_axis(idx[None, :], kernel, 1, num1[None, :], workers)
                 _convolve_axis(np.ones((1, n)), kernel, 1, wt1[None, :], workers)
                 off = num1 / wt1 - idx
+                if edge_strips and 4 * radius <= n:
+                    _correct_edge_strips(z, zs, den, off, kernel, axis, dtype, workers)
+                    continue
+            _one_sided_gradient(z, axis, out=a)
+            _conv2(a, kernel, work, workers)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                a /= den
+            if full:
                 a *= off[:, None] if axis == 0 else off[None, :]
             else:
-                idx = np.arange(h if axis == 0 else w, dtype=np.float64)
+                idx = np.arange(n, dtype=np.float64)
                 coord = np.broadcast_to(idx[:, None] if axis == 0 else idx[None, :], (h, w))
                 c = np.where(valid, coord, 0.0).astype(dtype)
                 _conv2(c, kernel, work, workers)
