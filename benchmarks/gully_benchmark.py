@@ -476,22 +476,46 @@ def main() -> None:
                 def same_raster(name):
                     return np.array_equal(read(tmp / "out" / name), read(tmp / "out_former" / name), equal_nan=True)
 
+                def float_raster(name):
+                    """'identical', or the largest difference and how many cells differ (float rasters)."""
+                    a, b = read(tmp / "out" / name).astype(np.float64), read(tmp / "out_former" / name).astype(np.float64)
+                    if np.array_equal(a, b, equal_nan=True):
+                        return "identical"
+                    if not np.array_equal(np.isnan(a), np.isnan(b)):
+                        return "DIFFERENT (nodata cells)"
+                    d = np.abs(np.nan_to_num(a - b))
+                    return f"equal within {d.max():.2e} m ({np.count_nonzero(d)} of {d.size} cells differ)"
+
                 def same_npz(name):
                     a, b = np.load(tmp / "out" / name), np.load(tmp / "out_former" / name)
                     return sorted(a.files) == sorted(b.files) and all(np.array_equal(a[k], b[k]) for k in a.files)
+
+                def table_text(t_new, t_old):
+                    if t_new.equals(t_old):
+                        return "identical"
+                    if list(t_new.columns) != list(t_old.columns) or t_new.shape != t_old.shape:
+                        return "DIFFERENT (shape)"
+                    num = t_new.select_dtypes("number").columns
+                    if not t_new.drop(columns=num).equals(t_old.drop(columns=num)):
+                        return "DIFFERENT"
+                    rel = (t_new[num] - t_old[num]).abs() / t_old[num].abs().where(t_old[num] != 0, 1.0)
+                    worst = rel.max()
+                    return ("equal within a relative " + f"{float(worst.max()):.1e}" + " (" +
+                            ", ".join(f"{c} {v:.1e}" for c, v in worst.items() if v > 0) + ")")
                 same_map = same_raster("gully_map.tif")
-                same_depth = same_raster("depth.tif")
-                same_sens = pd.read_csv(tmp / "out" / "sensitivity.csv").equals(pd.read_csv(tmp / "out_former" / "sensitivity.csv"))
-                others = {"smoothed DEM": same_raster("smoothed.tif"), "whole-patch map": same_raster("gully_map_whole.tif"),
-                          "traced network cells": same_npz("network.npz"),
-                          "validation good fit": former["val"]["good_fit_percent"] == vinfo["good_fit_percent"]}
+                same_depth = float_raster("depth.tif")
+                sens_text = table_text(pd.read_csv(tmp / "out" / "sensitivity.csv"), pd.read_csv(tmp / "out_former" / "sensitivity.csv"))
+                others = {"smoothed DEM": float_raster("smoothed.tif"),
+                          "whole-patch map": "identical" if same_raster("gully_map_whole.tif") else "DIFFERENT",
+                          "traced network cells": "identical" if same_npz("network.npz") else "DIFFERENT",
+                          "validation good fit": "identical" if former["val"]["good_fit_percent"] == vinfo["good_fit_percent"] else "DIFFERENT"}
                 say(f"- former code ({args.against}), same DEM, run just before: mapping {former['map_wall']:.1f} s, "
                     f"sensitivity {former['sens_wall']:.1f} s, validation {former['val_wall']:.1f} s, **whole stage "
                     f"{former['total']:.1f} s**, peak {former['peak']:.2f} GB (load average {former['load']:.1f} at its end); "
                     f"ratio former / new = **{former['total'] / new['total']:.2f}x**; gully map "
-                    f"{'identical' if same_map else 'DIFFERENT'}, depth map {'identical' if same_depth else 'DIFFERENT'}, "
-                    f"sensitivity table {'identical' if same_sens else 'DIFFERENT'}; "
-                    + ", ".join(f"{k} {'identical' if v else 'DIFFERENT'}" for k, v in others.items())
+                    f"{'identical' if same_map else 'DIFFERENT'}, depth map {same_depth}, "
+                    f"sensitivity table {sens_text}; "
+                    + ", ".join(f"{k} {v}" for k, v in others.items())
                     + f"; network length {former['map']['network_length_m']:.0f} m vs {info['network_length_m']:.0f} m")
                 say("- former code's " + cpu_text(former))
                 for i, (f, n) in enumerate(zip(formers, news), 1):
