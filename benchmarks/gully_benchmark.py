@@ -50,9 +50,10 @@ PYSHEDS_VENV_PINS = [PYSHEDS_PIN, "numba==0.61.2", "numpy==2.2.6"]
 CRS = "EPSG:32632"
 # the children import kitegully from here (``--against`` points them at a former revision)
 SRC = os.environ.get("KITEGULLY_BENCH_SRC", str(REPO / "src"))
-# main at the end of session 8 (before session 9's speed work on the gully stage); session 6 compared
-# with 3974773 (main at the end of session 5), which no longer runs the sites' current gully settings
-FORMER = "55a02f9"
+# main at the end of session 9 (before session 10's CPU work on the gully stage); session 9 compared
+# with 55a02f9 (main at session-8 end), session 6 with 3974773 (main at session-5 end, which no longer
+# runs the sites' current gully settings)
+FORMER = "969daf7"
 # the 80 M-cell site of issue 21: its gully settings are the ones timed (the default twin's need
 # checkpoints for head_snap: relief and an orthophoto for gully.crowns, which the synthetic DEM has not)
 SITE = "kamech_full"
@@ -128,10 +129,21 @@ def site_gully_config() -> dict:
     return g
 
 
+def as_rule_process() -> None:
+    """What the gully rule scripts do first in their process: :func:`kitegully.memory.keep_freed_memory`
+    where the revision under test has it (session 10 on), so a former revision runs as its rules did."""
+    sys.path.insert(0, SRC)
+    try:
+        from kitegully.memory import keep_freed_memory
+    except ImportError:
+        return
+    keep_freed_memory()
+
+
 def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> None:
     """Whole gully mapping chain as the gully_map rule runs it, with the full-size site's (:data:`SITE`)
     ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
-    sys.path.insert(0, SRC)
+    as_rule_process()
     from kitegully.gully.pipeline import GullyParams, map_gullies, map_raster
     from kitegully.io.raster import read_raster, write_raster
     from kitegully.io.vectors import write_vector
@@ -172,7 +184,7 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
 
 def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
     """The gully_sensitivity rule's work (its library function with the full-size site's settings), in a child process."""
-    sys.path.insert(0, SRC)
+    as_rule_process()
     from kitegully.gully.network import GullyNetwork
     from kitegully.gully.pipeline import GullyParams
     from kitegully.gully.sensitivity import gully_sensitivity
@@ -199,7 +211,7 @@ def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
 def run_validation(dem_path: str, out_dir: str) -> None:
     """The gully_validate rule's work (:func:`kitegully.gully.validation.score_network` with the default
     site's ``gully.validation`` settings, then the Fig. 9b map), in a child process."""
-    sys.path.insert(0, SRC)
+    as_rule_process()
     from kitegully.gully.plots import validation_map
     from kitegully.gully.validation import UNFILTERED, ValidationParams, score_network
     from kitegully.io.figures import save_figure
@@ -321,6 +333,8 @@ def main() -> None:
                     "the working tree's (empty string: no comparison)")
     ap.add_argument("--grass-runs", type=int, default=3, help="GRASS r.fill.dir runs (median; default 3)")
     ap.add_argument("--fill-only", action="store_true", help="only the depression-filling comparison (no stage, no smoothing)")
+    ap.add_argument("--stage-only", action="store_true", help="only the whole-stage comparison (no smoothing, no fill comparison)")
+    ap.add_argument("--rounds", type=int, default=1, help="whole-stage runs of the former and the new code, alternated (default 1)")
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "gully_benchmark.md"))
     ap.add_argument("--stage-child", nargs=3, metavar=("DEM", "HEADS", "OUTDIR"), help=argparse.SUPPRESS)
     ap.add_argument("--sens-child", nargs=2, metavar=("DEM", "OUTDIR"), help=argparse.SUPPRESS)
@@ -381,23 +395,35 @@ def main() -> None:
         shutil.copy(tmp / "out" / "reference.gpkg", small / "reference.gpkg")
 
         def whole_stage(src: str, out: Path, dem: Path = dem_tif) -> dict:
-            """The three rules' work in child processes importing kitegully from ``src``."""
+            """The three rules' work in child processes importing kitegully from ``src``: wall and CPU
+            (user + system of the child, all its threads) times per rule."""
             env = dict(os.environ, KITEGULLY_BENCH_SRC=src)
             r = {}
             for key, extra in (("map", ["--stage-child", str(dem), str(heads), str(out)]),
                                ("sens", ["--sens-child", str(dem), str(out)]),
                                ("val", ["--val-child", str(dem), str(out)])):
                 t0 = time.perf_counter()
+                c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
                 p = subprocess.run([sys.executable, __file__, "--threads", str(args.threads), *extra],
                                    capture_output=True, text=True, env=env)
+                c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
                 r[key + "_wall"] = time.perf_counter() - t0
+                r[key + "_user"] = c1.ru_utime - c0.ru_utime
+                r[key + "_sys"] = c1.ru_stime - c0.ru_stime
+                r[key + "_cpu"] = r[key + "_user"] + r[key + "_sys"]
                 if p.returncode != 0:
                     raise SystemExit(f"{key} run failed:\n{p.stderr[-3000:]}")
                 r[key] = json.loads(p.stdout.strip().splitlines()[-1])
             r["total"] = r["map_wall"] + r["sens_wall"] + r["val_wall"]
+            r["cpu"] = r["map_cpu"] + r["sens_cpu"] + r["val_cpu"]
             r["peak"] = max(r[k]["peak_gb"] for k in ("map", "sens", "val"))
             r["load"] = os.getloadavg()[0]
             return r
+
+        def cpu_text(r: dict) -> str:
+            return (f"CPU (user + sys) mapping {r['map_cpu']:.1f} ({r['map_user']:.1f} + {r['map_sys']:.1f}), sensitivity "
+                    f"{r['sens_cpu']:.1f} ({r['sens_user']:.1f} + {r['sens_sys']:.1f}), validation {r['val_cpu']:.1f} "
+                    f"({r['val_user']:.1f} + {r['val_sys']:.1f}), whole stage **{r['cpu']:.1f} s**")
 
         if args.against:
             # the former revision's src (its gully stage and fill are timed beside the new ones)
@@ -406,15 +432,19 @@ def main() -> None:
             arc = subprocess.run(["git", "-C", str(REPO), "archive", args.against, "src"], capture_output=True, check=True)
             subprocess.run(["tar", "-x", "-C", str(fsrc)], input=arc.stdout, check=True)
         if not args.fill_only:
-            former = None
+            formers, news = [], []
             if args.against:
-                # the former code first, on the same DEM and reference (one run each)
                 (tmp / "out_former").mkdir()
                 shutil.copy(tmp / "out" / "reference.gpkg", tmp / "out_former" / "reference.gpkg")
                 whole_stage(str(fsrc / "src"), small, small / "dem.tif")  # warm-up
-                former = whole_stage(str(fsrc / "src"), tmp / "out_former")
             whole_stage(str(REPO / "src"), small, small / "dem.tif")  # warm-up
-            new = whole_stage(str(REPO / "src"), tmp / "out")
+            # the former code first, on the same DEM and reference, then the new; --rounds alternates them
+            for _ in range(max(1, args.rounds)):
+                if args.against:
+                    formers.append(whole_stage(str(fsrc / "src"), tmp / "out_former"))
+                news.append(whole_stage(str(REPO / "src"), tmp / "out"))
+            new = news[-1]
+            former = formers[-1] if formers else None
             info, vinfo = new["map"], new["val"]
             say("## Whole gully stage (rules gully_map, gully_sensitivity, gully_validate, one after the other)")
             say("")
@@ -434,6 +464,7 @@ def main() -> None:
                 + " / ".join(f"{v:.1f} %" for v in vinfo["good_fit_percent"].values()))
             say(f"- **whole stage: {new['total']:.1f} s** (issue 21 target <= 90 s on 2 cores), peak memory of any rule "
                 f"{new['peak']:.2f} GB (target < 8 GB); load average {new['load']:.1f} at its end on {os.cpu_count()} CPUs")
+            say("- " + cpu_text(new))
             if former is not None:
                 import pandas as pd
                 import rasterio
@@ -441,17 +472,63 @@ def main() -> None:
                 def read(path):
                     with rasterio.open(path) as src:
                         return src.read(1)
-                same_map = np.array_equal(read(tmp / "out" / "gully_map.tif"), read(tmp / "out_former" / "gully_map.tif"))
-                same_depth = np.array_equal(read(tmp / "out" / "depth.tif"), read(tmp / "out_former" / "depth.tif"), equal_nan=True)
-                same_sens = pd.read_csv(tmp / "out" / "sensitivity.csv").equals(pd.read_csv(tmp / "out_former" / "sensitivity.csv"))
+
+                def same_raster(name):
+                    return np.array_equal(read(tmp / "out" / name), read(tmp / "out_former" / name), equal_nan=True)
+
+                def float_raster(name):
+                    """'identical', or the largest difference and how many cells differ (float rasters)."""
+                    a, b = read(tmp / "out" / name).astype(np.float64), read(tmp / "out_former" / name).astype(np.float64)
+                    if np.array_equal(a, b, equal_nan=True):
+                        return "identical"
+                    if not np.array_equal(np.isnan(a), np.isnan(b)):
+                        return "DIFFERENT (nodata cells)"
+                    d = np.abs(np.nan_to_num(a - b))
+                    return f"equal within {d.max():.2e} m ({np.count_nonzero(d)} of {d.size} cells differ)"
+
+                def same_npz(name):
+                    a, b = np.load(tmp / "out" / name), np.load(tmp / "out_former" / name)
+                    return sorted(a.files) == sorted(b.files) and all(np.array_equal(a[k], b[k]) for k in a.files)
+
+                def table_text(t_new, t_old):
+                    if t_new.equals(t_old):
+                        return "identical"
+                    if list(t_new.columns) != list(t_old.columns) or t_new.shape != t_old.shape:
+                        return "DIFFERENT (shape)"
+                    num = t_new.select_dtypes("number").columns
+                    if not t_new.drop(columns=num).equals(t_old.drop(columns=num)):
+                        return "DIFFERENT"
+                    rel = (t_new[num] - t_old[num]).abs() / t_old[num].abs().where(t_old[num] != 0, 1.0)
+                    worst = rel.max()
+                    return ("equal within a relative " + f"{float(worst.max()):.1e}" + " (" +
+                            ", ".join(f"{c} {v:.1e}" for c, v in worst.items() if v > 0) + ")")
+                same_map = same_raster("gully_map.tif")
+                same_depth = float_raster("depth.tif")
+                sens_text = table_text(pd.read_csv(tmp / "out" / "sensitivity.csv"), pd.read_csv(tmp / "out_former" / "sensitivity.csv"))
+                others = {"smoothed DEM": float_raster("smoothed.tif"),
+                          "whole-patch map": "identical" if same_raster("gully_map_whole.tif") else "DIFFERENT",
+                          "traced network cells": "identical" if same_npz("network.npz") else "DIFFERENT",
+                          "validation good fit": "identical" if former["val"]["good_fit_percent"] == vinfo["good_fit_percent"] else "DIFFERENT"}
                 say(f"- former code ({args.against}), same DEM, run just before: mapping {former['map_wall']:.1f} s, "
                     f"sensitivity {former['sens_wall']:.1f} s, validation {former['val_wall']:.1f} s, **whole stage "
                     f"{former['total']:.1f} s**, peak {former['peak']:.2f} GB (load average {former['load']:.1f} at its end); "
                     f"ratio former / new = **{former['total'] / new['total']:.2f}x**; gully map "
-                    f"{'identical' if same_map else 'DIFFERENT'}, depth map {'identical' if same_depth else 'DIFFERENT'}, "
-                    f"sensitivity table {'identical' if same_sens else 'DIFFERENT'}; network length "
-                    f"{former['map']['network_length_m']:.0f} m vs {info['network_length_m']:.0f} m")
+                    f"{'identical' if same_map else 'DIFFERENT'}, depth map {same_depth}, "
+                    f"sensitivity table {sens_text}; "
+                    + ", ".join(f"{k} {v}" for k, v in others.items())
+                    + f"; network length {former['map']['network_length_m']:.0f} m vs {info['network_length_m']:.0f} m")
+                say("- former code's " + cpu_text(former))
+                for i, (f, n) in enumerate(zip(formers, news), 1):
+                    say(f"- round {i} (former, then new): CPU former / new: mapping {f['map_cpu']:.1f} / {n['map_cpu']:.1f}, "
+                        f"sensitivity {f['sens_cpu']:.1f} / {n['sens_cpu']:.1f}, validation {f['val_cpu']:.1f} / "
+                        f"{n['val_cpu']:.1f}, whole stage {f['cpu']:.1f} / {n['cpu']:.1f} s = **{f['cpu'] / n['cpu']:.2f}x**; "
+                        f"wall {f['total']:.1f} / {n['total']:.1f} s; peak {f['peak']:.2f} / {n['peak']:.2f} GB")
             say("")
+        if args.stage_only:
+            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(args.out).write_text("\n".join(lines) + "\n", encoding="utf-8")
+            print(f"written {args.out}")
+            return
 
         # 2. smoothing: ours vs scipy.ndimage.gaussian_filter
         if not args.fill_only:

@@ -9,8 +9,10 @@ from kitegully.io.raster import read_raster, write_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
 from kitegully.logs import setup_script_logging
+from kitegully.memory import keep_freed_memory
 
 log = setup_script_logging(snakemake.log[0])
+keep_freed_memory()  # whole-DEM temporaries reuse freed heap memory (no page zeroing per array)
 inp, out, crs, source = snakemake.input, snakemake.output, snakemake.params.crs, snakemake.params.dem_source
 params, heads = GullyParams.from_config(snakemake.params.mapping), snakemake.params.heads
 dem, grid = read_raster(inp.dem)
@@ -22,12 +24,10 @@ auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid,
                              needed=params.crowns.enabled)
 tiled = {k: read_raster(inp[k])[0] for k in ("filled", "smoothed", "depth") if k in inp.keys()}  # tiled sites: merged tiles
 ortho = read_orthophoto_on_grid(inp.ortho, grid) if "ortho" in inp.keys() else None  # gully.crowns
-# the depth rasters are written while the fill runs on the other core (on_depth)
 res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads,
                   auto_heads=auto if heads != "digitised" else None, incision=auto, ortho=ortho, **tiled,
-                  on_depth=lambda s, d: (write_raster(out.depth, d, grid), write_raster(out.smoothed, s, grid)))
-if heads != "automatic":
-    check_heads_on_dem(res.heads_inside, inp.heads)
+                  on_depth=lambda s, d: (write_raster(out.depth, d, grid), write_raster(out.smoothed, s, grid)))  # beside the fill
+if heads != "automatic": check_heads_on_dem(res.heads_inside, inp.heads)  # noqa: E701
 write_raster(out.gully_map, map_raster(res.gully, np.isfinite(dem)), grid, nodata=255)
 write_raster(out.gully_map_whole, map_raster(res.gully_whole_patches, np.isfinite(dem)), grid, nodata=255)
 write_vector(res.lines, out.network, layer="gully_network")

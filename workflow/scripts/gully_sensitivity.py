@@ -12,8 +12,10 @@ from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
 from kitegully.logs import setup_script_logging
+from kitegully.memory import keep_freed_memory
 
 log = setup_script_logging(snakemake.log[0])
+keep_freed_memory()  # whole-DEM temporaries reuse freed heap memory (no page zeroing per array)
 inp, crs, sens = snakemake.input, snakemake.params.crs, snakemake.params.sensitivity
 with ThreadPoolExecutor(max_workers=1) as pool:  # the two rasters decoded at once (GDAL releases the GIL)
     later = pool.submit(read_raster, inp.depth)  # the stage's own depth map at sigma_m

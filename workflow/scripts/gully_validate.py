@@ -14,8 +14,10 @@ from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
 from kitegully.logs import setup_script_logging
+from kitegully.memory import keep_freed_memory
 
 log = setup_script_logging(snakemake.log[0])
+keep_freed_memory()  # whole-DEM temporaries reuse freed heap memory (no page zeroing per array)
 inp, out, crs = snakemake.input, snakemake.output, snakemake.params.crs
 params = ValidationParams.from_config(snakemake.params.validation)
 reference = check_reference(read_vector(inp.reference, crs=crs), inp.reference)

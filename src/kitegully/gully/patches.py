@@ -71,7 +71,10 @@ def depth_patches(
     keep[0] = False
     new_id = np.zeros(n + 1, dtype=np.int32)
     new_id[keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
-    out = new_id[labels]
+    # renumbered in place, only at the labelled cells (the rest is 0 already): the same
+    # array as new_id[labels] without a gather over the whole grid
+    out = labels
+    out.ravel()[inside] = new_id[lab]
     table = pd.DataFrame(
         {
             "patch_id": new_id[1:],
