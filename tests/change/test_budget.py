@@ -123,7 +123,8 @@ def test_polygon_groups_are_blocks_equal_to_full_rasterisation(tmp_path):
     pd_testing.assert_frame_equal(blocks, full)                   # same cells in the same order: equal sums, not just close
 
 
-def test_masks_on_a_window_equal_the_whole_grid_cropped(tmp_path):
+@pytest.mark.parametrize("split_vertices", [50_000, 20])
+def test_masks_on_a_window_equal_the_whole_grid_cropped(tmp_path, monkeypatch, split_vertices):
     """A polygon much larger than a tile, with many holes, clipped to the tile: the same cells as rasterised on the whole grid."""
     from rasterio import features
     from shapely.geometry import Polygon
@@ -140,6 +141,7 @@ def test_masks_on_a_window_equal_the_whole_grid_cropped(tmp_path):
     gpd.GeoDataFrame({"k": [1]}, geometry=[Polygon(outer, holes)], crs=CRS).to_file(tmp_path / "big.gpkg")
     whole = features.rasterize([(Polygon(outer, holes), 1)], out_shape=(g.height, g.width), transform=g.transform, fill=0, dtype="uint8").astype(bool)
     spec = [{"name": "bare", "file": str(tmp_path / "big.gpkg"), "by": "k"}]
+    monkeypatch.setattr(bg, "SPLIT_VERTICES", split_vertices)    # 20: the grid is halved down to 64 cells
     for r0, c0, h, w in ((0, 0, g.height, g.width), (7, 11, 33, 41), (g.height - 20, g.width - 25, 20, 25)):
         groups = bg.mask_groups(spec, g.window(r0, c0, h, w))
         np.testing.assert_array_equal(groups[1].mask, whole[r0:r0 + h, c0:c0 + w])
