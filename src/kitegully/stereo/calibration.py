@@ -546,8 +546,8 @@ def measure_targets(image: np.ndarray, predict_camera: Camera, pose: Pose, field
         Printed disc diameter (m).
     allowance_px : float
         Bound on the prediction error (px). A target predicted within ``allowance_px`` plus its
-        measuring window of the frame's edge, whose window then leaves the frame, is dropped with a
-        log line (legitimately at the edge of the frame); a target predicted outside the frame by more
+        measuring window of the frame's edge that is not found (window leaving the frame, or disc cut
+        off) is dropped with a log line (legitimately at the edge of the frame); a target predicted outside the frame by more
         than its window is not looked for.
     name : str
         Image name for messages.
@@ -605,7 +605,8 @@ def measure_targets(image: np.ndarray, predict_camera: Camera, pose: Pose, field
             fill = np.where(np.isfinite(win), win, np.nanmedian(win) if np.isfinite(win).any() else 0.0).astype(np.float32)
             _, _, _, (pu, pv) = cv2.minMaxLoc(cv2.matchTemplate(fill, tpl, cv2.TM_CCOEFF_NORMED))
             found = _centroid(img, np.array([x0 + pu + t, y0 + pv + t], float), r)
-        if found is None and edge[i] < allowance_px + need[i]:
+        weak = found is None or not found[2] > MARK_DETECTION_SIGMA * max(found[3], 1e-6)
+        if weak and edge[i] < allowance_px + need[i]:  # at the frame's edge: cut off or outside, legitimately
             dropped.append(str(field.ids[i]))
             continue
         if found is None or not found[2] > MARK_DETECTION_SIGMA * max(found[3], 1e-6):
