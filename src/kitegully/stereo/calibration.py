@@ -620,3 +620,31 @@ def measure_targets(image: np.ndarray, predict_camera: Camera, pose: Pose, field
     if dropped:
         log.info("%s: %d target(s) at or beyond the frame's edge not measured: %s", name, len(dropped), ", ".join(dropped))
     return TargetMeasurement(Observation(np.array(ids), np.array(uv, float).reshape(-1, 2)), np.array(sig), tuple(dropped))
+
+
+def measure_calibration_images(camera: Camera, predict_camera: Camera, field_true: ControlField, stated: ControlField,
+                               poses: list[Pose], diameter_m: float, noise_dn: float, rng: np.random.Generator,
+                               allowance_px: float, name: str) -> tuple[list[Observation], float]:
+    """Twin step + measurement: render each calibration photograph (targets at their true places) and locate the targets.
+
+    Only the part of each frame around a target is rendered (a 241 px window per target, the plates within
+    200 px of it): identical pixels there, a fraction of a full frame's cost. Returns the observations and the
+    median centroid σ from the image noise (px). Cost: ≈ 0.4 s CPU per image.
+    """
+    obs, sig = [], []
+    for k, pose in enumerate(poses):
+        P = predict_camera.project(field_true.xyz, pose)
+        img = np.full((camera.height, camera.width), np.nan, np.float32)
+        for p in P:
+            if not (-60 < p[0] < camera.width + 60 and -60 < p[1] < camera.height + 60):
+                continue
+            near = np.linalg.norm(P - p, axis=1) < 200
+            win = (int(p[0]) - 120, int(p[1]) - 120, int(p[0]) + 121, int(p[1]) + 121)
+            sub = render_calibration_image(camera, pose, calibration_targets(ControlField(field_true.ids[near], field_true.xyz[near]), diameter_m),
+                                           noise_dn, rng, win)
+            x0, y0, x1, y1 = max(0, win[0]), max(0, win[1]), min(camera.width, win[2]), min(camera.height, win[3])
+            img[y0:y1, x0:x1] = sub[y0:y1, x0:x1]
+        m = measure_targets(img, predict_camera, pose, stated, diameter_m, allowance_px, f"{name} image {k + 1}")
+        obs.append(m.observation)
+        sig.append(m.sigma_px)
+    return obs, float(np.median(np.concatenate(sig)))
