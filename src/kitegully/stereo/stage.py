@@ -26,6 +26,7 @@ import json
 import logging
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -41,6 +42,7 @@ from kitegully.io.tables import write_table
 from kitegully.seeds import rng_for
 from kitegully.stereo.calibration import (ControlField, calibrate_camera, calibrate_camera_weighted, calibration_field,
                                           calibration_poses, calibration_table, convergent_poses, distortion_precision,
+                                          measure_calibration_images,
                                           simulate_observations)
 from kitegully.stereo.matching import MatchParams, disparity_to_points, grid_dem, match_epipolar, triangulate_points
 from kitegully.stereo.metrics import fit_A_vs_M, fit_mae_vs_L, mae, mre
@@ -98,6 +100,13 @@ class StereoParams:
         Height of the calibration images (m) [P] ≈ 3.0.
     calibration.target_sigma_px : float
         Target measurement precision (px). [I] 0.1 px: centroids of round targets ~10 px wide.
+    calibration.targets : str
+        ``"rendered"``: each target a printed disc rendered into the photographs and located
+        (template + weighted centroid, :func:`kitegully.stereo.calibration.measure_targets`), the
+        bundle weighted with the median centroid σ from the noise; ``"simulated"``: projections +
+        N(0, ``target_sigma_px``) (the session-9 model; the calibration test at H = 2–6 m always uses it).
+    calibration.target_diameter_mm, calibration.image_noise_dn : float
+        Printed disc (mm) [I] 10: 15–18 px across at 3.0–3.6 m (see ``TARGET_DIAMETER_M``); image noise (DN) [I] 1.
     calibration.field_sigma_mm : float
         Accuracy of the field coordinates (mm) [P] 0.2.
     calibration.convergent_offset_m, calibration.n_convergent : float, int
@@ -187,6 +196,9 @@ class StereoParams:
                  "mark_diameter_mm"),
     }
 
+    #: optional keys (default: targets simulated)
+    OPTIONAL: ClassVar[dict] = {"calibration": ("targets", "target_diameter_mm", "image_noise_dn")}
+
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "StereoParams":
         """Build from the ``stereo`` section or any subset of its sub-sections (a rule passes only what it uses)."""
@@ -196,7 +208,7 @@ class StereoParams:
             if sec not in cfg:
                 out[sec] = {}
                 continue
-            c = dict(config_section(cfg[sec], f"stereo.{sec}", keys))
+            c = dict(config_section(cfg[sec], f"stereo.{sec}", keys, cls.OPTIONAL.get(sec, ())))
             out[sec] = c
         p = cls(**out)
         p._validate()
@@ -567,6 +579,11 @@ def _dod_figure(dod: np.ndarray, grid: GridSpec, title: str, path: str | Path) -
 
 
 # ----------------------------------------------------------------------------- rule: calibration
+#: [I] bound on the prediction error of a target through the nominal 50 mm lens: 2.8 % of f (51.4 vs 50 mm) at the
+#: 1480 px half-diagonal = 41 px, + principal point (≤ 10 px) + distortion (≤ 4 px) ≈ 55 px → 60 px.
+PREDICTION_ALLOWANCE_PX = 60.0
+
+
 def _calibrate(cams_true, params: StereoParams, seed: int, stations: str, weighted: bool):
     c = params.calibration
     rng = rng_for(seed, "stereo", "calibration")
@@ -577,9 +594,18 @@ def _calibrate(cams_true, params: StereoParams, seed: int, stations: str, weight
     known = ControlField(field.ids, field.xyz + rng.normal(0.0, c["field_sigma_mm"] * 1e-3, field.xyz.shape))
     out = {}
     for side, cam in cams_true.items():
-        obs = simulate_observations(cam, field, poses, c["target_sigma_px"], rng_for(seed, "stereo", "targets", side))
+        sigma = c["target_sigma_px"]
+        if c.get("targets", "simulated") == "rendered":
+            # targets rendered as printed discs and located in the photographs; predicted through the nominal lens
+            nom = _without_io(cam, True, True, True)
+            obs, sigma = measure_calibration_images(cam, nom, field, known, poses, c["target_diameter_mm"] * 1e-3, c["image_noise_dn"],
+                                                    rng_for(seed, "stereo", "target_images", side), PREDICTION_ALLOWANCE_PX, side)
+            log.info("%s: %d targets measured in %d rendered photographs, median centroid σ %.4f px", side,
+                     sum(len(o.ids) for o in obs), len(obs), sigma)
+        else:
+            obs = simulate_observations(cam, field, poses, sigma, rng_for(seed, "stereo", "targets", side))
         if weighted:
-            out[side] = calibrate_camera_weighted(known, obs, cam.width, cam.height, D2H_PIXEL_MM, c["target_sigma_px"],
+            out[side] = calibrate_camera_weighted(known, obs, cam.width, cam.height, D2H_PIXEL_MM, sigma,
                                                   c["field_sigma_mm"] * 1e-3, template=cam, name=side)[0]
         else:
             out[side] = calibrate_camera(known, obs, cam.width, cam.height, D2H_PIXEL_MM, template=cam, name=side)
