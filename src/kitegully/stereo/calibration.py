@@ -567,9 +567,7 @@ def measure_targets(image: np.ndarray, predict_camera: Camera, pose: Pose, field
     Search gate: half the smallest predicted spacing of two targets in this image (never reaches a
     neighbour's disc), at most ``2·allowance_px``. Cost: O(targets · gate²), a few ms per target.
     """
-    import cv2
-
-    from kitegully.stereo.measure import MARK_DETECTION_SIGMA, _centroid, _template, predict_marks
+    from kitegully.stereo.measure import MARK_DETECTION_SIGMA, predict_marks, search_disc
 
     P, R = predict_marks(predict_camera, pose, field.xyz, diameter_m)
     img = np.asarray(image, np.float32)
@@ -594,17 +592,7 @@ def measure_targets(image: np.ndarray, predict_camera: Camera, pose: Pose, field
         dropped.append(str(field.ids[i]))
     for i in np.flatnonzero(look):
         p, r = P[i], float(R[i])
-        tpl = _template(r)
-        t = tpl.shape[0] // 2
-        g = int(np.ceil(gate)) + t
-        u0, v0 = int(round(p[0])), int(round(p[1]))
-        x0, y0, x1, y1 = max(0, u0 - g), max(0, v0 - g), min(w, u0 + g + 1), min(h, v0 + g + 1)
-        found = None
-        if x1 - x0 > tpl.shape[1] and y1 - y0 > tpl.shape[0]:
-            win = img[y0:y1, x0:x1]
-            fill = np.where(np.isfinite(win), win, np.nanmedian(win) if np.isfinite(win).any() else 0.0).astype(np.float32)
-            _, _, _, (pu, pv) = cv2.minMaxLoc(cv2.matchTemplate(fill, tpl, cv2.TM_CCOEFF_NORMED))
-            found = _centroid(img, np.array([x0 + pu + t, y0 + pv + t], float), r)
+        found = search_disc(img, p, r, gate)
         weak = found is None or not found[2] > MARK_DETECTION_SIGMA * max(found[3], 1e-6)
         if weak and edge[i] < allowance_px + need[i]:  # at the frame's edge: cut off or outside, legitimately
             dropped.append(str(field.ids[i]))

@@ -208,8 +208,6 @@ def locate_marks(image: np.ndarray, predicted_uv: np.ndarray, radius_px: np.ndar
     -----
     Cost: O(N · gate²) for the template search; a few ms per mark.
     """
-    import cv2
-
     P = np.asarray(predicted_uv, float)
     R = np.asarray(radius_px, float)
     if len(P) < 2:
@@ -219,21 +217,9 @@ def locate_marks(image: np.ndarray, predicted_uv: np.ndarray, radius_px: np.ndar
     dd[np.diag_indices(len(P))] = np.inf
     gate = 0.5 * float(dd.min())  # [I] half the smallest spacing: the gate never reaches a neighbour's disc
     img = np.asarray(image, np.float32)
-    h, w = img.shape
     uv, sig, con, noi = [], [], [], []
     for i, (p, r) in enumerate(zip(P, R)):
-        tpl = _template(float(r))
-        t = tpl.shape[0] // 2
-        g = int(np.ceil(gate)) + t
-        u0, v0 = int(round(p[0])), int(round(p[1]))
-        x0, y0, x1, y1 = max(0, u0 - g), max(0, v0 - g), min(w, u0 + g + 1), min(h, v0 + g + 1)
-        found = None
-        if x1 - x0 > tpl.shape[1] and y1 - y0 > tpl.shape[0]:
-            win = img[y0:y1, x0:x1]
-            fill = np.where(np.isfinite(win), win, np.nanmedian(win) if np.isfinite(win).any() else 0.0).astype(np.float32)
-            ncc = cv2.matchTemplate(fill, tpl, cv2.TM_CCOEFF_NORMED)
-            _, _, _, (pu, pv) = cv2.minMaxLoc(ncc)
-            found = _centroid(img, np.array([x0 + pu + t, y0 + pv + t], float), float(r))
+        found = search_disc(img, p, float(r), gate)
         if found is None or not found[2] > MARK_DETECTION_SIGMA * max(found[3], 1e-6):
             why = "its window leaves the image or its rendered part" if found is None else (f"the brightest disc there has a contrast of {found[2]:.1f} DN against "
                                                                         f"{found[3]:.1f} DN of noise, below {MARK_DETECTION_SIGMA:g} σ")
@@ -244,6 +230,39 @@ def locate_marks(image: np.ndarray, predicted_uv: np.ndarray, radius_px: np.ndar
         con.append(found[2])
         noi.append(found[3])
     return MarkMeasurement(np.array(uv), np.array(sig), np.array(con), np.array(noi))
+
+
+def search_disc(img: np.ndarray, predicted: np.ndarray, radius_px: float, gate_px: float):
+    """Template search for a printed disc within ``gate_px`` of ``predicted``, then its weighted centroid.
+
+    Parameters
+    ----------
+    img : ndarray
+        Grey image (float32; NaN where nothing was rendered).
+    predicted : ndarray
+        Predicted (u, v) in pixels.
+    radius_px, gate_px : float
+        Disc radius and search radius in pixels.
+
+    Returns
+    -------
+    tuple or None
+        :func:`_centroid`'s result at the best normalised correlation, or None where the
+        search window leaves the image. O(gate² · template) per disc.
+    """
+    import cv2
+    h, w = img.shape
+    tpl = _template(radius_px)
+    t = tpl.shape[0] // 2
+    g = int(np.ceil(gate_px)) + t
+    u0, v0 = int(round(predicted[0])), int(round(predicted[1]))
+    x0, y0, x1, y1 = max(0, u0 - g), max(0, v0 - g), min(w, u0 + g + 1), min(h, v0 + g + 1)
+    if not (x1 - x0 > tpl.shape[1] and y1 - y0 > tpl.shape[0]):
+        return None
+    win = img[y0:y1, x0:x1]
+    fill = np.where(np.isfinite(win), win, np.nanmedian(win) if np.isfinite(win).any() else 0.0).astype(np.float32)
+    _, _, _, (pu, pv) = cv2.minMaxLoc(cv2.matchTemplate(fill, tpl, cv2.TM_CCOEFF_NORMED))
+    return _centroid(img, np.array([x0 + pu + t, y0 + pv + t], float), radius_px)
 
 
 def _to_uint8(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
