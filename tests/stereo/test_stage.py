@@ -171,3 +171,15 @@ def test_matching_residual_measures_a_known_disparity_error():
     # bilinear interpolation of independent pixel errors averages them a little: σ between 0.5 and 1.0 × 0.05
     assert 0.025 < m["sigma_d_px"] < 0.052
     assert m["y_parallax_rms_px"] < 1e-6  # true orientation: no vertical parallax
+
+
+def test_surface_consistent_drops_a_false_match_along_the_epipolar_line():
+    from kitegully.stereo.stage import surface_consistent
+
+    rng = np.random.default_rng(0)
+    uv = rng.uniform(0, 400, (500, 2))
+    d = -150 + 0.05 * uv[:, 0] + np.where(uv[:, 1] > 200, 6.0, 0.0)  # a tilted surface with a 6 px step (a rim)
+    d[7] = 55.0  # the right row, the wrong place: it fits the coplanarity condition
+    keep = surface_consistent(uv, d, 10.0)
+    assert not keep[7] and keep.sum() == 499
+    assert surface_consistent(uv[:5], d[:5], 10.0).all()  # too few ties to judge: all kept

@@ -306,6 +306,9 @@ def sift_tie_points(img_left: np.ndarray, img_right: np.ndarray, ratio: float = 
     if da is None or db is None or len(ka) < 8 or len(kb) < 8:
         raise InputError(f"tie points: SIFT found {len(ka)} keypoints in the left and {len(kb)} in the right image; "
                          "the relative orientation needs at least 8 matched points")
+    # FLANN's randomised k-d trees draw from OpenCV's global random stream: seeded here, the tie points are a
+    # function of the photographs alone, not of whatever ran before in the process
+    cv2.setRNGSeed(0)
     flann = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})
     pairs = flann.knnMatch(da, db, k=2)
     good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < ratio * p[1].distance]

@@ -20,6 +20,10 @@ import numpy as np
 from kitegully import InputError
 from kitegully.twin.camera import Camera, Pose
 
+# [I] Re-selections of the inliers against the adjusted relative orientation: the set settles in one
+# or two rounds when RANSAC's model was close; five bound the work when it was not.
+MAX_INLIER_ROUNDS = 5
+
 
 def relative_orientation_from_poses(pose_left: Pose, pose_right: Pose) -> tuple[np.ndarray, np.ndarray]:
     """``(R, T)`` with ``x_right = R x_left + T`` (camera frames, m) from two world poses."""
@@ -71,6 +75,7 @@ def relative_orientation(cam_left: Camera, cam_right: Camera, uv_left: np.ndarra
         raise InputError(f"relative orientation: {len(uv_left)} matched points given; the coplanarity condition needs at least 8")
     xl, xr = _normalised(cam_left, uv_left), _normalised(cam_right, uv_right)
     f = 0.5 * (cam_left.f + cam_right.f)
+    cv2.setRNGSeed(0)  # RANSAC draws from OpenCV's global stream: the same points give the same orientation
     E, mask = cv2.findEssentialMat(xl, xr, np.eye(3), method=cv2.RANSAC, prob=0.9999, threshold=threshold_px / f)
     if E is None or E.shape != (3, 3):
         raise InputError("relative orientation: the matched points admit no unique essential matrix (degenerate geometry)")
@@ -80,7 +85,29 @@ def relative_orientation(cam_left: Camera, cam_right: Camera, uv_left: np.ndarra
         R, t = np.asarray(approx[0], float), np.asarray(approx[1], float).ravel()
     inl = np.ravel(mask).astype(bool)
     R, t = _refine_coplanarity(R, np.ravel(t), xl[inl], xr[inl])
+    # The RANSAC's inliers belong to its minimal-sample model: over a flat, narrow scene that model can
+    # be far from the adjusted one, so points it accepted may be outliers of the adjustment (and the
+    # reverse). The inliers are re-selected against the adjusted model and the adjustment repeated
+    # until the set no longer changes, so the result follows from the points, not from RANSAC's draw.
+    thr = threshold_px / f
+    for _ in range(MAX_INLIER_ROUNDS):
+        new = np.abs(_sampson(R, t, xl, xr)) < thr
+        if new.sum() < 8 or np.array_equal(new, inl):
+            break
+        inl = new
+        R, t = _refine_coplanarity(R, t, xl[inl], xr[inl])
     return R, t / np.linalg.norm(t) * base_m, inl
+
+
+def _sampson(R: np.ndarray, t: np.ndarray, xl: np.ndarray, xr: np.ndarray) -> np.ndarray:
+    """Sampson distance (normalised image units) of each point pair to the coplanarity condition of (R, t)."""
+    t = np.ravel(t) / np.linalg.norm(t)
+    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+    E = tx @ R
+    hl = np.column_stack([xl, np.ones(len(xl))])
+    hr = np.column_stack([xr, np.ones(len(xr))])
+    Ex, Etx = hl @ E.T, hr @ E
+    return np.sum(hr * Ex, axis=1) / np.sqrt(Ex[:, 0] ** 2 + Ex[:, 1] ** 2 + Etx[:, 0] ** 2 + Etx[:, 1] ** 2)
 
 
 def _refine_coplanarity(R: np.ndarray, t: np.ndarray, xl: np.ndarray, xr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -93,8 +120,6 @@ def _refine_coplanarity(R: np.ndarray, t: np.ndarray, xl: np.ndarray, xr: np.nda
     from scipy.optimize import least_squares
 
     t = t / np.linalg.norm(t)
-    hl = np.column_stack([xl, np.ones(len(xl))])
-    hr = np.column_stack([xr, np.ones(len(xr))])
     # base direction on a tangent plane of the unit sphere at t
     a = np.cross(t, [0.0, 0.0, 1.0] if abs(t[2]) < 0.9 else [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a)
@@ -106,13 +131,7 @@ def _refine_coplanarity(R: np.ndarray, t: np.ndarray, xl: np.ndarray, xr: np.nda
         return Rp, tp / np.linalg.norm(tp)
 
     def resid(p):
-        Rp, tp = unpack(p)
-        tx = np.array([[0, -tp[2], tp[1]], [tp[2], 0, -tp[0]], [-tp[1], tp[0], 0]])
-        E = tx @ Rp
-        Ex = hl @ E.T
-        Etx = hr @ E
-        num = np.sum(hr * Ex, axis=1)
-        return num / np.sqrt(Ex[:, 0] ** 2 + Ex[:, 1] ** 2 + Etx[:, 0] ** 2 + Etx[:, 1] ** 2)
+        return _sampson(*unpack(p), xl, xr)
 
     sol = least_squares(resid, np.zeros(5), method="lm", xtol=1e-14, ftol=1e-14)
     return unpack(sol.x)

@@ -288,6 +288,52 @@ def _render_pair(rig: StereoRig, height: Callable, texture, noise_dn: float, rng
 
 
 # ----------------------------------------------------------------------------- processing (observed data only)
+# [I] Margin of the disparity search beyond the tie points' range (px): a coarse pyramid level's step
+# plus the relief between tie points; also the largest step between a tie and its neighbours that is
+# still taken for the surface.
+DISPARITY_MARGIN_PX = 10.0
+# [I] Neighbours a tie's disparity is compared with: enough for a robust median (a false match among
+# them is outvoted), few enough to stay local at the ties' spacing (a few mm on the box).
+TIE_NEIGHBOURS = 8
+
+
+def surface_consistent(uv: np.ndarray, disparity: np.ndarray, max_step_px: float, k: int = TIE_NEIGHBOURS) -> np.ndarray:
+    """Which tie points lie on the surface their neighbours describe (mask).
+
+    A false match along an epipolar line satisfies the coplanarity condition, so the relative
+    orientation keeps it, but its disparity is unlike that of the ties around it: the soil surface is
+    continuous at the ties' spacing. A tie is kept when its disparity is within ``max_step_px`` of the
+    median of its ``k`` nearest neighbours (rectified image positions).
+
+    Parameters
+    ----------
+    uv : ndarray (N, 2)
+        Rectified left-image positions of the ties (px).
+    disparity : ndarray (N,)
+        Their disparities (px).
+    max_step_px : float
+        Largest accepted difference to the neighbours' median (px).
+    k : int
+        Neighbours compared with.
+
+    Returns
+    -------
+    ndarray of bool (N,)
+        True for ties kept. With fewer than ``k + 1`` ties every tie is kept.
+
+    Notes
+    -----
+    Cost: O(N log N) (k-d tree).
+    """
+    from scipy.spatial import cKDTree
+
+    d = np.asarray(disparity, float)
+    if d.size <= k:
+        return np.ones(d.size, bool)
+    _, idx = cKDTree(np.asarray(uv, float)).query(uv, k=k + 1)
+    return np.abs(d - np.median(d[idx[:, 1:]], axis=1)) <= max_step_px
+
+
 class PairProcessor:
     """The paper's processing of one set-up: relative orientation, rectification, absolute orientation, DEMs.
 
@@ -323,11 +369,14 @@ class PairProcessor:
         self.model_pose = Pose(np.eye(3), np.zeros(3))
         self.marks_xyz = np.asarray(marks_xyz, float)
         self.to_world, abs_rms = self._absolute(marks_l, marks_r)
-        dt = self.rect.rectify_points(tie_l[inl], "left")[:, 0] - self.rect.rectify_points(tie_r[inl], "right")[:, 0]
-        # [I] the search range is the inlier ties' disparities ± 10 px, never wider than the depth range H ± 0.3 m
-        # given to the rectification (a false match along an epipolar line passes the coplanarity RANSAC)
+        rl = self.rect.rectify_points(tie_l[inl], "left")
+        dt = rl[:, 0] - self.rect.rectify_points(tie_r[inl], "right")[:, 0]
+        dt = dt[surface_consistent(rl, dt, DISPARITY_MARGIN_PX)]
+        # [I] the search range is the surface's tie disparities ± 10 px, never wider than the depth range
+        # H ± 0.3 m given to the rectification
         lo, hi = sorted(np.ravel(self.rect.disparity_for_depth(np.array([H_m + 0.3, H_m - 0.3]))))
-        self.d_range = (float(max(dt.min() - 10.0, lo)), float(min(dt.max() + 10.0, hi)))
+        m = DISPARITY_MARGIN_PX
+        self.d_range = (float(max(dt.min() - m, lo)), float(min(dt.max() + m, hi))) if dt.size else (float(lo), float(hi))
         self.cams = cams
         self.match = match
         self.B_m, self.H_m = float(B_m), float(H_m)
