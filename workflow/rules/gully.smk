@@ -17,10 +17,17 @@ if "gully" in config:
     if GULLY["heads_file"] is None and not IS_TWIN and GULLY["heads"] != "automatic":
         raise WorkflowError("Invalid configuration: gully.heads_file: a real site must name its gully head file")
 
+    if GULLY["dem"] == "file" and not GULLY.get("dem_file"):
+        raise WorkflowError("Invalid configuration: gully.dem: file needs gully.dem_file (a DEM GeoTIFF in the site CRS)")
+    if GULLY.get("dem_file") and GULLY["dem"] != "file":
+        raise WorkflowError(f"Invalid configuration: gully.dem_file is given but gully.dem is {GULLY['dem']}; set gully.dem: file to map on it")
+
     def mapping_dem(wildcards=None):
         """The DEM the gullies are mapped on, chosen by gully.dem."""
         if GULLY["dem"] == "dense":
             return result("dense", "dsm.tif")
+        if GULLY["dem"] == "file":  # a DEM the site hands in (LiDAR, TLS, another software's DSM), checked
+            return checked_dem("gully")
         # gully.dem: truth_plus_noise, an evaluation stand-in (twins only): NOT photogrammetric.
         return result("gully", "standin_dem_truth_plus_noise.tif")
 
@@ -93,7 +100,7 @@ if "gully" in config:
             mapping=GULLY_MAPPING,
             heads=GULLY["heads"],
             automatic_heads=GULLY["automatic_heads"],
-            dem_source=GULLY["dem"],
+            dem_source=GULLY["dem_file"] if GULLY["dem"] == "file" else GULLY["dem"],
             crs=config["site"]["crs"],
         threads: GULLY["threads"]
         log:

@@ -61,3 +61,37 @@ if "sfm" in config:
             "../scripts/inputs_check.py"
 
     add_targets(epoch_results("inputs", "report.json"))
+
+
+# DEM files a site hands to the DEM stages instead of (or besides) photographs (issue 17: a LiDAR
+# or TLS DTM, another software's DSM): gully.dem_file (with gully.dem: file) and polygons.dem_file.
+# One cheap rule per file checks it (CRS, grid, undeclared nodata sentinels) and writes the copy the
+# stage reads (float32, NaN = nodata), so every rule of the stage sees the same checked elevations.
+DEM_FILES = {
+    s: config[s]["dem_file"] for s in ("gully", "polygons")
+    if s in config and config[s].get("dem_file") and (s != "gully" or config[s]["dem"] == "file")
+}
+
+
+def checked_dem(stage):
+    """Path of the checked copy of ``<stage>.dem_file``."""
+    return result("inputs", f"dem/{stage}.tif")
+
+
+if DEM_FILES:
+
+    rule check_dem_file:
+        input:
+            dem=lambda wc: DEM_FILES[wc.stage],
+        output:
+            dem=result("inputs", "dem/{stage}.tif"),
+        wildcard_constraints:
+            stage="|".join(DEM_FILES),
+        params:
+            crs=config["site"]["crs"],
+            nodata=lambda wc: config[wc.stage].get("dem_nodata"),
+            key=lambda wc: f"{wc.stage}.dem_file",
+        log:
+            logfile("inputs", "dem_{stage}"),
+        script:
+            "../scripts/inputs_dem_file.py"

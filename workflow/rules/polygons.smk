@@ -7,9 +7,11 @@ if "polygons" in config:
     POLY_CAT = "Gully polygons"
     POLY_ATTRIBUTION = config["site"].get("attribution")
     # null dem_file: the DEM twin's TLS-like DTM on a DEM twin site (issue 16), else the dense DSM
-    POLY_DEM = POLY["dem_file"] or (result("twin", "observed/dtm.tif") if "dem_twin" in config else result("dense", "dsm.tif"))
+    # a dem_file is read through its checked copy (rule check_dem_file: CRS, grid, nodata)
+    POLY_DEM = checked_dem("polygons") if POLY["dem_file"] else (
+        result("twin", "observed/dtm.tif") if "dem_twin" in config else result("dense", "dsm.tif"))
     POLY_T = [float(t) for t in POLY["conditioning"]["thresholds_m"]]
-    POLY_METHOD = {k: v for k, v in POLY.items() if k not in ("dem_file", "evaluation", "figure_max_px")}
+    POLY_METHOD = {k: v for k, v in POLY.items() if k not in ("dem_file", "dem_nodata", "evaluation", "figure_max_px")}
 
     def poly_set(t):
         return result("polygons", f"gully_polygons_t{t:g}.gpkg")

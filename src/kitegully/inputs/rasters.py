@@ -9,6 +9,7 @@ import rasterio
 from pyproj import CRS
 from rasterio.enums import Resampling
 
+from kitegully import InputError
 from kitegully.inputs.crs import crs_label
 from kitegully.inputs.findings import Findings
 
@@ -30,11 +31,12 @@ def _sentinel_hits(data: np.ndarray) -> list[tuple[float, int]]:
     return hits
 
 
-def check_raster(path: str | Path, site_crs: CRS, declared_nodata: float | None, found: Findings, key: str = "inputs.rasters") -> None:
+def check_raster(path: str | Path, site_crs: CRS, declared_nodata: float | None, found: Findings, key: str = "inputs.rasters",
+                 nodata_key: str | None = None) -> None:
     """Check one raster; record errors in ``found``.
 
-    ``declared_nodata`` is the config's value (``inputs.rasters[].nodata``); the file's own
-    nodata tag counts as declared too. The data are read decimated to at most
+    ``declared_nodata`` is the config's value (``inputs.rasters[].nodata``, or ``nodata_key``
+    where the raster is named elsewhere); the file's own nodata tag counts as declared too. The data are read decimated to at most
     ``MAX_SAMPLE_SIDE`` cells a side (nearest neighbour keeps sentinel values intact), so
     the cost is O(MAX_SAMPLE_SIDE²) whatever the raster size.
     """
@@ -73,6 +75,58 @@ def check_raster(path: str | Path, site_crs: CRS, declared_nodata: float | None,
             s, n = hits[0]
             value = f"{s:g}" if s < 1e30 else "3.4e38 (float32 maximum)"
             found.error(src, f"{n} cells hold {value} but the raster declares no such nodata value; "
-                             f"declare it (nodata in the file or {key}[].nodata) so it is not read as elevation")
+                             f"declare it (nodata in the file or {nodata_key or key + '[].nodata'}) so it is not read as elevation")
             return
         found.facts.setdefault("rasters", []).append({"path": src, "cell_m": rx, "width": ds.width, "height": ds.height})
+
+
+def read_dem_file(path: str | Path, site_crs: str, declared_nodata: float | None, key: str,
+                  nodata_key: str | None = None) -> tuple[np.ndarray, "GridSpec"]:
+    """A DEM GeoTIFF a site hands in (LiDAR, TLS, another software's DSM), checked and read as float32.
+
+    Parameters
+    ----------
+    path : str or Path
+        The DEM file.
+    site_crs : str
+        The site's CRS; the DEM must be in it (projected, metres: the site CRS is checked so).
+    declared_nodata : float or None
+        Nodata value stated in the configuration; the file's own nodata tag counts too.
+    key : str
+        Config key naming the file, for the messages (e.g. ``gully.dem_file``).
+    nodata_key : str, optional
+        Config key of ``declared_nodata`` (messages); default ``<key's section>.dem_nodata``.
+
+    Returns
+    -------
+    data : ndarray float32 (rows, cols)
+        Elevations (m), NaN where the file or the configuration says nodata.
+    grid : GridSpec
+
+    Raises
+    ------
+    InputError
+        One sentence naming the file: missing, unreadable, no CRS or another CRS, rotated grid,
+        non-square cells, nodata sentinels nobody declared, or no valid elevation.
+
+    Notes
+    -----
+    Cost: one decimated read for the checks (O(MAX_SAMPLE_SIDE²)) and one full read, O(cells).
+    """
+    from kitegully.inputs.crs import site_crs as parse_site_crs
+    from kitegully.io.raster import grid_of
+
+    path = Path(path)
+    found = Findings()
+    check_raster(path, parse_site_crs(site_crs), declared_nodata, found, key=key,
+                 nodata_key=nodata_key or f"{key.rsplit('.', 1)[0]}.dem_nodata")
+    found.raise_for_errors()
+    with rasterio.open(path) as ds:
+        grid = grid_of(ds, path)
+        data = ds.read(1).astype(np.float32)
+        for v in (ds.nodata, declared_nodata):
+            if v is not None and not np.isnan(v):
+                data[data == np.float32(v)] = np.nan
+    if not np.isfinite(data).any():
+        raise InputError(f"{path}: the DEM named in {key} holds no valid elevation")
+    return data, grid

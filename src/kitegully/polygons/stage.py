@@ -181,7 +181,7 @@ class PolygonParams:
     def from_config(cls, cfg: Mapping[str, Any]) -> "PolygonParams":
         """Build from the ``polygons:`` section (nested keys as in ``polygons.schema.yaml``)."""
         cfg = config_section(cfg, "polygons", ["cell_m", "gap_fill", "breaklines", "thalweg", "transects", "conditioning", "morphometry"],
-                             optional=["dem_file", "evaluation", "figure_max_px"])
+                             optional=["dem_file", "dem_nodata", "evaluation", "figure_max_px"])
         g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"])
         b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"],
                            optional=["ground_segment_m"])
