@@ -18,9 +18,8 @@ import pandas as pd
 import yaml
 
 from kitegully.closerange import CloseRangeParams
-from kitegully.closerange.model import detection_rays, match_markers, read_oriented_photos, triangulate_spheres, verify_spheres
-from kitegully.closerange.spheres import detect_spheres
-from kitegully.closerange.stage import _original_photos, _read_photos, scene_walk
+from kitegully.closerange.model import read_oriented_photos
+from kitegully.closerange.stage import _original_photos, _read_photos, georeference_on_spheres, scene_walk
 from kitegully.georef.similarity import Similarity
 from kitegully.io.raster import read_raster
 
@@ -39,25 +38,6 @@ def stage_params(cfg: dict) -> CloseRangeParams:
             "rule_min_paint_fraction", "rule_strip_width_m", "on_scene_failure")
     return CloseRangeParams.from_config(dict({k: cr[k] for k in keys if k in cr}, pole_height_m=cr["walk"].get("pole_height_m", 3.0),
                                              sphere_radius_m=cfg["obia"]["scenes"]["marker_radius_m"]))
-
-
-def sphere_similarity(photos, images, survey: pd.DataFrame, params: CloseRangeParams) -> Similarity:
-    """The stage's sphere similarity (closerange.stage.photogrammetric_orthophoto, same steps)."""
-    O, D, pid, alpha = [], [], [], []
-    for k, ph in enumerate(photos):
-        det = detect_spheres(images[ph.name], ph.camera, params.spheres)
-        if len(det):
-            o, d = detection_rays(ph, det[["u_px", "v_px"]].to_numpy())
-            O.append(o)
-            D.append(d)
-            pid += [k] * len(det)
-            alpha += det["alpha_rad"].tolist()
-    O, D, pid, alpha = np.concatenate(O), np.concatenate(D), np.array(pid), np.array(alpha)
-    centres = np.array([p.centre for p in photos])
-    ring = float(np.median(np.linalg.norm(centres - centres.mean(axis=0), axis=1)))
-    tol = params.sphere_tolerance_m * ring / 5.0 if ring > 0 else params.sphere_tolerance_m
-    found_all = triangulate_spheres(O, D, pid, tol)
-    return found_all, O, alpha, centres
 
 
 @dataclass
@@ -98,26 +78,8 @@ def load_scene(results: Path, scene: str, cache: Path, site: str = "kamech_twin"
         sim = Similarity(s["scale"], np.array(s["rotation"]), np.array(s["translation_m"]))
     else:
         prepared = _read_photos(d / "sfm_work" / "images", [p.name for p in photos])
-        survey = pd.read_csv(od / "markers.csv")
-        found_all, O, alpha, centres = sphere_similarity(photos, prepared, survey, params)
-        checks_all = verify_spheres(found_all, O, alpha, sparse)
-        found = [f for f, c in zip(found_all, checks_all) if c["sphere"]]
-        checks = [c for c in checks_all if c["sphere"]]
-        model_xyz = np.array([f[0] for f in found]).reshape(-1, 3)
-        radii = np.array([c["radius"] for c in checks])
-        sxyz = survey[["x", "y", "z"]].to_numpy(float)
-        ids = survey["gcp_id"].astype(str).tolist()
-        A = np.column_stack([sxyz[:, 0] - sxyz[:, 0].mean(), sxyz[:, 1] - sxyz[:, 1].mean(), np.ones(len(sxyz))])
-        plane = np.linalg.lstsq(A, sxyz[:, 2], rcond=None)[0]
-
-        def on_poles(sim_) -> bool:
-            c = sim_.apply(centres)
-            g = plane[0] * (c[:, 0] - sxyz[:, 0].mean()) + plane[1] * (c[:, 1] - sxyz[:, 1].mean()) + plane[2] - params.sphere_radius_m
-            h = float(np.median(c[:, 2] - g))
-            return 0.5 * params.pole_height_m <= h <= 2.0 * params.pole_height_m
-
-        sim = match_markers(model_xyz, sxyz, ids, params.marker_budget_m, plausible=on_poles, radii=radii,
-                            radius_m=params.sphere_radius_m)[0]
+        # the stage's own sphere georeferencing (closerange.stage.georeference_on_spheres)
+        sim = georeference_on_spheres(photos, prepared, sparse, pd.read_csv(od / "markers.csv"), params, str(d), scene).sim
         cf.write_text(json.dumps(sim.as_dict()))
     if prepared is None:
         prepared = {p.name: None for p in photos}
