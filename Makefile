@@ -111,7 +111,7 @@ lowcost-5mm-cost: $(STAMP)
 
 # Close-range SfM of all OBIA scenes (issue 20; the default run builds closerange.scenes, one
 # scene): pole photos -> SfM -> 2 cm orthophotos -> OBIA, results/<site>/obia/closerange_sfm.csv
-# and closerange_accuracy.csv (all 10: 17 min 43 s and 20 min 25 s wall on 2 cores, session 9).
+# and closerange_accuracy.csv (all 10: 19 min 59 s wall on 2 idle cores, session 11; 17-20 min in session 9).
 # on_scene_failure: record: a scene that cannot be georeferenced (none since session 8: 08 now registers
 # with closerange.sfm_affine_features: fallback, ~26 min of its own on the loaded machine) is a `failed`
 # row with its one sentence, and the overall accuracy is over the scenes that succeeded ("9 of 10").
