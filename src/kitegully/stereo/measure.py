@@ -328,15 +328,7 @@ def coplanarity_residuals_px(cam_left: Camera, cam_right: Camera, R: np.ndarray,
     The Sampson distance is the first-order distance of the 4-vector (x_l, y_l, x_r, y_r) to the
     epipolar variety; with σ per coordinate its RMS over many points is σ (one constrained direction).
     """
-    from kitegully.stereo.rectify import _normalised
+    from kitegully.stereo.rectify import _normalised, _sampson
 
-    t = np.asarray(T, float).ravel()
-    t = t / np.linalg.norm(t)
-    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-    E = tx @ np.asarray(R, float)
-    hl = np.column_stack([_normalised(cam_left, uv_left), np.ones(len(uv_left))])
-    hr = np.column_stack([_normalised(cam_right, uv_right), np.ones(len(uv_right))])
-    Ex, Etx = hl @ E.T, hr @ E
-    num = np.sum(hr * Ex, axis=1)
     f = 0.5 * (cam_left.f + cam_right.f)
-    return f * num / np.sqrt(Ex[:, 0] ** 2 + Ex[:, 1] ** 2 + Etx[:, 0] ** 2 + Etx[:, 1] ** 2)
+    return f * _sampson(np.asarray(R, float), np.asarray(T, float), _normalised(cam_left, uv_left), _normalised(cam_right, uv_right))
