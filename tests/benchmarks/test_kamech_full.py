@@ -1,0 +1,58 @@
+"""benchmarks/kamech_full.py: the accuracy rows and the re-tabulation of a finished run."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import kamech_full as kf  # noqa: E402
+
+
+def _site(tmp_path: Path) -> Path:
+    site = tmp_path / "site"
+    (site / "polygons").mkdir(parents=True)
+    (site / "change").mkdir()
+    (site / "validate/epoch2").mkdir(parents=True)
+    pd.DataFrame({"gully_id": [0, 1, 2, -1, -1], "kind": ["wadi", "gully", "gully", "all", "wide"],
+                  "iou": [0.7, 0.2, 0.1, 0.4, 0.55]}).to_csv(site / "polygons/polygon_scores.csv", index=False)
+    pd.DataFrame({"quantity": ["width (m)", "depth (m)", "volume, all sections vs all true gullies (m3)"],
+                  "median_abs_error": [0.8, 0.2, float("nan")], "error_pct": [float("nan")] * 2 + [-6.3]}
+                 ).to_csv(site / "polygons/morphometry_errors.csv", index=False)
+    pd.DataFrame({"quantity": ["site_net_error_pct", "headcut median |error| (heads that retreated)"],
+                  "value": [4.0, 0.63], "unit": ["%", "m"]}).to_csv(site / "change/evaluation_summary.csv", index=False)
+    pd.DataFrame({"statistic": ["mean", "sd", "n"], "value_m": [-0.3, 0.25, 454]}
+                 ).to_csv(site / "validate/epoch2/checkpoint_summary.csv", index=False)
+    return site
+
+
+def test_polygon_rows_carry_the_issues_metric_not_only_the_median(tmp_path):
+    acc = kf.accuracies(_site(tmp_path))
+    # the issue's IoU is over the cells of all gullies wider than 2 m, not a median of per-gully IoUs
+    assert acc["polygon IoU, gullies wider than 2 m"] == pytest.approx(0.55)
+    assert acc["polygon IoU (median over gullies)"] == pytest.approx(0.2)  # summary rows (id -1) left out
+    assert acc["polygon width median abs error"] == pytest.approx(0.8)
+    assert acc["polygon depth median abs error"] == pytest.approx(0.2)
+    assert acc["polygon volume error"] == pytest.approx(-6.3)
+    assert acc["headcut retreat median abs error"] == pytest.approx(0.63)
+    assert acc["checkpoint SD, epoch 2"] == pytest.approx(0.25) and acc["checkpoint n, epoch 2"] == 454
+    assert set(acc) <= set(kf.PAPER)  # every row has its paper value and target entry
+
+
+def test_retabulation_keeps_the_timed_rows_only(tmp_path):
+    table = tmp_path / "benchmark.csv"
+    assert kf.timed_rows(table) == []
+    pd.DataFrame({"extent": "x", "kind": ["run", "run", "scaling", "rule", "accuracy"],
+                  "item": ["total wall (Snakemake, --cores 2)", "largest peak memory of any job",
+                           "tiled stages speed-up 1 -> 2 cores", "twin wall", "checkpoint SD"],
+                  "value": [7000.0, 5000.0, 1.6, 200.0, 0.1], "unit": ["s", "MB", "x", "s", "m"],
+                  "paper": [None, None, None, None, 0.22], "target": ["<= 10800 (3 h)", "<= 8000", None, None, None]}
+                 ).to_csv(table, index=False)
+    rows = kf.timed_rows(table)
+    assert [r[1] for r in rows] == ["total wall (Snakemake, --cores 2)", "tiled stages speed-up 1 -> 2 cores"]
+    assert rows[0][2] == 7000.0 and rows[0][5] == "<= 10800 (3 h)" and rows[1][5] is None
