@@ -107,6 +107,28 @@ def test_no_bridge_without_a_mapped_reach_downstream_and_green_flat_grass_is_no_
     assert capped.bridged.sum() == 0
 
 
+
+def test_a_tiled_site_traces_and_bridges_under_the_same_crowns():
+    """The tiled path (crown mask and surface in one job, tiled fill, the map given both) equals the untiled map."""
+    from kitegully.gully.pipeline import crowns_on, tracing_surface
+    from kitegully.terrain.tiled_fill import tiled_priority_flood_fill
+
+    grid, z, rgb, xs, ys = channel_with_shrubs()
+    hx, hy = np.array([6.0]), np.array([YC])
+    params = _params(True)
+    ref = map_gullies(z, grid, hx, hy, params, incision=IP, ortho=rgb)
+    hidden = crowns_on(z, grid, params, IP, rgb)
+    _, z_trace, _ = tracing_surface(z, grid, params, incision=IP, hidden=hidden)
+    filled = tiled_priority_flood_fill(z_trace, 37)
+    got = map_gullies(z, grid, hx, hy, params, incision=IP, filled=filled, crown_mask=hidden)
+    assert np.array_equal(got.crowns, ref.crowns) and np.array_equal(got.network.cells, ref.network.cells)
+    assert np.array_equal(got.gully, ref.gully) and np.array_equal(got.bridged, ref.bridged) and ref.bridged.any()
+    # a fill made on another surface than the crowns' cannot be checked: without the mask it is refused
+    with pytest.raises(ValueError, match="needs the crown mask"):
+        map_gullies(z, grid, hx, hy, params, incision=IP, ortho=rgb, filled=filled)
+    with pytest.raises(ValueError, match="crown mask has shape"):
+        map_gullies(z, grid, hx, hy, params, incision=IP, filled=filled, crown_mask=hidden[1:])
+
 def test_hidden_reaches_on_a_chain():
     # a straight chain of 10 cells along a row: pos_down i -> i + 1
     shape = (3, 12)

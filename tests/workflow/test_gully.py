@@ -195,3 +195,57 @@ def test_gully_stage_on_the_real_tiny_twin(tiny_flight, tmp_path):
     area = pd.read_csv(out / "gully_area_scores.csv").set_index("map_variant")
     assert {"precision", "recall", "iou"} <= set(area.columns)
     assert area.loc["buffer_and_patches", "iou"] > 0.05
+
+
+TILED_GULLY_RULES = ["gully_depth_tile", "gully_depth_mosaic", "gully_trace_surface", "gully_fill_tile", "gully_fill_merge",
+                     "gully_fill_mosaic"]
+
+
+def fabricate_orthophoto(results: Path, grid: GridSpec) -> None:
+    """``dense/orthophoto.tif``: soil colours, green foliage where the DSM stands > 0.15 m above the DTM (shrubs, crop)."""
+    dsm, _ = read_raster(results / "dense" / "dsm.tif")
+    dtm, _ = read_raster(results / "twin" / "truth" / "dtm.tif")
+    rng = np.random.default_rng(3)
+    soil = np.array([120.0, 110.0, 95.0])[:, None, None] + rng.normal(0.0, 3.0, (3, *dsm.shape))
+    leaf = np.array([40.0, 90.0, 30.0])[:, None, None] + rng.normal(0.0, 3.0, (3, *dsm.shape))
+    rgb = np.where((np.nan_to_num(dsm - dtm) > 0.15)[None], leaf, soil)
+    rgb[:, ~np.isfinite(dsm)] = 0
+    write_raster(results / "dense" / "orthophoto.tif", np.clip(rgb, 1, 255).astype(np.uint8), grid, nodata=0)
+
+
+def test_tiled_site_with_crowns_maps_as_untiled(tmp_path):
+    """gully.crowns on a tiled site (issue 21): crown mask and tracing surface in one job, tiled fill, same map."""
+    runs = {}
+    for name, tiled in (("untiled", False), ("tiled", True)):
+        results = tmp_path / name
+        info = fabricate_twin(results / "tiny_twin" / "twin")
+        fabricate_orthophoto(results / "tiny_twin", info["grid"])
+        overlay = {"gully": {"crowns": {"enabled": True, "window_m": 1.0},
+                             "automatic_heads": {"dsm_sigma_z_m": 0.05}}}  # the fabricated DSM's stated noise
+        if tiled:
+            overlay["tiling"] = {"tile_m": 100.0, "extent": None}  # 2 x 2 tiles of the site's 200 m extent
+        site = tmp_path / f"{name}.yaml"
+        site.write_text(yaml.safe_dump(_merge(yaml.safe_load(SITE.read_text()), overlay)))
+        out = results / "tiny_twin" / "gully"
+        proc = run_snakemake(site, results, [str(out / "gully_summary.csv")],
+                             extra=["--allowed-rules", *GULLY_RULES, *TILED_GULLY_RULES, "--printshellcmds"], cores=2)
+        runs[name] = (out, proc.stdout + proc.stderr)
+    (u, _), (t, log) = runs["untiled"], runs["tiled"]
+    assert "rule gully_trace_surface:" in log and log.count("rule gully_fill_tile:") == 4
+    crowns, _ = read_raster(t / "tiles" / "crown_mask.tif")
+    assert 0 < int((crowns == 1).sum()) < crowns.size // 4  # shrubs and crop, not the field
+    for raster in ("gully_map.tif", "gully_map_whole_patches.tif"):
+        assert np.array_equal(read_raster(u / raster)[0], read_raster(t / raster)[0]), raster
+    cu, ct = np.load(u / "gully_network_cells.npz"), np.load(t / "gully_network_cells.npz")
+    assert all(np.array_equal(cu[k], ct[k]) for k in cu.files)
+    su = dict(pd.read_csv(u / "gully_summary.csv").values)
+    st = dict(pd.read_csv(t / "gully_summary.csv").values)
+    assert {k: v for k, v in su.items() if "time" not in k and "(s)" not in k} == \
+        {k: v for k, v in st.items() if "time" not in k and "(s)" not in k}
+
+
+def _merge(base: dict, overlay: dict) -> dict:
+    out = dict(base)
+    for k, v in overlay.items():
+        out[k] = _merge(base.get(k, {}), v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out

@@ -79,6 +79,10 @@ if "gully" in config:
         "smoothed": result("gully", "tiles/smoothed_dem.tif"),
         "depth": result("gully", "tiles/depth.tif"),
     } if GULLY_TILED else {}
+    # gully.crowns on a tiled site: the trace-surface job makes the crown mask on the whole grid (the
+    # fill tiles read the surface interpolated under it) and gully_map bridges with the same mask
+    GULLY_CROWN_MASK = {"crowns": result("gully", "tiles/crown_mask.tif")} if GULLY_TILED and GULLY_CROWNS else {}
+    GULLY_FILLED_INPUT.update(GULLY_CROWN_MASK)
 
     rule gully_map:
         input:
@@ -254,11 +258,16 @@ if "gully" in config:
 
         rule gully_trace_surface:
             input:
+                unpack(lambda wc: {k: v for k, v in GULLY_HEADS_INPUT.items() if k in ("ortho", "checkpoints")}
+                       if GULLY_CROWNS else {}),
                 dem=mapping_dem(),
             output:
                 surface=result("gully", "tiles/trace_surface.tif"),
+                **GULLY_CROWN_MASK,
             params:
                 mapping=GULLY_MAPPING,
+                heads=GULLY["heads"],
+                automatic_heads=GULLY["automatic_heads"],
                 crs=config["site"]["crs"],
             threads: GULLY["threads"]
             log:

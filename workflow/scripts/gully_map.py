@@ -23,7 +23,9 @@ hx, hy = read_heads(inp.heads, crs) if heads != "automatic" else (np.zeros(0), n
 auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"), params.head_snap,
                              needed=params.crowns.enabled)
 tiled = {k: read_raster(inp[k])[0] for k in ("filled", "smoothed", "depth") if k in inp.keys()}  # tiled sites: merged tiles
-ortho = read_orthophoto_on_grid(inp.ortho, grid) if "ortho" in inp.keys() else None  # gully.crowns
+if "crowns" in inp.keys():  # tiled sites with gully.crowns: the mask the tiled fill's surface was made with
+    tiled["crown_mask"] = read_raster(inp.crowns)[0] == 1
+ortho = read_orthophoto_on_grid(inp.ortho, grid) if "ortho" in inp.keys() and "crowns" not in inp.keys() else None
 res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads,
                   auto_heads=auto if heads != "digitised" else None, incision=auto, ortho=ortho, **tiled,
                   on_depth=lambda s, d: (write_raster(out.depth, d, grid), write_raster(out.smoothed, s, grid)))  # beside the fill

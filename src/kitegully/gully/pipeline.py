@@ -172,6 +172,7 @@ def map_gullies(
     incision: HeadDetectionParams | None = None,
     ortho: np.ndarray | None = None,
     on_depth: Callable[[np.ndarray, np.ndarray], None] | None = None,
+    crown_mask: np.ndarray | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -207,6 +208,11 @@ def map_gullies(
         before waiting for the fill: with ``workers`` > 1 it runs beside the fill branch
         (e.g. the rule writes the two float rasters there, O(n) compression that would
         otherwise follow the fill on one core). It must not modify the arrays.
+    crown_mask : ndarray bool (H, W), optional
+        The crown mask of ``crowns`` made elsewhere (:func:`crowns_on`; the trace-surface
+        job of a large site, whose surface the tiled ``filled`` was made from); then
+        ``ortho`` is not needed. A ``filled`` DEM with ``crowns`` needs it: the fill must
+        have been made on the surface interpolated under the same crowns.
 
     Returns
     -------
@@ -234,11 +240,16 @@ def map_gullies(
         if filled.shape != dem.shape:
             raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {dem.shape}")
     hidden = None
-    if params.crowns.enabled:
+    if params.crowns.enabled and crown_mask is not None:
+        if np.shape(crown_mask) != dem.shape:
+            raise ValueError(f"crown mask has shape {np.shape(crown_mask)}, the DEM {dem.shape}")
+        hidden = np.asarray(crown_mask, dtype=bool)
+    elif params.crowns.enabled:
         if ortho is None or ip is None:
             raise ValueError("gully.crowns needs the orthophoto and the incision-map parameters (gully.automatic_heads)")
         if filled is not None:
-            raise ValueError("gully.crowns changes the tracing surface: it cannot use a filled DEM made elsewhere")
+            raise ValueError("gully.crowns changes the tracing surface: a filled DEM made elsewhere needs the crown mask "
+                             "it was made with (crown_mask)")
         if np.shape(ortho)[1:] != dem.shape:
             raise ValueError(f"orthophoto has shape {np.shape(ortho)[1:]}, the DEM {dem.shape}")
         tc = time.perf_counter()
