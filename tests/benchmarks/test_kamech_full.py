@@ -56,3 +56,13 @@ def test_retabulation_keeps_the_timed_rows_only(tmp_path):
     rows = kf.timed_rows(table)
     assert [r[1] for r in rows] == ["total wall (Snakemake, --cores 2)", "tiled stages speed-up 1 -> 2 cores"]
     assert rows[0][2] == 7000.0 and rows[0][5] == "<= 10800 (3 h)" and rows[1][5] is None
+
+
+def test_wall_time_from_the_snakemake_log(tmp_path):
+    log = tmp_path / "benchmark_run.log"
+    assert kf.wall_from_log(log) is None
+    log.write_text("Building DAG of jobs...\n[Tue Dec  1 23:54:43 2026]\nlocalrule twin:\n"
+                   "    jobid: 3\n[Wed Dec  2 01:04:45 2026]\nFinished jobid: 3\n")
+    assert kf.wall_from_log(log) == 70 * 60 + 2
+    log.write_text("[Tue Dec  1 23:54:43 2026]\n")
+    assert kf.wall_from_log(log) is None
