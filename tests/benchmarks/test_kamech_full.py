@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import sys
+from datetime import datetime
 from pathlib import Path
 
 import pandas as pd
@@ -61,8 +63,14 @@ def test_retabulation_keeps_the_timed_rows_only(tmp_path):
 def test_wall_time_from_the_snakemake_log(tmp_path):
     log = tmp_path / "benchmark_run.log"
     assert kf.wall_from_log(log) is None
+    # no header: the span of the job timestamps
     log.write_text("Building DAG of jobs...\n[Tue Dec  1 23:54:43 2026]\nlocalrule twin:\n"
                    "    jobid: 3\n[Wed Dec  2 01:04:45 2026]\nFinished jobid: 3\n")
     assert kf.wall_from_log(log) == 70 * 60 + 2
     log.write_text("[Tue Dec  1 23:54:43 2026]\n")
     assert kf.wall_from_log(log) is None
+    # Snakemake's header: from its start to the log's last write
+    log.write_text("SNAKEMAKE\n  Date: 2026-12-01 23:54:39\n[Tue Dec  1 23:54:43 2026]\n")
+    end = datetime(2026, 12, 2, 1, 21, 14).timestamp()
+    os.utime(log, (end, end))
+    assert kf.wall_from_log(log) == 86 * 60 + 35
