@@ -52,6 +52,10 @@ SNAKEMAKE = REPO / ".venv/bin/snakemake"
 TILE_RULES = ("gully_depth_tile", "gully_fill_tile", "polygons_morph_tile", "obia_kite_tile", "change_tile")
 MERGE_RULES = ("gully_depth_mosaic", "gully_fill_mosaic", "polygons_morph_merge", "obia_kite_merge", "change_merge")
 
+#: Rules that claim two threads in the workflow, run on one each here (see ``base`` in main).
+ONE_THREAD_RULES = ("twin_epoch1", "twin_epoch2", "flight_render", "sfm_reconstruct", "georef_adjust", "dense_tile",
+                    "dense_match", "dense_finish", "ortho_tile", "gully_map", "gully_sensitivity", "gully_trace_surface",
+                    "obia_classify", "obia_scene", "obia_kite_scale", "closerange_photos")
 #: (item, unit, paper value, issue target): Feurer et al. 2018 Tables 3-4 (METHODS.md 1.8).
 PAPER = {
     "camera RMSE": ("m", None, "<= 2 GSD"),
@@ -247,6 +251,13 @@ def main() -> int:
     env = dict(os.environ, PYTHONPATH=f"{REPO / 'src'}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
     # a run of hours may be interrupted: resuming reruns the jobs it left incomplete
     base = ["--configfile", *configfiles, "--config", f"results_dir={results}", "--rerun-incomplete"]
+    # [I] One thread per job, and epoch 2's chain first (session 12's timed run): the rules that claim
+    # both cores ran one at a time and used 1.1-1.6 of them (COLMAP's mapping, the renderer and the
+    # georeferencing are partly serial; one dense tile ran 1.6x faster on 2 threads than on 1), and
+    # Snakemake started epoch 2's twin -> render -> SfM -> georeferencing chain only after epoch 1's
+    # dense tiles. With one thread each, two jobs share the two cores, and the longest chain starts first.
+    base += ["--set-threads", *(f"{r}=1" for r in ONE_THREAD_RULES),
+             "--prioritize", str(results / site / "dense" / "epoch2" / "dsm.tif")]
 
     rows = []
     if args.dry_run:
