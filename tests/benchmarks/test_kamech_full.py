@@ -74,3 +74,11 @@ def test_wall_time_from_the_snakemake_log(tmp_path):
     end = datetime(2026, 12, 2, 1, 21, 14).timestamp()
     os.utime(log, (end, end))
     assert kf.wall_from_log(log) == 86 * 60 + 35
+
+
+def test_a_resumed_run_keeps_the_interrupted_runs_log(tmp_path):
+    assert kf.run_log(tmp_path).name == "benchmark_run.log"
+    (tmp_path / "benchmark_run.log").write_text("run 1")
+    assert kf.run_log(tmp_path).name == "benchmark_run2.log"
+    (tmp_path / "benchmark_run2.log").write_text("run 2")
+    assert kf.run_log(tmp_path).name == "benchmark_run3.log"
