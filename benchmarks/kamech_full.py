@@ -239,6 +239,8 @@ def main() -> int:
     ap.add_argument("--collect-only", action="store_true")
     ap.add_argument("--dry-run", action="store_true")
     ap.add_argument("--no-scaling", action="store_true", help="skip the 1- vs 2-core rerun of the tiled stages")
+    ap.add_argument("--mtime-only", action="store_true",
+                    help="resume without rerunning finished jobs whose code or params changed since (--rerun-triggers mtime)")
     args = ap.parse_args()
 
     site_cfg = yaml.safe_load(SITE_FILE.read_text())
@@ -269,6 +271,8 @@ def main() -> int:
     # georeferencing are partly serial; one dense tile ran 1.6x faster on 2 threads than on 1), and
     # Snakemake started epoch 2's twin -> render -> SfM -> georeferencing chain only after epoch 1's
     # dense tiles. With one thread each, two jobs share the two cores, and the longest chain starts first.
+    if args.mtime_only:
+        base += ["--rerun-triggers", "mtime"]
     base += ["--set-threads", *(f"{r}=1" for r in ONE_THREAD_RULES),
              "--prioritize", str(results / site / "dense" / "epoch2" / "dsm.tif")]
 
