@@ -123,6 +123,10 @@ def test_a_tiled_site_traces_and_bridges_under_the_same_crowns():
     got = map_gullies(z, grid, hx, hy, params, incision=IP, filled=filled, crown_mask=hidden)
     assert np.array_equal(got.crowns, ref.crowns) and np.array_equal(got.network.cells, ref.network.cells)
     assert np.array_equal(got.gully, ref.gully) and np.array_equal(got.bridged, ref.bridged) and ref.bridged.any()
+    # given the surface the fill was made from (the rule's path), the map does not make it again: same map
+    given = map_gullies(z, grid, hx, hy, params, incision=IP, filled=filled, crown_mask=hidden, trace_surface=z_trace)
+    assert given.n_raised == ref.n_raised and np.array_equal(given.gully, ref.gully)
+    assert np.array_equal(given.bridged, ref.bridged) and np.array_equal(given.network.cells, ref.network.cells)
     # a fill made on another surface than the crowns' cannot be checked: without the mask it is refused
     with pytest.raises(ValueError, match="needs the crown mask"):
         map_gullies(z, grid, hx, hy, params, incision=IP, ortho=rgb, filled=filled)

@@ -100,6 +100,10 @@ def test_map_gullies_with_the_tiled_fill_equals_the_untiled_chain(tmp_path):
     assert got.n_raised == ref.n_raised > 0
     assert np.array_equal(got.network.cells, ref.network.cells)
     assert np.array_equal(got.gully, ref.gully)
+    given = map_gullies(z, grid, hx, hy, params, filled=filled, trace_surface=z_trace)  # the tiled rules' path
+    assert given.n_raised == ref.n_raised and np.array_equal(given.gully, ref.gully)
+    with pytest.raises(ValueError, match="only used with the filled DEM"):
+        map_gullies(z, grid, hx, hy, params, trace_surface=z_trace)
     with pytest.raises(ValueError, match="flat_routing: resolve"):
         map_gullies(z, grid, hx, hy, GullyParams(flat_routing="epsilon"), filled=filled)
 

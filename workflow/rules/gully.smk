@@ -41,7 +41,8 @@ if "gully" in config:
         if GULLY["dem"] != "dense":
             raise WorkflowError("Invalid configuration: gully.crowns needs gully.dem: dense (the orthophoto of that DSM)")
         GULLY_HEADS_INPUT["ortho"] = result("dense", "orthophoto.tif")
-    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief") or GULLY_CROWNS) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
+    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief") or GULLY_CROWNS
+            or GULLY.get("trace_ground", False)) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
         _cps = result("twin", "observed/checkpoints.csv") if IS_TWIN else config.get("inputs", {}).get("checkpoints")
         if not _cps:
             raise WorkflowError("Invalid configuration: gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints (inputs.checkpoints)")
@@ -75,6 +76,7 @@ if "gully" in config:
     # reads the merged products. Other sites do both inside gully_map, unchanged.
     GULLY_TILED = "tiling" in config
     GULLY_FILLED_INPUT = {
+        "trace_surface": result("gully", "tiles/trace_surface.tif"),  # what the fill was made from: not made again
         "filled": result("gully", "tiles/filled_trace_surface.tif"),
         "smoothed": result("gully", "tiles/smoothed_dem.tif"),
         "depth": result("gully", "tiles/depth.tif"),
@@ -256,18 +258,21 @@ if "gully" in config:
             script:
                 "../scripts/gully_depth_mosaic.py"
 
+        # the trace-surface job needs the incision map's parameters for the crown mask and for trace_ground
+        GULLY_TRACE_INCISION = GULLY_CROWNS or bool(GULLY_MAPPING.get("trace_ground", False))
+
         rule gully_trace_surface:
             input:
-                unpack(lambda wc: {k: v for k, v in GULLY_HEADS_INPUT.items() if k in ("ortho", "checkpoints")}
-                       if GULLY_CROWNS else {}),
+                unpack(lambda wc: {k: v for k, v in GULLY_HEADS_INPUT.items()
+                                   if (k == "ortho" and GULLY_CROWNS) or (k == "checkpoints" and GULLY_TRACE_INCISION)}),
                 dem=mapping_dem(),
             output:
                 surface=result("gully", "tiles/trace_surface.tif"),
                 **GULLY_CROWN_MASK,
             params:
                 mapping=GULLY_MAPPING,
-                heads=GULLY["heads"],
-                automatic_heads=GULLY["automatic_heads"],
+                # the incision map's settings (crown mask, trace_ground): where unused they must not trigger a rerun
+                **({"heads": GULLY["heads"], "automatic_heads": GULLY["automatic_heads"]} if GULLY_TRACE_INCISION else {}),
                 crs=config["site"]["crs"],
             threads: GULLY["threads"]
             log:

@@ -23,9 +23,10 @@ check_dem(dem, inp.dem, grid.crs, snakemake.params.crs)
 params = GullyParams.from_config(snakemake.params.mapping)
 dem = np.asarray(dem, dtype=np.float32)
 hidden = incision = None
-if params.crowns.enabled:
-    incision = automatic_head_params(snakemake.params.heads, snakemake.params.automatic_heads, dem, grid,
+if params.crowns.enabled or params.trace_ground:  # both stand on the incision map's ground surface and threshold
+    incision = automatic_head_params(snakemake.params["heads"], snakemake.params["automatic_heads"], dem, grid,
                                      inp.get("checkpoints"), params.head_snap, needed=True)
+if params.crowns.enabled:
     hidden = crowns_on(dem, grid, params, incision, read_orthophoto_on_grid(inp.ortho, grid), snakemake.threads)
     write_raster(snakemake.output.crowns, hidden.astype(np.uint8), grid)
 _, z_trace, n_holes = tracing_surface(dem, grid, params, workers=snakemake.threads, incision=incision, hidden=hidden)

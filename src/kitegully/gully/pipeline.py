@@ -173,6 +173,7 @@ def map_gullies(
     ortho: np.ndarray | None = None,
     on_depth: Callable[[np.ndarray, np.ndarray], None] | None = None,
     crown_mask: np.ndarray | None = None,
+    trace_surface: np.ndarray | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -213,6 +214,11 @@ def map_gullies(
         job of a large site, whose surface the tiled ``filled`` was made from); then
         ``ortho`` is not needed. A ``filled`` DEM with ``crowns`` needs it: the fill must
         have been made on the surface interpolated under the same crowns.
+    trace_surface : ndarray (H, W), optional
+        The tracing surface ``filled`` was made from (:func:`tracing_surface`, the
+        trace-surface job of a large site); only with ``filled``. It is then not made
+        again here (its smoothing, object removal and interpolation under crowns are
+        whole-grid solves): only the hole-filled DEM the heads snap to is.
 
     Returns
     -------
@@ -239,6 +245,11 @@ def map_gullies(
             raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: resolve")
         if filled.shape != dem.shape:
             raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {dem.shape}")
+    if trace_surface is not None:
+        if filled is None:
+            raise ValueError("a tracing surface made elsewhere is only used with the filled DEM made from it")
+        if np.shape(trace_surface) != dem.shape:
+            raise ValueError(f"tracing surface has shape {np.shape(trace_surface)}, the DEM {dem.shape}")
     hidden = None
     if params.crowns.enabled and crown_mask is not None:
         if np.shape(crown_mask) != dem.shape:
@@ -259,7 +270,10 @@ def map_gullies(
     def flow_branch() -> tuple:
         """Steps f-i before the heads: tracing surface, depression fill, flow directions."""
         tb = time.perf_counter()
-        z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip, hidden=hidden)
+        if trace_surface is None:
+            z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip, hidden=hidden)
+        else:
+            (z_heads, n_holes), zi = hole_filled(dem, grid, params), trace_surface
         if filled is None:
             fz, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
         else:
@@ -363,6 +377,27 @@ def map_gullies(
     )
 
 
+def hole_filled(dem: np.ndarray, grid: GridSpec, params: GullyParams) -> tuple[np.ndarray, int]:
+    """The DEM with holes smaller than ``water_min_area_m2`` interpolated (larger ones stay NaN: open water).
+
+    Parameters
+    ----------
+    dem : ndarray (H, W) float32
+        The DEM (m), NaN nodata.
+    grid : GridSpec
+    params : GullyParams
+
+    Returns
+    -------
+    z : ndarray (H, W)
+        The hole-filled DEM (heads are snapped and detected on it).
+    n_holes : int
+        Hole cells interpolated.
+    """
+    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
+    return interpolate_holes(dem, water_cells)
+
+
 def crowns_on(dem: np.ndarray, grid: GridSpec, params: GullyParams, incision: HeadDetectionParams, ortho: np.ndarray,
               workers: int = 1) -> np.ndarray:
     """The crown mask of ``gully.crowns`` (:func:`kitegully.gully.crowns.crown_mask`) on the DEM grid.
@@ -371,8 +406,7 @@ def crowns_on(dem: np.ndarray, grid: GridSpec, params: GullyParams, incision: He
     above the ground surface of the hole-filled DEM (the object threshold of
     :func:`remove_objects`: the incision threshold mirrored above the ground). O(n log n).
     """
-    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
-    zi, _ = interpolate_holes(dem, water_cells)
+    zi, _ = hole_filled(dem, grid, params)
     valid = np.isfinite(zi)
     rough = surface_roughness((gaussian_smooth_fft(zi, incision.scale_m / grid.cell, workers=workers) - zi)[valid])
     ground = ground_surface(zi, grid.cell, incision.scale_m, incision.slope_window_m, workers)
@@ -422,8 +456,7 @@ def tracing_surface(
     O(n log n) (the FFT smoothing); the interpolation of holes is global (a hole may
     cross any tile border), so a tiled site makes this surface in one job.
     """
-    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
-    zi, n_holes = interpolate_holes(dem, water_cells)
+    zi, n_holes = hole_filled(dem, grid, params)
     z_trace = zi
     if hidden is not None:
         z_trace, n_under = interpolate_under(zi, hidden)
