@@ -97,11 +97,17 @@ def analyse_member(cfg: dict, site: Path) -> pd.DataFrame:
         pxy = grid.flat_xy(pc)
         step = np.hypot(*np.diff(pxy, axis=0).T).sum() / max(len(pc) - 1, 1) if len(pc) > 1 else grid.cell
         far = shapely.distance(shapely.points(pxy), ref_u) > tol if len(pc) else np.zeros(0, bool)
+        in_map = gully[pc] if len(pc) else np.zeros(0, bool)
+        first_in = int(np.argmax(in_map)) if in_map.any() else len(pc)
         rows.append({"x": xy[k, 0], "y": xy[k, 1], "to_true_centreline_m": d_true[k], "false": d_true[k] > tol,
                      "landcover": cover[k], "to_nodata_m": dist_nd[hr[k], hc[k]],
                      "relief_over_threshold": float(relief[hr[k], hc[k]] / thr),
                      "path_m": len(pc) * step, "path_far_m": float(far.sum() * step),
-                     "path_far_mapped_m": float((far & gully[pc]).sum() * step), "end": int(ends[k])})
+                     "path_far_mapped_m": float((far & gully[pc]).sum() * step), "end": int(ends[k]),
+                     # the pipeline's own products along the path (no truth): share of it in the gully map
+                     # (kept depth patches within the buffer) and the path length before it first enters it
+                     "path_in_map_frac": float(in_map.mean()) if len(pc) else 0.0,
+                     "to_first_mapped_m": first_in * step})
     return pd.DataFrame(rows)
 
 

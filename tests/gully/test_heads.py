@@ -156,3 +156,37 @@ def test_rough_surface_raises_the_incision_threshold():
     _, stats = detect_heads(z, filled, dirs, grid, HeadDetectionParams(**dict(P.__dict__, dsm_sigma_z_m=0.01)))
     assert stats["relief_threshold_m"] == pytest.approx(3 * stats["surface_roughness_m"])
     assert stats["surface_roughness_m"] > 0.03
+
+
+def _flat_floored_channel(n=400, head_y=60.0, depth=0.8, floor_m=2.0, bank_m=1.0, x0=40.0):
+    """The valley's hollow with a trapezoidal channel: a flat floor ``floor_m`` wide between 1:1.25 banks."""
+    grid = _grid(n)
+    X, Y = np.meshgrid(*grid.cell_centres())
+    z = 0.1 * Y + 0.05 * np.abs(X - x0)
+    prof = np.clip((floor_m / 2 + bank_m - np.abs(X - x0)) / bank_m, 0, 1)
+    return (z - depth * prof * np.clip((head_y - Y) / 0.4, 0, 1)).astype(np.float32), grid
+
+
+def test_a_flat_floored_head_is_one_head_not_one_per_floor_corner():
+    # without noise the D8 paths down the flat floor run side by side and never join: each corner
+    # of the floor (3 m apart) started its own head before; both lie within one head-scale FWHM
+    z, grid = _flat_floored_channel()
+    heads, stats = _detect(z, grid)
+    assert len(heads) == 1 and stats["heads_within_scale"] == 1
+    assert np.hypot(heads[0, 0] - 40.0, heads[0, 1] - 60.0) < 2.5
+
+
+def test_one_head_per_incision_keeps_the_first_of_each_cluster_in_order():
+    from kitegully.gully.heads import FWHM_PER_SIGMA, one_head_per_incision
+
+    assert FWHM_PER_SIGMA == pytest.approx(2.3548, abs=1e-4)
+    grid = _grid(100)
+    # cells (row, col): a cluster of three 0.2-0.6 m apart, one 5 m away, one 4 m from the cluster's second
+    rc = np.array([[50, 50], [50, 51], [50, 53], [50, 75], [70, 51]])
+    idx = rc[:, 0] * grid.width + rc[:, 1]
+    kept = one_head_per_incision(idx, grid, 4.71)
+    assert kept.tolist() == [idx[0], idx[3]]  # [4] is 4.0 m from [0]: one incision; [3] is 5 m off
+    # the order decides which of a cluster stays: reversed, [4] is kept and drops all three (4.0-4.02 m from it)
+    assert one_head_per_incision(idx[::-1], grid, 4.71).tolist() == [idx[4], idx[3]]
+    assert one_head_per_incision(idx[:1], grid, 4.71).tolist() == [idx[0]]
+    assert one_head_per_incision(idx, grid, 0.1).tolist() == idx.tolist()

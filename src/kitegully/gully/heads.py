@@ -23,7 +23,8 @@ of the concave, channelised reach). Here:
 4. Heads: channel cells with no channel cell upstream whose path downstream stays in
    channel cells over most of ``min_channel_length_m`` (a channel, not a pit). Traced
    highest first; a candidate whose path joins one traced before within
-   ``min_channel_length_m`` is a bank-side twin of that channel and is dropped.
+   ``min_channel_length_m`` is a bank-side twin of that channel and is dropped, and so is
+   one within the head-scale Gaussian's FWHM of a higher head (:func:`one_head_per_incision`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from typing import Any, Mapping
 import numpy as np
 import scipy.ndimage as ndi
 from numba import njit
+from scipy.spatial import cKDTree
 
 from kitegully import InputError
 from kitegully.io.raster import GridSpec
@@ -42,6 +44,10 @@ from kitegully.terrain.flow import D8_OFFSETS, END_MERGE, END_ON_NETWORK, trace_
 from kitegully.terrain.smoothing import gaussian_smooth_fft
 
 log = logging.getLogger(__name__)
+
+#: Full width at half maximum of a Gaussian per σ, 2·sqrt(2 ln 2): [I] two incisions closer than the
+#: FWHM of the head-scale Gaussian (4.7 m at σ_h 2 m) are one depression in its depth map.
+FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
 
 #: Values of ``gully.heads``.
 HEAD_SOURCES = ("digitised", "automatic", "both")
@@ -253,11 +259,60 @@ def detect_heads(
     lengths = np.diff(starts) * cell  # cells before joining / ending (D8 steps ~ cell)
     joined_short = ((ends == END_MERGE) & (lengths < params.min_channel_length_m)) | (ends == END_ON_NETWORK)
     heads = cand[~joined_short]
+    n_paths = heads.size
+    heads = one_head_per_incision(heads, grid, FWHM_PER_SIGMA * params.scale_m)
     stats = {"incised_cells": int(incised.sum()), "channel_cells": int(channel.sum()), "candidates": int(cand.size),
-             "heads": int(heads.size), "relief_threshold_m": threshold, "surface_roughness_m": rough}
-    log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads",
-             stats["incised_cells"], stats["channel_cells"], stats["candidates"], stats["heads"])
+             "heads": int(heads.size), "heads_within_scale": int(n_paths - heads.size),
+             "relief_threshold_m": threshold, "surface_roughness_m": rough}
+    log.info("automatic heads: %d incised cells, %d channel cells, %d candidates, %d heads (%d more within %.3g m "
+             "of a higher one dropped)", stats["incised_cells"], stats["channel_cells"], stats["candidates"],
+             stats["heads"], stats["heads_within_scale"], FWHM_PER_SIGMA * params.scale_m)
     return heads, stats
+
+
+def one_head_per_incision(heads: np.ndarray, grid: GridSpec, radius_m: float) -> np.ndarray:
+    """The heads with every head within ``radius_m`` of a kept one before it dropped (greedy, in the given order).
+
+    [I] The head-scale depth map is the DSM seen through a Gaussian of σ_h (``scale_m``):
+    two channel heads closer than its full width at half maximum (``FWHM_PER_SIGMA``·σ_h,
+    4.7 m at 2 m; the usual resolution limit of a Gaussian blur) are one incision to it,
+    found twice (the same reasoning that makes an automatic head within the 6 m snapping
+    radius of a digitised one the same head, :func:`kitegully.gully.pipeline.new_heads`).
+    Without this, neighbouring cells of
+    one broad, flat-floored head (the foot of a tree row or plot boundary, a wide hollow)
+    each start a D8 path, and those paths run side by side, 0.2 m apart, for tens of metres
+    before they join: one channel counted several times, in the network and in its false
+    positives. ``heads`` come highest first from :func:`detect_heads`, so the highest of a
+    cluster is kept.
+
+    Parameters
+    ----------
+    heads : ndarray int64
+        Flat cell indices of the heads, in order of preference.
+    grid : GridSpec
+        Their grid.
+    radius_m : float
+        Heads closer than this to a kept head are dropped.
+
+    Returns
+    -------
+    ndarray int64
+        The kept heads, in their order. O(k log k) for k heads.
+    """
+    heads = np.asarray(heads, dtype=np.int64)
+    if heads.size < 2:
+        return heads
+    xs, ys = grid.cell_centres()
+    r, c = np.divmod(heads, grid.width)
+    xy = np.column_stack([xs[c], ys[r]])
+    tree = cKDTree(xy)
+    dropped = np.zeros(heads.size, dtype=bool)
+    for i in range(heads.size):
+        if dropped[i]:
+            continue
+        near = np.asarray(tree.query_ball_point(xy[i], radius_m), dtype=np.int64)
+        dropped[near[near > i]] = True
+    return heads[~dropped]
 
 
 def incision_map(z: np.ndarray, cell_m: float, params: HeadDetectionParams, workers: int = 1,
