@@ -190,3 +190,24 @@ def test_one_head_per_incision_keeps_the_first_of_each_cluster_in_order():
     assert one_head_per_incision(idx[::-1], grid, 4.71).tolist() == [idx[4], idx[3]]
     assert one_head_per_incision(idx[:1], grid, 4.71).tolist() == [idx[0]]
     assert one_head_per_incision(idx, grid, 0.1).tolist() == idx.tolist()
+
+
+
+def test_what_the_dsm_did_not_observe_does_not_change_the_incision_map():
+    # a 3 m gap (a crown the matcher lost) 6 m beside the channel head, interpolated low, flat or high:
+    # the incised cells, the roughness and the heads are those of the observed cells alone
+    z, grid = _valley()
+    X, Y = np.meshgrid(*grid.cell_centres())
+    gap = np.hypot(X - 46.0, Y - 55.0) < 1.5
+    filled, _ = priority_flood_fill(z, 0.0)
+    dirs, _, _ = flow_directions(filled)
+    runs = [detect_heads(np.where(gap, z + dz, z).astype(np.float32), filled, dirs, grid, P, observed=~gap)
+            for dz in (-0.8, 0.0, 0.8)]
+    (h0, s0), *rest = runs
+    assert np.hypot(*(np.array(grid.flat_xy(h0)).reshape(-1, 2)[0] - [40.0, 60.0])) < 2.0
+    for h, st in rest:
+        assert h.tolist() == h0.tolist() and st["incised_cells"] == s0["incised_cells"]
+        assert st["surface_roughness_m"] == s0["surface_roughness_m"]
+    # taken as observed, the interpolated values do move the map
+    seen = detect_heads(np.where(gap, z - 0.8, z).astype(np.float32), filled, dirs, grid, P)[1]
+    assert seen["incised_cells"] != s0["incised_cells"]

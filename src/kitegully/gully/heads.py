@@ -218,8 +218,9 @@ def detect_heads(
         FFT threads.
     observed : ndarray bool (H, W), optional
         Cells the DSM matched (before its holes were interpolated); default: the finite
-        cells of ``z``. No head is detected within one matching window of an unmatched cell
-        (:func:`matched_cells`).
+        cells of ``z``. The incision map is made from these cells alone (normalised
+        convolution), and no head is detected within one matching window of an unmatched
+        cell (:func:`matched_cells`).
 
     Returns
     -------
@@ -235,9 +236,15 @@ def detect_heads(
     """
     cell = grid.cell
     valid = np.isfinite(z)
-    incised, threshold, rough = incision_map(z, cell, params, workers)
+    observed = valid if observed is None else observed
+    # [I] the incision is measured on what the DSM observed: an interpolated gap (tree crown, shadow) is a
+    # smooth membrane from its rim, and its head-scale depth is the interpolation's, not the ground's; the
+    # smoothings' normalised convolution leaves the unmatched cells out (the gap rule below keeps heads
+    # off their rims as well)
+    incised, threshold, rough = incision_map(np.where(observed, z, np.nan) if not observed.all() else z, cell,
+                                             params, workers)
     # no head where the DSM was not matched: within one matching window of a gap, open water or the edge
-    matched = matched_cells(valid if observed is None else observed, cell, params.slope_window_m)
+    matched = matched_cells(observed, cell, params.slope_window_m)
     incised &= matched
     zsl = gaussian_smooth_fft(z, params.slope_window_m / cell, workers=workers)
     gy, gx = np.gradient(zsl, cell)
