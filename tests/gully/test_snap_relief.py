@@ -126,3 +126,18 @@ def test_relief_and_incision_snapping_need_the_detector_parameters():
 
     with pytest.raises(ValueError, match="incision-map parameters"):
         map_gullies(z, grid, np.array([0.5]), np.array([0.5]), GullyParams(head_snap="relief"), workers=1)
+
+
+def test_relief_snap_never_lands_in_a_gap_of_the_dsm():
+    # the DSM lost a 1.5-2 m disc over the channel next to the digitised head: the hole-filled surface
+    # there is interpolated, so the snapping reads the relief of the observed cells only
+    from kitegully.gully.pipeline import GullyParams, map_gullies
+
+    grid, z, xs, ys = steepening_slope_with_a_shallow_channel(kappa=0.0)
+    X, Y = np.meshgrid(xs - xs[0], ys - ys[-1])
+    params = GullyParams(head_snap="relief", sigma_m=2.0, water_min_area_m2=None)
+    for cx, cy, r in ((20.0, 21.0, 1.5), (21.0, 20.0, 2.0)):
+        gap = np.hypot(X - cx, Y - cy) < r
+        dem = np.where(gap, np.nan, z).astype(np.float32)
+        res = map_gullies(dem, grid, np.array([xs[100]]), np.array([ys[-1] + 22.0]), params, workers=1, incision=P)
+        assert res.heads_inside[0] and not gap.ravel()[res.network.cells[0]]

@@ -314,7 +314,8 @@ def map_gullies(
     t0 = time.perf_counter()
     incised = relief = None
     if params.head_snap == "relief" and np.size(heads_x):
-        relief = head_scale_relief(z_heads, grid.cell, ip, workers)[0]
+        # on the observed cells only, as the detector's incision map: a head never snaps into an interpolated gap
+        relief = head_scale_relief(dem, grid.cell, ip, workers)[0]
     if params.head_snap == "incision" and np.size(heads_x):
         incised = visible_incisions(incision_map(z_heads, grid.cell, ip, workers, roughness=False)[0], grid.cell,
                                     ip.slope_window_m)
