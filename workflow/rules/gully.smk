@@ -37,12 +37,13 @@ if "gully" in config:
     # automatic heads (and head_snap: incision, which uses their incision map) with dsm_sigma_z_m: null
     # measure the DSM noise at the (observed) checkpoints
     GULLY_CROWNS = bool(GULLY.get("crowns", {}).get("enabled", False))  # gully.crowns: the orthophoto's crowns
+    # crowns and trace_ground stand on the incision map's ground surface: they need its parameters whatever the heads
+    GULLY_GROUND_SURFACE = GULLY_CROWNS or bool(GULLY.get("trace_ground", False))
     if GULLY_CROWNS:
         if GULLY["dem"] != "dense":
             raise WorkflowError("Invalid configuration: gully.crowns needs gully.dem: dense (the orthophoto of that DSM)")
         GULLY_HEADS_INPUT["ortho"] = result("dense", "orthophoto.tif")
-    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief") or GULLY_CROWNS
-            or GULLY.get("trace_ground", False)) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
+    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief") or GULLY_GROUND_SURFACE) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
         _cps = result("twin", "observed/checkpoints.csv") if IS_TWIN else config.get("inputs", {}).get("checkpoints")
         if not _cps:
             raise WorkflowError("Invalid configuration: gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints (inputs.checkpoints)")
@@ -258,13 +259,10 @@ if "gully" in config:
             script:
                 "../scripts/gully_depth_mosaic.py"
 
-        # the trace-surface job needs the incision map's parameters for the crown mask and for trace_ground
-        GULLY_TRACE_INCISION = GULLY_CROWNS or bool(GULLY_MAPPING.get("trace_ground", False))
-
         rule gully_trace_surface:
             input:
                 unpack(lambda wc: {k: v for k, v in GULLY_HEADS_INPUT.items()
-                                   if (k == "ortho" and GULLY_CROWNS) or (k == "checkpoints" and GULLY_TRACE_INCISION)}),
+                                   if (k == "ortho" and GULLY_CROWNS) or (k == "checkpoints" and GULLY_GROUND_SURFACE)}),
                 dem=mapping_dem(),
             output:
                 surface=result("gully", "tiles/trace_surface.tif"),
@@ -272,7 +270,7 @@ if "gully" in config:
             params:
                 mapping=GULLY_MAPPING,
                 # the incision map's settings (crown mask, trace_ground): where unused they must not trigger a rerun
-                **({"heads": GULLY["heads"], "automatic_heads": GULLY["automatic_heads"]} if GULLY_TRACE_INCISION else {}),
+                **({"heads": GULLY["heads"], "automatic_heads": GULLY["automatic_heads"]} if GULLY_GROUND_SURFACE else {}),
                 crs=config["site"]["crs"],
             threads: GULLY["threads"]
             log:

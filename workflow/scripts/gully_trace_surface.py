@@ -23,7 +23,7 @@ check_dem(dem, inp.dem, grid.crs, snakemake.params.crs)
 params = GullyParams.from_config(snakemake.params.mapping)
 dem = np.asarray(dem, dtype=np.float32)
 hidden = incision = None
-if params.crowns.enabled or params.trace_ground:  # both stand on the incision map's ground surface and threshold
+if params.needs_ground_surface:
     incision = automatic_head_params(snakemake.params["heads"], snakemake.params["automatic_heads"], dem, grid,
                                      inp.get("checkpoints"), params.head_snap, needed=True)
 if params.crowns.enabled:

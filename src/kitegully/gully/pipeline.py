@@ -114,6 +114,12 @@ class GullyParams:
     trace_ground: bool = False
     crowns: CrownParams = CrownParams()
 
+    @property
+    def needs_ground_surface(self) -> bool:
+        """``crowns`` and ``trace_ground`` stand on the incision map's ground surface and threshold
+        (``gully.automatic_heads``), whatever the heads are."""
+        return self.crowns.enabled or self.trace_ground
+
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "GullyParams":
         """Build from the ``gully:`` config section (keys of the same names; ``trace_ground``
