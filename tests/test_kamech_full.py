@@ -23,3 +23,33 @@ def test_kamech_full_is_the_paper_survey():
     assert set(default) <= set(cfg)
     assert "epoch2" in cfg["twin"] and "change" in cfg and "polygons" in cfg and cfg["obia"]["kite_scale"]["enabled"]
     assert TilingParams.from_config(cfg).counts == (3, 5)
+
+
+def _leaves(node: dict, path: tuple = ()) -> dict:
+    """Every leaf of a nested config as {dotted path: value}."""
+    out = {}
+    for key, value in node.items():
+        if isinstance(value, dict):
+            out.update(_leaves(value, path + (key,)))
+        else:
+            out[".".join(path + (key,))] = value
+    return out
+
+
+#: What issue 21 changes on the default twin, and nothing else (the site file's header says so).
+FULL_SIZE_CHANGES = {
+    "site.name", "site.description",
+    "twin.extent.xmin", "twin.extent.ymin", "twin.extent.width_m", "twin.extent.height_m",
+    "twin.terrain.right_bank.relief_m", "twin.terrain.right_bank.width_m",
+    "twin.terrain.left_bank.relief_m", "twin.terrain.left_bank.width_m",
+    "twin.targets.count", "flight.line_lengths_m", "flight.forward_overlap",
+    "sfm.deterministic", "dense.matching.max_views", "tiling.tile_m", "tiling.extent",
+}
+
+
+def test_kamech_full_runs_the_default_twins_methods():
+    """Only the extent and acquisition differ: a method setting changed on the default twin reaches the full site."""
+    default = _leaves(load_yaml(REPO / "config/sites/kamech_twin.yaml"))
+    full = _leaves(load_yaml(SITE))
+    differing = {key for key in default.keys() | full.keys() if default.get(key, "absent") != full.get(key, "absent")}
+    assert differing - FULL_SIZE_CHANGES == set()

@@ -163,13 +163,24 @@ def crown_mask(z: np.ndarray, exg: np.ndarray, ground: np.ndarray, height_thresh
     return mask, info
 
 
-def interpolate_under(z: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int]:
+def interpolate_under(z: np.ndarray, mask: np.ndarray, max_unknowns: int = 1_000_000) -> tuple[np.ndarray, int]:
     """``z`` with the cells of ``mask`` replaced by the harmonic interpolation of the cells around them.
 
     Each masked cell takes the mean of its valid 4-neighbours (masked neighbours unknown,
     unmasked finite ones fixed; NaN or off-grid neighbours are left out, a no-flux edge). A
-    masked group with no fixed neighbour keeps its values. One sparse direct solve over the
-    m masked cells, about O(m^1.5) for compact groups.
+    masked group with no fixed neighbour keeps its values. Sparse direct solves over whole
+    groups, at most ``max_unknowns`` cells per solve (unless one group is larger), about
+    O(g^1.5) per compact group of g cells; memory O(max_unknowns) beyond the grids.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Surface; NaN = no data.
+    mask : ndarray (H, W) bool
+        Cells to replace.
+    max_unknowns : int
+        Cells per sparse solve. [I] 1 M keeps SuperLU's factor far below its 32-bit limits
+        (one solve over 15 M crown cells at 80 M cells failed) and each solve under ~1 GB.
 
     Returns
     -------
@@ -194,9 +205,30 @@ def interpolate_under(z: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int]
     m = rows.size
     if m == 0:
         return out, 0
-    h, w = z.shape
+    # Groups never touch (4-connected labels), so the system is block diagonal: solve it in
+    # batches of whole groups. One solve over every crown of a full-size site (15 M unknowns
+    # at 80 M cells) overruns SuperLU's 32-bit work arrays (measured: SUPERLU_MALLOC fails).
+    order = np.argsort(lab[rows, cols], kind="stable")
+    rows, cols = rows[order], cols[order]
     index = np.full(z.shape, -1, dtype=np.int64)
     index[rows, cols] = np.arange(m)
+    bounds = np.append(np.flatnonzero(np.diff(lab[rows, cols])) + 1, m)  # where each group ends
+    start = 0
+    while start < m:
+        ahead = bounds[bounds > start]
+        fitting = ahead[ahead - start <= max_unknowns]
+        stop = int(fitting[-1]) if fitting.size else int(ahead[0])  # a group larger than the cap goes alone
+        out[rows[start:stop], cols[start:stop]] = _harmonic_solve(z, known, index, rows[start:stop],
+                                                                  cols[start:stop], start)
+        start = stop
+    return out, m
+
+
+def _harmonic_solve(z: np.ndarray, known: np.ndarray, index: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                    first: int) -> np.ndarray:
+    """Harmonic values of whole masked groups (``index`` numbers them from ``first`` on)."""
+    h, w = z.shape
+    m = rows.size
     diag = np.zeros(m)
     rhs = np.zeros(m)
     ii, jj = [], []
@@ -210,11 +242,10 @@ def interpolate_under(z: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int]
         diag += fixed | unk
         rhs[fixed] += z[nrc[fixed], ncc[fixed]]
         ii.append(np.nonzero(unk)[0])
-        jj.append(nidx[unk])
+        jj.append(nidx[unk] - first)
     a = sp.csr_matrix((np.concatenate([diag, -np.ones(sum(x.size for x in ii))]),
                        (np.concatenate([np.arange(m), *ii]), np.concatenate([np.arange(m), *jj]))), shape=(m, m))
-    out[rows, cols] = spla.spsolve(a.tocsc(), rhs)
-    return out, m
+    return spla.spsolve(a.tocsc(), rhs)
 
 
 @njit(cache=True)
