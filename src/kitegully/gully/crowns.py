@@ -215,9 +215,9 @@ def interpolate_under(z: np.ndarray, mask: np.ndarray, max_unknowns: int = 1_000
     bounds = np.append(np.flatnonzero(np.diff(lab[rows, cols])) + 1, m)  # where each group ends
     start = 0
     while start < m:
-        ahead = bounds[bounds > start]
-        fitting = ahead[ahead - start <= max_unknowns]
-        stop = int(fitting[-1]) if fitting.size else int(ahead[0])  # a group larger than the cap goes alone
+        stop = int(bounds[np.searchsorted(bounds, start + max_unknowns, side="right") - 1])
+        if stop <= start:  # one group larger than the cap goes alone
+            stop = int(bounds[np.searchsorted(bounds, start, side="right")])
         out[rows[start:stop], cols[start:stop]] = _harmonic_solve(z, known, index, rows[start:stop],
                                                                   cols[start:stop], start)
         start = stop
