@@ -19,6 +19,11 @@ epochs, every stage) and writes ``results/<site>/benchmark.csv`` (+ ``.md``):
     .venv/bin/python benchmarks/kamech_full.py [--cores 2]             # the full site (hours)
     .venv/bin/python benchmarks/kamech_full.py --cut 600x400 --tile-m 200  # a cut-down extent
     .venv/bin/python benchmarks/kamech_full.py --collect-only          # re-tabulate a finished run
+    .venv/bin/python benchmarks/kamech_full.py --scaling-only --scaling-rules gully_depth_tile gully_fill_tile
+                                            # the speed-up alone, on a finished run, for some tile rules
+
+The per-job rows are read before the scaling reruns, which overwrite the tile jobs' benchmark
+files: a later ``--collect-only`` reports those jobs' 2-core rerun instead.
     .venv/bin/python benchmarks/kamech_full.py --dry-run               # snakemake -n
 
 ``--cut WxH`` runs the same site on a W × H m corner (site name ``kamech_full_cut<W>x<H>``,
@@ -51,6 +56,7 @@ SNAKEMAKE = REPO / ".venv/bin/snakemake"
 #: Dense matching's tile jobs are left out: rerunning both epochs twice would add more than an hour.
 TILE_RULES = ("gully_depth_tile", "gully_fill_tile", "polygons_morph_tile", "obia_kite_tile", "change_tile")
 MERGE_RULES = ("gully_depth_mosaic", "gully_fill_mosaic", "polygons_morph_merge", "obia_kite_merge", "change_merge")
+MERGE_OF = dict(zip(TILE_RULES, MERGE_RULES))
 
 #: Rules that claim two threads in the workflow, run on one each here (see ``base`` in main).
 ONE_THREAD_RULES = ("twin_epoch1", "twin_epoch2", "flight_render", "sfm_reconstruct", "georef_adjust", "dense_tile",
@@ -230,6 +236,33 @@ def timed_rows(table: Path) -> list[tuple]:
     return [tuple(None if pd.isna(v) else v for v in r) for r in old.loc[keep, cols].itertuples(index=False)]
 
 
+def scaling_targets(tile_rules: list[str] | None) -> tuple[list[str], list[str]]:
+    """The tile rules to rerun for the 1- vs 2-core ratio and the merge rules they run until.
+
+    Parameters
+    ----------
+    tile_rules : list of str or None
+        A subset of :data:`TILE_RULES` (None = all of them).
+
+    Returns
+    -------
+    (list of str, list of str)
+        The tile rules, in :data:`TILE_RULES` order, and their merges.
+    """
+    chosen = list(TILE_RULES) if not tile_rules else [r for r in TILE_RULES if r in tile_rules]
+    unknown = sorted(set(tile_rules or ()) - set(TILE_RULES))
+    if unknown:
+        raise SystemExit(f"--scaling-rules: {', '.join(unknown)} is not a tile rule (one of {', '.join(TILE_RULES)})")
+    return chosen, [MERGE_OF[r] for r in chosen]
+
+
+def scaling_label(tile_rules: list[str], k: int) -> str:
+    """The table's item for the tiled stages' rerun on ``k`` cores (names the rules when not all)."""
+    which = ("gully depth + fill, polygon morphometry, kite map, change" if list(tile_rules) == list(TILE_RULES)
+             else " + ".join(tile_rules))
+    return f"tiled stages ({which}: tile jobs and merges), --cores {k}"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cores", type=int, default=2)
@@ -239,6 +272,10 @@ def main() -> int:
     ap.add_argument("--collect-only", action="store_true")
     ap.add_argument("--dry-run", action="store_true")
     ap.add_argument("--no-scaling", action="store_true", help="skip the 1- vs 2-core rerun of the tiled stages")
+    ap.add_argument("--scaling-only", action="store_true",
+                    help="only the 1- vs 2-core reruns on a finished run's results, then re-tabulate")
+    ap.add_argument("--scaling-rules", nargs="+", metavar="RULE",
+                    help=f"rerun only these tile rules for the speed-up (default: all of {', '.join(TILE_RULES)})")
     ap.add_argument("--mtime-only", action="store_true",
                     help="resume without rerunning finished jobs whose code or params changed since (--rerun-triggers mtime)")
     args = ap.parse_args()
@@ -281,7 +318,9 @@ def main() -> int:
         snakemake(["-n", "--cores", str(args.cores), *base], site_dir / "benchmark_dryrun.log", env)
         print((site_dir / "benchmark_dryrun.log").read_text()[-3000:])
         return 0
-    if not args.collect_only:
+    tile_rules, merge_rules = scaling_targets(args.scaling_rules)
+    retabulate = args.collect_only or args.scaling_only
+    if not retabulate:
         log_path = run_log(site_dir)
         earlier = [w for w in (wall_from_log(p) for p in sorted(site_dir.glob("benchmark_run*.log"))) if w is not None]
         wall = snakemake(["--cores", str(args.cores), *base], log_path, env)
@@ -291,23 +330,24 @@ def main() -> int:
                          sum(earlier) + wall, "s", None, "<= 10800 (3 h)"))
         else:
             rows.append(("run", "total wall (Snakemake, --cores %d)" % args.cores, wall, "s", None, "<= 10800 (3 h)"))
-        if not args.no_scaling:
-            walls = {}
-            for k in (1, 2):
-                walls[k] = snakemake(["--cores", str(k), "--forcerun", *TILE_RULES, "--until", *MERGE_RULES, *base],
-                                     site_dir / f"benchmark_tiled_{k}core.log", env)
-                rows.append(("scaling", f"tiled stages (gully depth + fill, polygon morphometry, kite map, change: tile jobs and merges), --cores {k}", walls[k], "s",
-                             None, None))
-            rows.append(("scaling", "tiled stages speed-up 1 -> 2 cores", walls[1] / walls[2], "x", None, None))
-    if args.collect_only:
-        rows.extend(timed_rows(site_dir / "benchmark.csv"))
+    if retabulate:
+        kept = timed_rows(site_dir / "benchmark.csv")
+        rows.extend(r for r in kept if not (args.scaling_only and r[0] == "scaling"))  # new reruns replace old ones
+    costs = rule_costs(site_dir)  # before the reruns below overwrite the tile jobs' benchmark files
+    if (not args.collect_only) and not args.no_scaling:
+        walls = {}
+        for k in (1, 2):
+            walls[k] = snakemake(["--cores", str(k), "--forcerun", *tile_rules, "--until", *merge_rules, *base],
+                                 site_dir / f"benchmark_tiled_{k}core.log", env)
+            rows.append(("scaling", scaling_label(tile_rules, k), walls[k], "s", None, None))
+        rows.append(("scaling", "tiled stages speed-up 1 -> 2 cores", walls[1] / walls[2], "x", None, None))
+    if retabulate:
         if not any(r[0] == "run" for r in rows):  # the wrapper did not time it (stopped, or resumed by hand): the logs
             logs = sorted(site_dir.glob("benchmark_run*.log"))
             spans = [w for w in (wall_from_log(p) for p in logs) if w is not None]
             if spans:
                 rows.append(("run", f"total wall (Snakemake logs: {' + '.join(p.name for p in logs)}, --cores {args.cores})",
                              sum(spans), "s", None, "<= 10800 (3 h)"))
-    costs = rule_costs(site_dir)
     for r in costs.itertuples(index=False):
         rows.append(("rule", f"{r.job} wall", r.wall_s, "s", None, None))
         rows.append(("rule", f"{r.job} CPU", r.cpu_s, "s", None, None))

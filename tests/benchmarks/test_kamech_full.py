@@ -82,3 +82,13 @@ def test_a_resumed_run_keeps_the_interrupted_runs_log(tmp_path):
     assert kf.run_log(tmp_path).name == "benchmark_run2.log"
     (tmp_path / "benchmark_run2.log").write_text("run 2")
     assert kf.run_log(tmp_path).name == "benchmark_run3.log"
+
+
+def test_scaling_reruns_a_chosen_subset_of_tile_rules_until_their_merges():
+    assert kf.scaling_targets(None) == (list(kf.TILE_RULES), list(kf.MERGE_RULES))
+    tiles, merges = kf.scaling_targets(["gully_fill_tile", "gully_depth_tile"])
+    assert tiles == ["gully_depth_tile", "gully_fill_tile"] and merges == ["gully_depth_mosaic", "gully_fill_mosaic"]
+    assert "gully_depth_tile + gully_fill_tile" in kf.scaling_label(tiles, 1)
+    assert "change" in kf.scaling_label(list(kf.TILE_RULES), 2) and kf.scaling_label(tiles, 2).endswith("--cores 2")
+    with pytest.raises(SystemExit, match="dense_tile is not a tile rule"):
+        kf.scaling_targets(["dense_tile"])
