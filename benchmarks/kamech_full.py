@@ -5,6 +5,7 @@ epochs, every stage) and writes ``results/<site>/benchmark.csv`` (+ ``.md``):
 
 - ``rule`` rows: per Snakemake job, wall time, CPU time and peak memory (max RSS) from the
   rules' benchmark files (``results/<site>/benchmarks/**.tsv``);
+- ``stage`` rows: the same summed per stage (jobs, wall, CPU, largest peak);
 - ``run`` rows: total wall time of the Snakemake run, the largest peak memory of any job,
   the number of jobs;
 - ``accuracy`` rows: camera RMSE, checkpoint mean / SD / n (both epochs), DSM coverage, gully
@@ -111,6 +112,27 @@ def rule_costs(site_dir: Path) -> pd.DataFrame:
                      "wall_s": float(b["s"].iloc[-1]), "cpu_s": float(b["cpu_time"].iloc[-1]),
                      "max_rss_mb": float(b["max_rss"].iloc[-1])})
     return pd.DataFrame(rows, columns=["job", "wall_s", "cpu_s", "max_rss_mb"])
+
+
+def stage_costs(costs: pd.DataFrame) -> pd.DataFrame:
+    """Per stage (the first folder of a job's benchmark file): jobs, summed wall and CPU s, largest peak MB.
+
+    Parameters
+    ----------
+    costs : DataFrame
+        :func:`rule_costs`.
+
+    Returns
+    -------
+    DataFrame
+        ``stage, jobs, wall_s, cpu_s, max_rss_mb``, one row per stage in order of summed wall time.
+    """
+    if costs.empty:
+        return pd.DataFrame(columns=["stage", "jobs", "wall_s", "cpu_s", "max_rss_mb"])
+    stage = costs["job"].str.split("/").str[0]
+    out = costs.groupby(stage).agg(jobs=("job", "size"), wall_s=("wall_s", "sum"), cpu_s=("cpu_s", "sum"),
+                                   max_rss_mb=("max_rss_mb", "max"))
+    return out.rename_axis("stage").reset_index().sort_values("wall_s", ascending=False, ignore_index=True)
 
 
 def _kv(path: Path, key_col: str, val_col: str) -> dict:
@@ -352,6 +374,10 @@ def main() -> int:
         rows.append(("rule", f"{r.job} wall", r.wall_s, "s", None, None))
         rows.append(("rule", f"{r.job} CPU", r.cpu_s, "s", None, None))
         rows.append(("rule", f"{r.job} peak memory", r.max_rss_mb, "MB", None, "<= 8000"))
+    for r in stage_costs(costs).itertuples(index=False):
+        rows.append(("stage", f"{r.stage}: {r.jobs} jobs, summed wall", r.wall_s, "s", None, None))
+        rows.append(("stage", f"{r.stage}: summed CPU", r.cpu_s, "s", None, None))
+        rows.append(("stage", f"{r.stage}: largest peak memory", r.max_rss_mb, "MB", None, "<= 8000"))
     if len(costs):
         rows.append(("run", "largest peak memory of any job", costs["max_rss_mb"].max(), "MB", None, "<= 8000"))
         rows.append(("run", "sum of job wall times", costs["wall_s"].sum(), "s", None, None))

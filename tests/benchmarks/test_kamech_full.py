@@ -92,3 +92,13 @@ def test_scaling_reruns_a_chosen_subset_of_tile_rules_until_their_merges():
     assert "change" in kf.scaling_label(list(kf.TILE_RULES), 2) and kf.scaling_label(tiles, 2).endswith("--cores 2")
     with pytest.raises(SystemExit, match="dense_tile is not a tile rule"):
         kf.scaling_targets(["dense_tile"])
+
+
+def test_stage_costs_sum_the_jobs_of_each_stage():
+    costs = pd.DataFrame({"job": ["dense/dense_tile_r000_c000", "dense/epoch2/dense_tile_r000_c000", "twin/epoch1"],
+                          "wall_s": [100.0, 120.0, 250.0], "cpu_s": [90.0, 110.0, 240.0], "max_rss_mb": [900.0, 950.0, 1000.0]})
+    st = kf.stage_costs(costs)
+    assert st["stage"].tolist() == ["twin", "dense"]
+    dense = st.set_index("stage").loc["dense"]
+    assert dense["jobs"] == 2 and dense["wall_s"] == 220.0 and dense["cpu_s"] == 200.0 and dense["max_rss_mb"] == 950.0
+    assert kf.stage_costs(kf.rule_costs(Path("/nonexistent"))).empty
