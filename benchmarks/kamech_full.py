@@ -22,10 +22,10 @@ epochs, every stage) and writes ``results/<site>/benchmark.csv`` (+ ``.md``):
     .venv/bin/python benchmarks/kamech_full.py --collect-only          # re-tabulate a finished run
     .venv/bin/python benchmarks/kamech_full.py --scaling-only --scaling-rules gully_depth_tile gully_fill_tile
                                             # the speed-up alone, on a finished run, for some tile rules
+    .venv/bin/python benchmarks/kamech_full.py --dry-run               # snakemake -n
 
 The per-job rows are read before the scaling reruns, which overwrite the tile jobs' benchmark
 files: a later ``--collect-only`` reports those jobs' 2-core rerun instead.
-    .venv/bin/python benchmarks/kamech_full.py --dry-run               # snakemake -n
 
 ``--cut WxH`` runs the same site on a W × H m corner (site name ``kamech_full_cut<W>x<H>``,
 its own results folder); every row of its table says ``NOT the full site``.
