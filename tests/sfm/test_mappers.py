@@ -15,7 +15,7 @@ import pytest
 
 from kitegully import InputError
 from kitegully.sfm import SfmParams
-from kitegully.sfm.reconstruct import map_model
+from kitegully.sfm.reconstruct import _hierarchical_options, _incremental_options, map_model
 
 from .test_stage import PARAMS
 
@@ -61,6 +61,24 @@ def test_mapper_option_validates():
     assert SfmParams.from_config({**PARAMS, "mapper": "global"}).mapper == "global"
     with pytest.raises(InputError, match=r"^sfm.mapper: must be one of incremental, global, hierarchical, got 'glomap'$"):
         SfmParams.from_config({**PARAMS, "mapper": "glomap"})
+
+
+def test_global_ba_growth_validates_and_reaches_colmap():
+    assert SfmParams.from_config(PARAMS).global_ba_growth == 1.1  # key left out: COLMAP's own ratio
+    assert SfmParams.from_config({**PARAMS, "global_ba_growth": 1.3}).global_ba_growth == 1.3
+    with pytest.raises(InputError, match=r"^sfm.global_ba_growth: must be above 1, got 1.0$"):
+        SfmParams.from_config({**PARAMS, "global_ba_growth": 1.0})
+    inc = _incremental_options(True, 15, 1, 1, 1.3)
+    assert (inc.ba_global_frames_ratio, inc.ba_global_points_ratio) == (1.3, 1.3)
+    assert _hierarchical_options(True, 15, 1, 2, 1.4).incremental_options.ba_global_frames_ratio == 1.4
+
+
+def test_sparser_global_adjustments_still_register_all_views_and_refine_f(synthetic_db, tmp_path):
+    db = tmp_path / "database.db"
+    shutil.copy(synthetic_db / "database.db", db)
+    rec = map_model(db, synthetic_db / "images", tmp_path / "model", True, 15, 1, 1, global_ba_growth=2.0)
+    assert rec.num_reg_images() == 14
+    assert float(next(iter(rec.cameras.values())).params[0]) == pytest.approx(TRUE_F, rel=1e-3)  # the final BA is unchanged
 
 
 def test_unknown_mapper_is_refused_before_colmap_runs(tmp_path):

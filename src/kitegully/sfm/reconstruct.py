@@ -203,12 +203,20 @@ def why_no_model(database: Path, min_num_matches: int) -> str:
 
 
 MAPPERS = ("incremental", "global", "hierarchical")
+#: COLMAP's growth factor of the model between the incremental mapper's global adjustments
+DEFAULT_GLOBAL_BA_GROWTH = 1.1
 
 
-def _incremental_options(refine_principal_point: bool, min_num_matches: int, seed: int,
-                         num_threads: int) -> pycolmap.IncrementalPipelineOptions:
-    """COLMAP's incremental pipeline options with self-calibration and every seed set."""
+def _incremental_options(refine_principal_point: bool, min_num_matches: int, seed: int, num_threads: int,
+                         global_ba_growth: float = DEFAULT_GLOBAL_BA_GROWTH) -> pycolmap.IncrementalPipelineOptions:
+    """COLMAP's incremental pipeline options with self-calibration and every seed set.
+
+    ``global_ba_growth``: a global bundle adjustment each time the registered frames or the
+    points have grown by this factor (COLMAP's two ratios; see ``SfmParams``).
+    """
     opts = pycolmap.IncrementalPipelineOptions()
+    opts.ba_global_frames_ratio = global_ba_growth
+    opts.ba_global_points_ratio = global_ba_growth
     opts.min_num_matches = min_num_matches
     opts.ba_refine_focal_length = True
     opts.ba_refine_principal_point = refine_principal_point
@@ -245,13 +253,14 @@ def _global_options(refine_principal_point: bool, min_num_matches: int, seed: in
     return opts
 
 
-def _hierarchical_options(refine_principal_point: bool, min_num_matches: int, seed: int,
-                          num_threads: int) -> pycolmap.HierarchicalPipelineOptions:
+def _hierarchical_options(refine_principal_point: bool, min_num_matches: int, seed: int, num_threads: int,
+                          global_ba_growth: float = DEFAULT_GLOBAL_BA_GROWTH) -> pycolmap.HierarchicalPipelineOptions:
     """COLMAP's partitioned pipeline: overlapping clusters mapped incrementally, then merged."""
     opts = pycolmap.HierarchicalPipelineOptions()
     opts.num_threads = num_threads
     opts.num_workers = max(1, min(num_threads, 2))
-    inc = _incremental_options(refine_principal_point, min_num_matches, seed, max(1, num_threads // opts.num_workers))
+    inc = _incremental_options(refine_principal_point, min_num_matches, seed, max(1, num_threads // opts.num_workers),
+                               global_ba_growth)
     inc.ba_refine_sensor_from_rig = False  # one camera per frame: no rig to refine (COLMAP warns it breaks merging)
     opts.incremental_options = inc
     return opts
@@ -283,6 +292,7 @@ def map_model(
     num_threads: int,
     source_dir: str | Path | None = None,
     mapper: str = "incremental",
+    global_ba_growth: float = DEFAULT_GLOBAL_BA_GROWTH,
 ) -> pycolmap.Reconstruction:
     """Map the matched images into a model; returns the model with the most registered images.
 
@@ -293,7 +303,8 @@ def map_model(
     graph split into overlapping clusters of at most 500 images, each mapped incrementally,
     then merged). Every mapper's model ends with a global bundle adjustment that refines
     the shared camera's focal length, radial distortion and (``refine_principal_point``)
-    principal point.
+    principal point. ``global_ba_growth`` sets how often the incremental mappers (also
+    within hierarchical clusters) adjust the whole model (see ``SfmParams``).
 
     ``source_dir`` is the photo folder the user gave (named in errors instead of the
     prepared copies' work folder).
@@ -311,12 +322,12 @@ def map_model(
     tmp.mkdir(parents=True)
     args = (refine_principal_point, min_num_matches, seed, num_threads)
     if mapper == "incremental":
-        models = pycolmap.incremental_mapping(database, image_dir, tmp, _incremental_options(*args))
+        models = pycolmap.incremental_mapping(database, image_dir, tmp, _incremental_options(*args, global_ba_growth))
     elif mapper == "global":
         models = pycolmap.global_mapping(database, image_dir, tmp, _global_options(*args))
     else:
         try:
-            models = pycolmap.hierarchical_mapping(database, image_dir, tmp, _hierarchical_options(*args))
+            models = pycolmap.hierarchical_mapping(database, image_dir, tmp, _hierarchical_options(*args, global_ba_growth))
         except (RuntimeError, ValueError, IndexError):  # no cluster registered an image (COLMAP checks or indexes an empty list)
             models = {}
     models = {k: r for k, r in models.items() if r.num_reg_images() > 0}
@@ -385,12 +396,13 @@ def run_sfm(
     t2 = time.perf_counter()
     rec = map_model(
         database, image_dir, model_dir, params.refine_principal_point, params.min_num_matches, seed, num_threads,
-        source_dir, params.mapper,
+        source_dir, params.mapper, params.global_ba_growth,
     )
     t3 = time.perf_counter()
     timings = {
         "features_s": t1 - t0, "matching_s": t2 - t1, "mapping_s": t3 - t2, "matching_method": used,
         "n_position_priors": n_priors, "deterministic": deterministic, "mapper": params.mapper,
+        "global_ba_growth": params.global_ba_growth,
         "keypoints_extracted": capped["keypoints_before"], "keypoints_kept": capped["keypoints_after"],
         "images_feature_capped": capped["images_capped"],
         "estimate_affine_shape": params.estimate_affine_shape, "domain_size_pooling": params.domain_size_pooling,
