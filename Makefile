@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -67,6 +67,15 @@ stereo: $(STAMP)
 # --tile-m 200" runs a corner instead (its table says NOT the full site).
 kamech-full: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/kamech_full.py --cores $(CORES) $(KAMECH_FULL_ARGS)
+
+# An ESTIMATE of the full site's wall time on $(CORES) cores, in a minute: the job graph of make
+# kamech-full (a dry run on an empty results folder) replayed with the job times a finished run
+# measured (KAMECH_TIMES, a benchmark.csv; default the sessions 15-16 run).
+KAMECH_TIMES ?= docs/benchmarks/kamech_full_sessions15-16.csv
+kamech-full-estimate: $(STAMP)
+	rm -rf /tmp/kitegully_kamech_dry
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/kamech_full.py --cores $(CORES) --dry-run --results-dir /tmp/kitegully_kamech_dry
+	$(BIN)/python benchmarks/schedule_estimate.py /tmp/kitegully_kamech_dry/kamech_full/benchmark_dryrun.log $(KAMECH_TIMES) --cores $(CORES)
 
 # Dense matching with and without dense.matching.max_views (issue 21) in one run: a 1024 x 1024-cell
 # window of the full site's tile r002_c002 (needs a full-size run's georef/sfm under FULL_RESULTS, read
