@@ -102,3 +102,17 @@ def test_stage_costs_sum_the_jobs_of_each_stage():
     dense = st.set_index("stage").loc["dense"]
     assert dense["jobs"] == 2 and dense["wall_s"] == 220.0 and dense["cpu_s"] == 200.0 and dense["max_rss_mb"] == 950.0
     assert kf.stage_costs(kf.rule_costs(Path("/nonexistent"))).empty
+
+
+def test_log_peaks_read_each_rules_high_water_mark(tmp_path):
+    site = tmp_path / "site"
+    (site / "logs/gully").mkdir(parents=True)
+    (site / "logs/change").mkdir()
+    (site / "logs/gully/gully_map.log").write_text(
+        "x INFO a: start\nx INFO kitegully: peak memory: 6100 MB resident (high-water mark); largest child process 0 MB\n")
+    (site / "logs/change/evaluate.log").write_text(
+        "x INFO kitegully: peak memory: 900 MB resident (high-water mark); largest child process 11300 MB\n")
+    (site / "logs/change/failed.log").write_text("a.tif: no CRS\n")  # a failed job states no peak
+    peaks = kf.log_peaks(site)
+    assert peaks["job"].tolist() == ["change/evaluate", "gully/gully_map"]
+    assert peaks["peak_mb"].tolist() == [11300.0, 6100.0]  # a child's peak counts as the job's

@@ -148,6 +148,9 @@ def test_maps_the_photogrammetric_dsm(gully_run):
     assert int(summary["interpolated hole cells"]) > 0  # the fabricated matching gaps
     assert not (root / "gully" / "standin_dem_truth_plus_noise.tif").exists()
     assert "NOT the photogrammetric DSM" not in (root / "logs" / "gully" / "map.log").read_text()
+    from kitegully.logs import read_peak_memory
+
+    assert read_peak_memory(root / "logs" / "gully" / "map.log") > 50  # the job's high-water mark ends its log
 
 
 def test_standin_is_labelled_not_photogrammetric(tmp_path):
