@@ -212,6 +212,23 @@ def test_confusion_ignores_nodata():
     assert confusion_matrix(mapped, reference).sum() == 2
 
 
+def test_confusion_in_chunks_equals_all_at_once_and_stays_small():
+    import tracemalloc
+
+    rng = np.random.default_rng(3)
+    mapped = rng.choice(np.array([0, 1, 255], dtype=np.uint8), size=(1000, 3001))
+    reference = rng.choice(np.array([0, 1, 255], dtype=np.uint8), size=(1000, 3001))
+    valid = rng.random((1000, 3001)) > 0.1
+    whole = confusion_matrix(mapped, reference, valid=valid, chunk_cells=mapped.size)
+    tracemalloc.start()
+    chunked = confusion_matrix(mapped, reference, valid=valid, chunk_cells=65_537)  # chunks end mid-row
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert np.array_equal(chunked, whole) and whole.sum() > 0
+    # int64 codes of the 3 M cells at once would take 24 MB each; a chunk's work arrays < 3 MB
+    assert peak < 4e6
+
+
 def test_classify_scene_rejects_bad_input():
     with pytest.raises(InputError, match="same grid"):
         classify_scene(np.zeros((3, 10, 10)), np.zeros((9, 10)), 0.02, ObiaParams(), source="ortho.tif")
