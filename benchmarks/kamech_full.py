@@ -119,8 +119,8 @@ def log_peaks(site_dir: Path) -> pd.DataFrame:
 
     Snakemake's benchmark files sample a job's memory every 30 s after its first 15 s, so a
     shorter peak falls between samples (session 18: 6.0 GB in the files, 11.3 GB by
-    ``time -v`` around the run). Every rule script logs its process's ``ru_maxrss`` at exit
-    (:func:`kitegully.logs.peak_memory_line`), whether or not its rule has a benchmark file.
+    ``time -v`` around the run). Every rule script logs its process's high-water mark at exit
+    (``VmHWM``, :func:`kitegully.logs.peak_memory_line`), whether or not its rule has a benchmark file.
 
     Parameters
     ----------

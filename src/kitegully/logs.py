@@ -42,7 +42,8 @@ def peak_memory_mb() -> tuple[float, float]:
     its address space since ``exec``. ``getrusage``'s ``ru_maxrss`` is not: Linux carries the
     mark of the address space a process was forked or vforked from across ``exec``, so a
     script started by a 1.6 GB pytest worker read 1.6 GB there for a 0.3 GB peak of its own.
-    ``ru_maxrss`` serves elsewhere and for the children.
+    ``ru_maxrss`` serves elsewhere and for the children, whose mark is at least the size this
+    process had when it started them (that part never exceeds this process's own peak).
     """
     scale = 1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0  # ru_maxrss: bytes on macOS, KiB on Linux
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / scale
