@@ -46,17 +46,15 @@ def peak_memory_mb() -> tuple[float, float]:
     process had when it started them (that part never exceeds this process's own peak).
     """
     scale = 1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0  # ru_maxrss: bytes on macOS, KiB on Linux
-    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / scale
+    child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / scale
     try:
         with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
             for line in fh:
                 if line.startswith("VmHWM:"):
-                    own = int(line.split()[1]) / 1024.0  # kB
-                    break
+                    return int(line.split()[1]) / 1024.0, child  # kB
     except (OSError, ValueError, IndexError):
         pass
-    child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / scale
-    return own, child
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / scale, child
 
 
 def peak_memory_line() -> str:

@@ -23,6 +23,7 @@ import yaml
 
 from kitegully.io.raster import GridSpec, read_raster, write_raster
 from kitegully.io.vectors import read_vector, write_vector
+from kitegully.logs import read_peak_memory
 from snakemake_utils import REPO, run_snakemake
 from .tiny_sfm import copy_results
 
@@ -148,8 +149,6 @@ def test_maps_the_photogrammetric_dsm(gully_run):
     assert int(summary["interpolated hole cells"]) > 0  # the fabricated matching gaps
     assert not (root / "gully" / "standin_dem_truth_plus_noise.tif").exists()
     assert "NOT the photogrammetric DSM" not in (root / "logs" / "gully" / "map.log").read_text()
-    from kitegully.logs import read_peak_memory
-
     assert read_peak_memory(root / "logs" / "gully" / "map.log") > 50  # the job's high-water mark ends its log
 
 

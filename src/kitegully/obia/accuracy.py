@@ -50,8 +50,9 @@ def confusion_matrix(mapped: np.ndarray, reference: np.ndarray, n_classes: int =
         raise ValueError(f"mapped has {m_all.size} cells, the reference {r_all.size}")
     v_all = None if valid is None else np.asarray(valid, dtype=bool).ravel()
     counts = np.zeros(n_classes * n_classes, dtype=np.int64)
-    for start in range(0, m_all.size, max(1, int(chunk_cells))):
-        part = slice(start, start + max(1, int(chunk_cells)))
+    step = max(1, int(chunk_cells))
+    for start in range(0, m_all.size, step):
+        part = slice(start, start + step)
         m = m_all[part].astype(np.int64)
         r = r_all[part].astype(np.int64)
         ok = (m >= 0) & (m < n_classes) & (r >= 0) & (r < n_classes) & (m != NODATA) & (r != NODATA)
