@@ -105,7 +105,7 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     res = map_gullies(dem, grid, hx, hy, params, workers=1, auto_heads=auto, incision=ip, ortho=ortho)
     # cells raised by the fill of the tracing surface (filled depressions and flats) and nodata
     _zh, zt, _n = tracing_surface(dem, grid, params, 1, ip, hidden=res.crowns)
-    filled, _r = priority_flood_fill(zt, 0.0 if params.flat_routing == "resolve" else params.fill_epsilon_m)
+    filled, _r = priority_flood_fill(zt, params.fill_epsilon_m if params.flat_routing == "epsilon" else 0.0)
     raised = np.isfinite(zt) & (filled > zt + 1e-6)
     nodata = ~np.isfinite(zt)
     del _zh, zt, filled

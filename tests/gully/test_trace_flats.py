@@ -33,7 +33,7 @@ def traced_xy(res):
 NOISE = HeadDetectionParams(dsm_sigma_z_m=0.03)
 
 
-@pytest.mark.parametrize("routing", ["resolve", "epsilon"])
+@pytest.mark.parametrize("routing", ["resolve", "epsilon", "least_cost"])
 def test_a_channel_interrupted_by_a_filled_pit_is_traced_through_it(routing):
     grid, z, xs, yc, X, Y = side_slope_channel()
     # a 3 m long pit, 0.3 m deep, in the channel floor: the fill makes a flat whose only outlet

@@ -108,6 +108,23 @@ def test_map_gullies_with_the_tiled_fill_equals_the_untiled_chain(tmp_path):
         map_gullies(z, grid, hx, hy, GullyParams(flat_routing="epsilon"), filled=filled)
 
 
+def test_least_cost_routing_with_the_tiled_rules_inputs_equals_the_untiled_call():
+    z = _dem((90, 140), "gully")
+    grid = GridSpec(500000.0, 4001000.0, 0.2, z.shape[1], z.shape[0], CRS)
+    params = GullyParams(sigma_m=2.0, depth_threshold_m=0.1, min_patch_volume_m3=0.01, water_min_area_m2=None,
+                         trace_smoothing_m=0.4, flat_routing="least_cost")
+    hx, hy = np.array([500003.0, 500020.0]), np.array([4000990.0, 4000995.0])
+    ref = map_gullies(z, grid, hx, hy, params)
+    _, z_trace, _ = tracing_surface(z, grid, params)
+    from kitegully.terrain.tiled_fill import tiled_priority_flood_fill
+
+    filled = tiled_priority_flood_fill(z_trace, 17)
+    got = map_gullies(z, grid, hx, hy, params, filled=filled, trace_surface=z_trace)
+    assert got.n_flat_routed == ref.n_flat_routed > 0  # routes out of depressions found by the search
+    assert np.array_equal(got.network.cells, ref.network.cells)
+    assert np.array_equal(got.gully, ref.gully)
+
+
 def test_the_default_sites_stay_untiled():
     from kitegully.config import load_yaml
 

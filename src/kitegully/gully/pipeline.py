@@ -24,13 +24,14 @@ from kitegully.io.raster import GridSpec
 from kitegully.terrain.fill import priority_flood_fill
 from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.flow import d8_directions
+from kitegully.terrain.least_cost import least_cost_directions
 from kitegully.terrain.holes import interpolate_holes
 from kitegully.terrain.smoothing import gaussian_smooth_fft
 
 log = logging.getLogger(__name__)
 
 #: Ways of routing flow across filled depressions and flats (``gully.flat_routing``).
-FLAT_ROUTINGS = ("resolve", "epsilon")
+FLAT_ROUTINGS = ("resolve", "epsilon", "least_cost")
 
 
 @dataclass(frozen=True)
@@ -53,7 +54,12 @@ class GullyParams:
         How flow crosses filled depressions and flats ([I] ``resolve``): ``resolve`` =
         priority-flood fill without gradient (ε = 0), then flat resolution (Barnes et al.
         2014: towards lower and away from higher terrain, paths converge); ``epsilon`` =
-        priority-flood+ε fill, steepest descent on it (paths cross flats on parallel lines).
+        priority-flood+ε fill, steepest descent on it (paths cross flats on parallel lines);
+        ``least_cost`` = directions by least-cost search on the unfilled tracing surface
+        (:func:`kitegully.terrain.least_cost.least_cost_directions`, after GRASS
+        ``r.watershed``): a depression is left through the same spill cell as the fill, but
+        the route inside it follows its lowest cells (a channel under a filled reach) instead
+        of the flat's shape; the ε = 0 fill is still made for the other steps.
     fill_epsilon_m : float
         Priority-flood ε (m per cell) of ``flat_routing: epsilon`` ([I] 1e-4).
     water_min_area_m2 : float or None
@@ -202,7 +208,7 @@ def map_gullies(
     filled : ndarray (H, W), optional
         The ε = 0 priority-flood fill of :func:`tracing_surface`, made elsewhere (the
         tiled fill of a large site, :mod:`kitegully.terrain.tiled_fill`, equal bit for
-        bit to the fill done here); only with ``flat_routing: resolve``.
+        bit to the fill done here); only with ``flat_routing: resolve`` or ``least_cost``.
     smoothed, depth : ndarray (H, W) float32, optional
         The depth map (steps a-d) made elsewhere, both or neither: the merged depth
         tiles of a large site (:func:`kitegully.gully.depth.depth_map_tile`).
@@ -243,12 +249,14 @@ def map_gullies(
     if smoothed is not None and (smoothed.shape != dem.shape or depth.shape != dem.shape):
         raise ValueError(f"depth map has shape {depth.shape}, the DEM {dem.shape}")
     resolve = params.flat_routing == "resolve"
+    least_cost = params.flat_routing == "least_cost"
     ip = incision if incision is not None else auto_heads
     if params.head_snap in ("incision", "relief") and np.size(heads_x) and ip is None:
         raise ValueError(f"head_snap {params.head_snap!r} needs the incision-map parameters (gully.automatic_heads)")
     if filled is not None:
-        if not resolve:
-            raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: resolve")
+        if not (resolve or least_cost):
+            raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: "
+                             "resolve or least_cost")
         if filled.shape != dem.shape:
             raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {dem.shape}")
     if trace_surface is not None:
@@ -281,15 +289,17 @@ def map_gullies(
         else:
             (z_heads, n_holes), zi = hole_filled(dem, grid, params), trace_surface
         if filled is None:
-            fz, n_raised = priority_flood_fill(zi, 0.0 if resolve else params.fill_epsilon_m)
+            fz, n_raised = priority_flood_fill(zi, params.fill_epsilon_m if params.flat_routing == "epsilon" else 0.0)
         else:
             fz = np.asarray(filled, dtype=np.float64)  # as priority_flood_fill returns it (same values)
             n_raised = int(np.count_nonzero(fz > zi))
             log.info("filled DEM: given (tiled priority flood), not filled here")
-        del zi
         dirs, n_flat, n_left = (None, 0, 0)
         if resolve:
             dirs, n_flat, n_left = flow_directions(fz)
+        elif least_cost:
+            dirs, n_flat = least_cost_directions(zi)  # n_flat: cells draining to a neighbour not below them
+        del zi
         return z_heads, n_holes, fz, n_raised, dirs, n_flat, n_left, time.perf_counter() - tb
 
     # The fill and flat resolution (compiled, serial, without the GIL) run on one core while
@@ -335,7 +345,8 @@ def map_gullies(
     del incised, relief
     t["snap_s"] = time.perf_counter() - t0
     log.info(
-        "filled DEM (%s): %d hole cells interpolated (holes >= %s m2 kept as open water), %d cells raised, %d flat cells routed by the flat mask, "
+        "filled DEM (%s): %d hole cells interpolated (holes >= %s m2 kept as open water), %d cells raised, %d cells routed across flats "
+        "(the flat mask) or out of depressions (least cost), "
         "%d cells left undrained, %.1f s",
         params.flat_routing, n_holes, params.water_min_area_m2, n_raised, n_flat, n_left, t_flow,
     )
@@ -584,6 +595,7 @@ def gully_summary(res: GullyResult, grid: GridSpec, params: GullyParams, dem_sou
         ("holes kept as open water from (m2)", params.water_min_area_m2),
         ("cells raised by filling", res.n_raised),
         ("flow routing across flats", params.flat_routing),
-        ("flat cells routed by the flat mask", res.n_flat_routed),
+        ("flat cells routed by the flat mask" if params.flat_routing != "least_cost"
+         else "cells breached (draining to a neighbour not below them)", res.n_flat_routed),
     ] + [(f"time {k[:-2]} (s)", round(v, 2)) for k, v in res.timings_s.items()]
     return pd.DataFrame(rows, columns=["quantity", "value"]).astype({"value": str})

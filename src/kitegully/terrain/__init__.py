@@ -15,12 +15,16 @@ Modules, one job each:
     cell drains, paths converge instead of running in parallel.
 ``flow``
     D8 flow directions and steepest-descent tracing on a depression-free DEM.
+``least_cost``
+    Drainage directions of an unfilled DEM by least-cost search (depressions breached
+    along their lowest route, after GRASS ``r.watershed``), O(n log n).
 """
 
 from kitegully.terrain.fill import priority_flood_fill
 from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.flow import D8_OFFSETS, d8_directions, trace_paths
 from kitegully.terrain.holes import interior_holes, interpolate_holes
+from kitegully.terrain.least_cost import least_cost_directions
 from kitegully.terrain.smoothing import gaussian_kernel_1d, gaussian_smooth_fft
 
 __all__ = [
@@ -31,6 +35,7 @@ __all__ = [
     "gaussian_smooth_fft",
     "interior_holes",
     "interpolate_holes",
+    "least_cost_directions",
     "priority_flood_fill",
     "trace_paths",
 ]
