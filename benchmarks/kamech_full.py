@@ -37,12 +37,14 @@ import argparse
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
 from datetime import datetime
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import yaml
 
@@ -219,6 +221,28 @@ def accuracies(site_dir: Path) -> dict[str, float]:
     if ob.exists():
         out["kite bare-soil OA"] = float(pd.read_csv(ob)["overall_accuracy"].iloc[0])
     return out
+
+
+def keep_below_target(site_dir: Path, acc: dict[str, float], target_pct: float = 85.0) -> Path | None:
+    """Copy epoch 1's DSM, orthophoto and gully tables aside when the network misses its target.
+
+    Session 18's run scored 79.5 % and its DSM was overwritten by the next run before anyone
+    could ask why; a run that misses the target now keeps what the miss analysis needs
+    (``benchmarks/gully_miss_analysis.py`` on a site folder holding these as ``dense/`` and
+    ``gully/``, with the twin's ``twin/`` beside them) under ``kept_below_target/<UTC time>/``.
+    Returns that folder, or None when nothing was kept.
+    """
+    good = acc.get("gully good fit 5 m")
+    if good is None or not np.isfinite(good) or good >= target_pct:
+        return None
+    dest = site_dir / "kept_below_target" / time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    for rel in ("dense/dsm.tif", "dense/orthophoto.tif", "gully/gully_summary.csv", "gully/network_validation.csv"):
+        src = site_dir / rel
+        if src.exists():
+            (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dest / rel)
+    print(f"gully good fit {good:.1f} % < {target_pct:.0f} %: the DSM and gully tables were kept in {dest}")
+    return dest
 
 
 def wall_from_log(log_path: Path) -> float | None:
@@ -416,7 +440,9 @@ def main() -> int:
         rows.append(("run", f"largest peak memory of any job (high-water mark from the logs: {top['job']})",
                      top["peak_mb"], "MB", None, "<= 8000"))
         rows.append(("run", "jobs whose log states its peak memory", len(peaks), "", None, None))
-    for name, value in accuracies(site_dir).items():
+    acc = accuracies(site_dir)
+    keep_below_target(site_dir, acc)
+    for name, value in acc.items():
         unit, paper, target = PAPER.get(name, ("", None, None))
         rows.append(("accuracy", name, value, unit, paper, target))
     df = pd.DataFrame(rows, columns=["kind", "item", "value", "unit", "paper", "target"])

@@ -116,3 +116,18 @@ def test_log_peaks_read_each_rules_high_water_mark(tmp_path):
     peaks = kf.log_peaks(site)
     assert peaks["job"].tolist() == ["change/evaluate", "gully/gully_map"]
     assert peaks["peak_mb"].tolist() == [11300.0, 6100.0]  # a child's peak counts as the job's
+
+
+def test_a_run_below_the_gully_target_keeps_its_dsm_and_gully_tables(tmp_path):
+    site = tmp_path / "site"
+    (site / "dense").mkdir(parents=True)
+    (site / "gully").mkdir()
+    (site / "dense/dsm.tif").write_bytes(b"dsm")
+    (site / "gully/network_validation.csv").write_text("category,percent\ngood_fit,79.5\n")
+    assert kf.keep_below_target(site, {"gully good fit 5 m": 87.2}) is None
+    assert not (site / "kept_below_target").exists()
+    kept = kf.keep_below_target(site, {"gully good fit 5 m": 79.5})
+    assert (kept / "dense/dsm.tif").read_bytes() == b"dsm"
+    assert (kept / "gully/network_validation.csv").exists()
+    assert not (kept / "dense/orthophoto.tif").exists()  # what is missing is skipped, not invented
+    assert kf.keep_below_target(site, {}) is None  # no gully row: nothing to judge
