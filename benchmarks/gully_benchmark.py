@@ -259,29 +259,40 @@ def ensure_grass() -> str | None:
     return shutil.which("grass")
 
 
-def grass_fill(grass: str, tif: Path, work: Path) -> tuple[float, np.ndarray] | None:
-    script = work / "grass_fill.sh"
-    out = work / "grass_filled.tif"
+def grass_timed(grass: str, tif: Path, work: Path, command: str, output: str, out_type: str) -> tuple[float, Path] | None:
+    """Import ``tif`` as raster ``dem`` into a temporary GRASS location, time ``command`` alone
+    (import and export excluded) and export raster ``output`` as GeoTIFF: (seconds, path), or None
+    with the error printed when GRASS fails."""
+    name = command.split()[0]
+    script = work / f"grass_{name}.sh"
+    out = work / f"grass_{output}.tif"
     script.write_text(textwrap.dedent(f"""\
         set -e
         r.in.gdal -o input={tif} output=dem --quiet
         g.region raster=dem
         t0=$(date +%s.%N)
-        r.fill.dir input=dem output=filled direction=dir --quiet --overwrite
+        {command} --quiet --overwrite
         t1=$(date +%s.%N)
-        echo "FILLTIME $t0 $t1"
-        r.out.gdal input=filled output={out} type=Float64 --quiet --overwrite
+        echo "GRASSTIME $t0 $t1"
+        r.out.gdal input={output} output={out} type={out_type} --quiet --overwrite
         """))
     p = subprocess.run([grass, "--tmp-location", CRS, "--exec", "bash", str(script)], capture_output=True, text=True)
-    line = [ln for ln in p.stdout.splitlines() if ln.startswith("FILLTIME")]
+    line = [ln for ln in p.stdout.splitlines() if ln.startswith("GRASSTIME")]
     if p.returncode != 0 or not line:
-        print(f"GRASS r.fill.dir failed: {p.stderr.strip()[-500:]}")
+        print(f"GRASS {name} failed: {p.stderr.strip()[-500:]}")
         return None
     _, a, b = line[0].split()
+    return float(b) - float(a), out
+
+
+def grass_fill(grass: str, tif: Path, work: Path) -> tuple[float, np.ndarray] | None:
+    g = grass_timed(grass, tif, work, "r.fill.dir input=dem output=filled direction=dir", "filled", "Float64")
+    if g is None:
+        return None
     import rasterio
 
-    with rasterio.open(out) as src:
-        return float(b) - float(a), src.read(1)
+    with rasterio.open(g[1]) as src:
+        return g[0], src.read(1)
 
 
 def ensure_pysheds(venv: Path) -> Path | None:

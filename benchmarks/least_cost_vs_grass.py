@@ -26,10 +26,8 @@ does); without apt the GRASS half is skipped with a message. Writes
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
 import tempfile
-import textwrap
 import time
 from pathlib import Path
 
@@ -38,7 +36,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 
-from gully_benchmark import CRS, ensure_grass, synthetic_catchment  # noqa: E402
+from gully_benchmark import CRS, ensure_grass, grass_timed, synthetic_catchment  # noqa: E402
 
 from kitegully.io.raster import GridSpec, write_raster  # noqa: E402
 from kitegully.terrain.fill import priority_flood_fill  # noqa: E402
@@ -52,32 +50,17 @@ GRASS_TO_D8 = np.array([255, 2, 1, 0, 3, 5, 6, 7, 4], dtype=np.uint8)
 
 def grass_watershed(grass: str, tif: Path, work: Path) -> tuple[float, np.ndarray] | None:
     """``r.watershed -s`` on ``tif``: (wall seconds of the call, drainage as our D8 codes, 255 = none)."""
-    out = work / "grass_drain.tif"
-    script = work / "grass_ws.sh"
-    script.write_text(textwrap.dedent(f"""\
-        set -e
-        r.in.gdal -o input={tif} output=dem --quiet
-        g.region raster=dem
-        t0=$(date +%s.%N)
-        r.watershed -s elevation=dem drainage=drain --quiet --overwrite
-        t1=$(date +%s.%N)
-        echo "WSTIME $t0 $t1"
-        r.out.gdal input=drain output={out} type=Int16 --quiet --overwrite
-        """))
-    p = subprocess.run([grass, "--tmp-location", CRS, "--exec", "bash", str(script)], capture_output=True, text=True)
-    line = [ln for ln in p.stdout.splitlines() if ln.startswith("WSTIME")]
-    if p.returncode != 0 or not line:
-        print(f"GRASS r.watershed failed: {p.stderr.strip()[-500:]}")
+    g = grass_timed(grass, tif, work, "r.watershed -s elevation=dem drainage=drain", "drain", "Int16")
+    if g is None:
         return None
     import rasterio
 
-    with rasterio.open(out) as src:
+    with rasterio.open(g[1]) as src:
         v = src.read(1).astype(np.int64)
     codes = np.full(v.shape, 255, dtype=np.uint8)
     ok = (v >= 1) & (v <= 8)  # negative: flows out of the region; 0 or nodata: none
     codes[ok] = GRASS_TO_D8[v[ok]]
-    _, a, b = line[0].split()
-    return float(b) - float(a), codes
+    return g[0], codes
 
 
 def main() -> None:
