@@ -243,6 +243,9 @@ def run_validation(dem_path: str, out_dir: str) -> None:
 
 # --------------------------------------------------------------------------- GRASS and pysheds
 def ensure_grass() -> str | None:
+    """The ``grass`` executable, installing Debian grass-core with apt-get when missing (every
+    benchmark that compares with GRASS calls this one); None, with the reason printed, when it
+    cannot be installed."""
     grass = shutil.which("grass")
     if grass:
         return grass
@@ -251,7 +254,7 @@ def ensure_grass() -> str | None:
         return None
     print("installing Debian grass-core with apt-get (once) ...", flush=True)
     env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-    for cmd in (["apt-get", "update", "-qq"], ["apt-get", "install", "-y", "-qq", "grass-core"]):
+    for cmd in (["apt-get", "update", "-qq"], ["apt-get", "install", "-y", "-qq", "--no-install-recommends", "grass-core"]):
         p = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if p.returncode != 0:
             print(f"GRASS comparison skipped: {' '.join(cmd)} failed: {p.stderr.strip()[-300:]}")

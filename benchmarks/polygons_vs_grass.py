@@ -23,8 +23,6 @@ Results are printed and written to ``results/benchmarks/polygons_vs_grass.md``.
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
 import subprocess
 import tempfile
 import textwrap
@@ -39,24 +37,9 @@ from kitegully.io.raster import Raster
 from kitegully.polygons.breaklines import convexity
 from kitegully.polygons.thalweg import topographic_convergence_index
 
+from gully_benchmark import ensure_grass  # noqa: E402  (benchmarks/ is the script's folder)
+
 REPO = Path(__file__).resolve().parents[1]
-
-
-def ensure_grass() -> str | None:
-    """The ``grass`` executable, installing Debian grass-core with apt-get when missing."""
-    grass = shutil.which("grass")
-    if grass:
-        return grass
-    if not shutil.which("apt-get"):
-        print("GRASS comparison skipped: apt-get is not available on this machine")
-        return None
-    env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-    for cmd in (["apt-get", "update", "-qq"], ["apt-get", "install", "-y", "-qq", "--no-install-recommends", "grass-core"]):
-        p = subprocess.run(cmd, env=env, capture_output=True, text=True)
-        if p.returncode != 0:
-            print(f"GRASS comparison skipped: {' '.join(cmd)} failed: {p.stderr.strip()[-300:]}")
-            return None
-    return shutil.which("grass")
 
 
 def run_grass(grass: str, tif: Path, crs: str, work: Path, window: int) -> dict[str, tuple[float, np.ndarray]]:
