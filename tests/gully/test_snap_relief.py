@@ -128,6 +128,23 @@ def test_relief_and_incision_snapping_need_the_detector_parameters():
         map_gullies(z, grid, np.array([0.5]), np.array([0.5]), GullyParams(head_snap="relief"), workers=1)
 
 
+def test_posterior_snap_in_the_pipeline_lands_in_the_channel_and_not_in_a_gap():
+    """map_gullies with ``head_snap: posterior``: the relief spread is measured on the DSM (ρ) and
+    the head digitised 2 m upslope of the shallow channel starts its path in the channel; the snap
+    reads observed cells only, as ``relief`` does."""
+    from kitegully.gully.pipeline import GullyParams, map_gullies
+
+    grid, z, xs, ys = steepening_slope_with_a_shallow_channel(kappa=0.0)
+    X, Y = np.meshgrid(xs - xs[0], ys - ys[-1])
+    params = GullyParams(head_snap="posterior", head_snap_radius_m=6.0, sigma_m=2.0, water_min_area_m2=None)
+    res = map_gullies(z, grid, np.array([xs[100]]), np.array([ys[-1] + 22.0]), params, workers=1, incision=P)
+    assert res.heads_inside[0] and abs(_y(res.network.cells[0], ys, grid) - 20.0) <= 0.6
+    gap = np.hypot(X - 20.0, Y - 21.0) < 1.5
+    dem = np.where(gap, np.nan, z).astype(np.float32)
+    res = map_gullies(dem, grid, np.array([xs[100]]), np.array([ys[-1] + 22.0]), params, workers=1, incision=P)
+    assert res.heads_inside[0] and not gap.ravel()[res.network.cells[0]]
+
+
 def test_relief_snap_never_lands_in_a_gap_of_the_dsm():
     # the DSM lost a 1.5-2 m disc over the channel next to the digitised head: the hole-filled surface
     # there is interpolated, so the snapping reads the relief of the observed cells only
@@ -141,3 +158,28 @@ def test_relief_snap_never_lands_in_a_gap_of_the_dsm():
         dem = np.where(gap, np.nan, z).astype(np.float32)
         res = map_gullies(dem, grid, np.array([xs[100]]), np.array([ys[-1] + 22.0]), params, workers=1, incision=P)
         assert res.heads_inside[0] and not gap.ravel()[res.network.cells[0]]
+
+
+def test_posterior_snap_weighs_the_digitising_error_against_the_relief():
+    """A head digitised 1.5 m beside its 0.30 m-deep channel, a 0.35 m hollow 5.5 m away (σ 2 m,
+    radius 6 m, relief spread ρ 0.073 m, k 3): ``relief`` takes the deeper hollow wherever it lies;
+    ``posterior`` stays on the channel (0.05 m = 0.7 ρ of extra relief is not worth 5.5 m at σ 2 m),
+    but follows a hollow deep enough to outweigh the distance (0.8 m)."""
+    grid = _grid(100)
+    xs, ys = grid.cell_centres()
+    z = np.zeros((100, 100), np.float32)
+    relief = np.zeros((100, 100), np.float32)
+    r0, c0 = 50, 50
+    relief[r0, c0 + 7:c0 + 40] = 0.30  # the channel, its first cell 1.4 m east of the digitised head
+    relief[r0 + 27, c0] = 0.35  # the hollow, 5.4 m south
+    hx, hy = np.array([xs[c0]]), np.array([ys[r0]])
+    rel, _ = snap_heads(z, grid, hx, hy, 6.0, "relief", relief=relief)
+    post, inside = snap_heads(z, grid, hx, hy, 6.0, "posterior", relief=relief, relief_noise_m=0.073, relief_k=3.0)
+    assert inside[0]
+    assert rel[0] == (r0 + 27) * 100 + c0
+    assert post[0] // 100 == r0 and post[0] % 100 == c0 + 7  # the channel's cell nearest the head
+    relief[r0 + 27, c0] = 0.8
+    post, _ = snap_heads(z, grid, hx, hy, 6.0, "posterior", relief=relief, relief_noise_m=0.073, relief_k=3.0)
+    assert post[0] == (r0 + 27) * 100 + c0
+    with pytest.raises(ValueError, match="relief noise"):
+        snap_heads(z, grid, hx, hy, 6.0, "posterior", relief=relief)

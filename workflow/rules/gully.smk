@@ -43,7 +43,7 @@ if "gully" in config:
         if GULLY["dem"] != "dense":
             raise WorkflowError("Invalid configuration: gully.crowns needs gully.dem: dense (the orthophoto of that DSM)")
         GULLY_HEADS_INPUT["ortho"] = result("dense", "orthophoto.tif")
-    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief") or GULLY_GROUND_SURFACE) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
+    if (GULLY["heads"] != "digitised" or GULLY["head_snap"] in ("incision", "relief", "posterior") or GULLY_GROUND_SURFACE) and GULLY["automatic_heads"]["dsm_sigma_z_m"] is None:
         _cps = result("twin", "observed/checkpoints.csv") if IS_TWIN else config.get("inputs", {}).get("checkpoints")
         if not _cps:
             raise WorkflowError("Invalid configuration: gully.automatic_heads.dsm_sigma_z_m: null needs checkpoints (inputs.checkpoints)")

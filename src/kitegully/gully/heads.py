@@ -555,7 +555,7 @@ def automatic_head_params(heads: str, cfg: Mapping[str, Any], dem: np.ndarray, g
     -------
     HeadDetectionParams or None
     """
-    if heads == "digitised" and head_snap not in ("incision", "relief") and not needed:
+    if heads == "digitised" and head_snap not in ("incision", "relief", "posterior") and not needed:
         return None
     sz = None
     if checkpoints_csv:

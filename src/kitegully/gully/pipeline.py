@@ -251,7 +251,7 @@ def map_gullies(
     resolve = params.flat_routing == "resolve"
     least_cost = params.flat_routing == "least_cost"
     ip = incision if incision is not None else auto_heads
-    if params.head_snap in ("incision", "relief") and np.size(heads_x) and ip is None:
+    if params.head_snap in ("incision", "relief", "posterior") and np.size(heads_x) and ip is None:
         raise ValueError(f"head_snap {params.head_snap!r} needs the incision-map parameters (gully.automatic_heads)")
     if filled is not None:
         if not (resolve or least_cost):
@@ -329,9 +329,15 @@ def map_gullies(
     t["fill_branch_s"] = t_flow
     t0 = time.perf_counter()
     incised = relief = None
-    if params.head_snap == "relief" and np.size(heads_x):
+    relief_noise = None
+    if params.head_snap in ("relief", "posterior") and np.size(heads_x):
         # on the observed cells only, as the detector's incision map: a head never snaps into an interpolated gap
-        relief = head_scale_relief(dem, grid.cell, ip, workers)[0]
+        relief, rough = head_scale_relief(dem, grid.cell, ip, workers)
+        relief_noise = max(float(ip.dsm_sigma_z_m), rough)
+        if params.head_snap == "posterior":
+            log.info("head snapping: posterior of the digitising error (SD %.3g m) and the head-scale relief "
+                     "(spread %.3g m = max(σ_z %.3g m, ρ %.3g m), k %.3g)", params.head_snap_radius_m / 3.0,
+                     relief_noise, ip.dsm_sigma_z_m, rough, ip.relief_k)
     if params.head_snap == "incision" and np.size(heads_x):
         incised = visible_incisions(incision_map(z_heads, grid.cell, ip, workers, roughness=False)[0], grid.cell,
                                     ip.slope_window_m)
@@ -340,7 +346,7 @@ def map_gullies(
         log.info("head snapping: %d incised cells lead into a channel (candidates)", int(incised.sum()))
     inside_idx, inside = snap_heads(
         z_heads, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels,
-        smoothed=smoothed, incised=incised, relief=relief,
+        smoothed=smoothed, incised=incised, relief=relief, relief_noise_m=relief_noise, relief_k=ip.relief_k if ip else 3.0,
     )
     del incised, relief
     t["snap_s"] = time.perf_counter() - t0
