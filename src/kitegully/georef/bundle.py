@@ -325,16 +325,39 @@ def _levenberg_marquardt(pb: _Problem, state: tuple) -> tuple[tuple, float, floa
 
 def _intrinsics_sd(pb: _Problem, state: tuple, w: np.ndarray, r: np.ndarray) -> np.ndarray:
     """A-priori SD (nc, nri) of the refined intrinsics: (JᵀJ)⁻¹ of the final state reduced
-    to the camera block (NaN when singular)."""
+    to the camera block (NaN when singular).
+
+    Points are eliminated with the pseudo-inverse of their 3 × 3 blocks: a point seen along
+    nearly parallel rays has a near-singular block, whose plain inverse (1e12 and more)
+    made the reduced system indefinite and the variances negative (clipped to 0) depending
+    on the BLAS threads' rounding. The reduced camera system mixes units (f in pixels, k1
+    dimensionless, rotations, metres), so it is scaled to unit diagonal (Jacobi) before the
+    solve and the intrinsics' block of its inverse is scaled back. O(P³) for P camera unknowns."""
     nc, nri = pb.nc, pb.nri
+    if not nri:
+        return np.zeros((nc, 0))
     U, W, V, _, _ = _normal_equations(pb, *state, w, r)
-    Vinv_sp = _blockdiag(np.linalg.inv(V + 1e-12 * np.eye(3)[None]))
+    Vinv_sp = _blockdiag(_pinv_sym3(V))
     S = U - (W @ Vinv_sp @ W.T).toarray()
+    m = nc * nri
+    d = np.sqrt(np.abs(np.diag(S)))
+    d[~(d > 0)] = 1.0
+    Sn = S / d[:, None] / d[None, :]
     try:
-        cov_c = np.linalg.inv(S[: nc * nri, : nc * nri] - S[: nc * nri, nc * nri:] @ np.linalg.solve(S[nc * nri:, nc * nri:], S[nc * nri:, : nc * nri]))
-        return np.sqrt(np.clip(np.diag(cov_c), 0, None)).reshape(nc, nri) if nri else np.zeros((nc, 0))
+        cov_c = np.linalg.solve(Sn, np.eye(len(S))[:, :m])[:m] / np.outer(d[:m], d[:m])
     except np.linalg.LinAlgError:
         return np.full((nc, nri), np.nan)
+    var = np.diag(cov_c)
+    return np.where(var > 0, np.sqrt(np.abs(var)), np.nan).reshape(nc, nri)
+
+
+def _pinv_sym3(V: np.ndarray, rcond: float = 1e-9) -> np.ndarray:
+    """Pseudo-inverses of symmetric PSD 3 × 3 blocks (n, 3, 3): eigenvalues below ``rcond`` ×
+    the block's largest (or ≤ 0) are dropped, as a point direction the rays do not fix."""
+    ev, Q = np.linalg.eigh(V)
+    keep = ev > rcond * np.maximum(ev[:, -1:], 0.0)
+    inv = np.where(keep, 1.0 / np.where(keep, ev, 1.0), 0.0)
+    return np.einsum("nij,nj,nkj->nik", Q, inv, Q)
 
 
 def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Block, dict]:
