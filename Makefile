@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -88,6 +88,16 @@ dense-view-cap: $(STAMP)
 		--out benchmarks/out/dense_view_cap_full.md
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/dense_view_cap.py --site config/sites/kamech_twin.yaml \
 		--results $(TWIN_RESULTS) --caps none,20 --out benchmarks/out/dense_view_cap_twin.md
+
+# The GCP bundle's tie-point budget against the block's shape (issue 21; evaluation only): one epoch
+# of a finished full-size run's SfM model adjusted with 10 000, ~4 a tie-grid cell and every tie point,
+# each also with f fixed at the true value; camera errors, the tie points' dome against the true DSM and
+# at the checkpoints (~15 min) -> results/benchmarks/georef_tie_density_<epoch>.csv.
+TIE_EPOCH ?= epoch2/
+georef-tie-density: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/georef_tie_density.py --site config/sites/kamech_full.yaml \
+		--results $(FULL_RESULTS) --epoch "$(TIE_EPOCH)" --ties 10000,99072,0 --f-true \
+		--out results/benchmarks/georef_tie_density_$(subst /,,$(TIE_EPOCH)).csv
 
 # Tiny twin's gully map untiled and with the tiled fill rules: products must be identical (~1-5 min).
 tiles-check: $(STAMP)

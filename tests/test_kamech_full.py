@@ -44,8 +44,9 @@ FULL_SIZE_CHANGES = {
     "twin.terrain.left_bank.relief_m", "twin.terrain.left_bank.width_m",
     "twin.targets.count", "flight.line_lengths_m", "flight.forward_overlap",
     "sfm.deterministic", "dense.matching.max_views", "tiling.tile_m", "tiling.extent",
-    # the block size decides it: epoch 2 has 516 photos here, enough for its own camera
-    "georef.camera_from_first_epoch",
+    # the block size decides them: epoch 2 has 516 photos here, enough for its own camera; and the
+    # default twin's 10 000 tie points are 175 a photo there but 13-19 here (every tie point is used)
+    "georef.camera_from_first_epoch", "georef.max_tie_points",
 }
 
 
