@@ -183,3 +183,8 @@ def test_posterior_snap_weighs_the_digitising_error_against_the_relief():
     assert post[0] == (r0 + 27) * 100 + c0
     with pytest.raises(ValueError, match="relief noise"):
         snap_heads(z, grid, hx, hy, 6.0, "posterior", relief=relief)
+    from kitegully import InputError
+    from kitegully.gully.pipeline import GullyParams
+
+    with pytest.raises(InputError, match="head_snap_radius_m"):
+        GullyParams(head_snap="posterior", head_snap_radius_m=0.0)

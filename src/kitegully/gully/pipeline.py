@@ -18,6 +18,7 @@ from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
                                    head_scale_relief, incision_map, surface_roughness, visible_incisions)
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
+from kitegully import InputError
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
 from kitegully.gully.patches import depth_patches
 from kitegully.io.raster import GridSpec
@@ -141,6 +142,9 @@ class GullyParams:
             raise ValueError(f"flat_routing must be one of {FLAT_ROUTINGS}, got {self.flat_routing!r}")
         if self.head_snap not in HEAD_SNAPS:
             raise ValueError(f"head_snap must be one of {HEAD_SNAPS}, got {self.head_snap!r}")
+        if self.head_snap == "posterior" and not self.head_snap_radius_m > 0:
+            raise InputError("gully.head_snap_radius_m: head_snap posterior needs a positive radius "
+                             f"(3 x the heads' digitising SD), got {self.head_snap_radius_m!r}")
 
 
 @dataclass
