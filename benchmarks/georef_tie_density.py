@@ -62,15 +62,13 @@ from kitegully.sfm.stage import load_image_infos  # noqa: E402
 log = logging.getLogger("georef_tie_density")
 
 
-def sample_raster(ds: rasterio.DatasetReader, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Nearest-cell values of ``ds`` at (x, y); NaN outside or at nodata."""
-    z = ds.read(1, masked=True)
-    r, c = rasterio.transform.rowcol(ds.transform, x, y)
+def sample_raster(z: np.ndarray, transform, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Nearest-cell values of the raster ``z`` (NaN nodata) at (x, y); NaN outside."""
+    r, c = rasterio.transform.rowcol(transform, x, y)
     r, c = np.asarray(r), np.asarray(c)
-    ok = (r >= 0) & (c >= 0) & (r < ds.height) & (c < ds.width)
+    ok = (r >= 0) & (c >= 0) & (r < z.shape[0]) & (c < z.shape[1])
     out = np.full(len(x), np.nan)
-    v = z[r[ok], c[ok]]
-    out[ok] = np.where(np.ma.getmaskarray(v), np.nan, np.ma.getdata(v))
+    out[ok] = z[r[ok], c[ok]]
     return out
 
 
@@ -136,7 +134,9 @@ def main() -> None:
     sfm_to_name = {i.sfm_name: i.name for i in infos}
     poses = pd.read_csv(R / "flight" / pre / "truth" / "poses.csv").set_index("image")
     cam = json.loads((R / "flight" / pre / "truth" / "camera.json").read_text())
-    dsm = rasterio.open(R / "twin" / pre / "truth" / "dsm.tif")
+    with rasterio.open(R / "twin" / pre / "truth" / "dsm.tif") as ds:  # read once: 80 M cells at full size
+        dsm = ds.read(1, masked=True).filled(np.nan).astype(np.float32)
+        dsm_transform = ds.transform
     checkpoints = pd.read_csv(R / "twin" / pre / "observed" / "checkpoints.csv")
     gcps = read_gcps(R / "flight" / pre / "observed" / "gcp_list.txt", cfg["site"]["crs"], P.gcp_format)
     seed = int(rng_for(cfg["seed"], "georef").integers(2**31 - 1))  # the rule's seed
@@ -168,7 +168,7 @@ def main() -> None:
         # every SfM point (not only the adjusted ties) through the adjusted block
         Xt, _ = retriangulate_all(local, index)
         Xt = Xt[np.all(np.isfinite(Xt), 1)] + off
-        e = Xt[:, 2] - sample_raster(dsm, Xt[:, 0], Xt[:, 1])
+        e = Xt[:, 2] - sample_raster(dsm, dsm_transform, Xt[:, 0], Xt[:, 1])
         med = np.nanmedian(e)
         ok = np.isfinite(e) & (np.abs(e - med) < 1.0)  # plants and blunders out of the fit
         nmad = 1.4826 * np.median(np.abs(e[ok] - np.median(e[ok])))

@@ -337,7 +337,8 @@ def _intrinsics_sd(pb: _Problem, state: tuple, w: np.ndarray, r: np.ndarray) -> 
     if not nri:
         return np.zeros((nc, 0))
     U, W, V, _, _ = _normal_equations(pb, *state, w, r)
-    Vinv_sp = _blockdiag(_pinv_sym3(V))
+    # eigenvalues below 1e-9 x the block's largest: a point direction the rays do not fix
+    Vinv_sp = _blockdiag(np.linalg.pinv(V, rcond=1e-9, hermitian=True))
     S = U - (W @ Vinv_sp @ W.T).toarray()
     m = nc * nri
     d = np.sqrt(np.abs(np.diag(S)))
@@ -349,15 +350,6 @@ def _intrinsics_sd(pb: _Problem, state: tuple, w: np.ndarray, r: np.ndarray) -> 
         return np.full((nc, nri), np.nan)
     var = np.diag(cov_c)
     return np.where(var > 0, np.sqrt(np.abs(var)), np.nan).reshape(nc, nri)
-
-
-def _pinv_sym3(V: np.ndarray, rcond: float = 1e-9) -> np.ndarray:
-    """Pseudo-inverses of symmetric PSD 3 × 3 blocks (n, 3, 3): eigenvalues below ``rcond`` ×
-    the block's largest (or ≤ 0) are dropped, as a point direction the rays do not fix."""
-    ev, Q = np.linalg.eigh(V)
-    keep = ev > rcond * np.maximum(ev[:, -1:], 0.0)
-    inv = np.where(keep, 1.0 / np.where(keep, ev, 1.0), 0.0)
-    return np.einsum("nij,nj,nkj->nik", Q, inv, Q)
 
 
 def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Block, dict]:
