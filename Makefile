@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density bundle-speed
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -98,6 +98,11 @@ georef-tie-density: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/georef_tie_density.py --site config/sites/kamech_full.yaml \
 		--results $(FULL_RESULTS) --epoch "$(TIE_EPOCH)" --ties 10000,99072,0 --f-true \
 		--out results/benchmarks/georef_tie_density_$(subst /,,$(TIE_EPOCH)).csv
+
+# GCP bundle at the full site's size (528 synthetic photos, 247 000 points): the compiled
+# normal-equation kernels against the NumPy + SciPy sparse formulation, one run (~1 min, 3 GB).
+bundle-speed: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/bundle_speed.py --out results/benchmarks/bundle_speed.csv
 
 # Tiny twin's gully map untiled and with the tiled fill rules: products must be identical (~1-5 min).
 tiles-check: $(STAMP)

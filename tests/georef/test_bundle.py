@@ -150,10 +150,12 @@ def test_problem_indexing_and_a_damped_step_lower_the_cost():
     pts = np.vstack([model.points, model.gcp_xyz])
     state = (model.intr.copy(), model.rv.copy(), model.t.copy(), pts)
     cost, r, w = _residual_state(pb, *state)
-    U, W, V, gc, gp = _normal_equations(pb, *state, w, r)
-    assert U.shape == (pb.P, pb.P) and W.shape == (pb.P, 3 * pb.N) and V.shape == (pb.N, 3, 3)
-    np.testing.assert_allclose(U, U.T, rtol=1e-10, atol=1e-9)
-    dc, dp = _damped_step(pb, U, W, V, gc, gp, 1e-3)
+    ne = _normal_equations(pb, *state, w, r)
+    assert ne.U.shape == (pb.P, pb.P) and ne.V.shape == (pb.N, 3, 3) and ne.Jc.shape == (len(pb.o_img), 2, 11)
+    np.testing.assert_allclose(ne.U, ne.U.T, rtol=1e-10, atol=1e-9)
+    # observations grouped by point
+    assert np.array_equal(np.sort(pb.o_pt[pb.order]), pb.o_pt[pb.order]) and pb.start[-1] == len(pb.o_pt)
+    dc, dp = _damped_step(pb, ne, 1e-3)
     new = _apply_step(pb, *state, dc, dp)
     assert new[0] is not state[0] and np.array_equal(state[3], pts)  # inputs unchanged
     assert _residual_state(pb, *new)[0] < cost

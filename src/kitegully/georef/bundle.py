@@ -18,7 +18,8 @@ GCP points are points with an additional position prior. Because the survey
 fixes position, orientation and scale and the tie points tie the block together, a bent
 block (wrong distortion start, dome) is straightened, which a similarity cannot do.
 
-Cost per iteration: O(observations × 11²) to build the normal equations plus
+Cost per iteration: O(observations × 11²) to build the normal equations, O(Σ tracks² ×
+11² × 3) to reduce them to the cameras (compiled, :mod:`kitegully.georef.schur`) plus
 O(P³) for the reduced camera system of P = 5·cameras + 6·images unknowns.
 """
 
@@ -28,9 +29,9 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import coo_matrix, csr_matrix
 
 from kitegully.georef.geometry import project, rotate
+from kitegully.georef.schur import accumulate_normal_equations, point_order, point_steps, reduce_to_cameras, weighted_jacobians
 
 log = logging.getLogger(__name__)
 
@@ -153,10 +154,6 @@ def projection_jacobian(intr, rv, t, X):
     return p, Ji, Jp, JX
 
 
-def _bincount2(index, values, size):
-    return np.bincount(index.ravel(), weights=values.ravel(), minlength=size)
-
-
 @dataclass
 class _Problem:
     """The fixed structure of one adjustment: observations, their weights and where each
@@ -179,10 +176,11 @@ class _Problem:
     o_xy: np.ndarray
     o_sig: np.ndarray
     cidx: np.ndarray  # global camera-parameter index of each observation's 5+6 columns (-1: not refined)
-    keep_c: np.ndarray
     prior_w: np.ndarray
     n_tie: int
     n_g: int
+    order: np.ndarray  # observations grouped by point (kitegully.georef.schur.point_order)
+    start: np.ndarray
 
     @property
     def nri(self) -> int:
@@ -213,8 +211,9 @@ def _problem(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> _Problem
         cidx[:, r] = cam * nri + j
     cidx[:, 5:] = nc * nri + 6 * o_img[:, None] + np.arange(6)
     sig_prior = np.array([s.sigma_gcp_xy_m, s.sigma_gcp_xy_m, s.sigma_gcp_z_m])
-    return _Problem(s, gcp_prior, nc, ni, npt, ng, ref, cam, o_img, o_pt, o_xy, o_sig, cidx, cidx >= 0,
-                    1.0 / sig_prior**2, len(block.obs_image), len(block.gcp_obs_image))
+    order, start = point_order(o_pt, npt + ng)
+    return _Problem(s, gcp_prior, nc, ni, npt, ng, ref, cam, o_img, o_pt, o_xy, o_sig, cidx,
+                    1.0 / sig_prior**2, len(block.obs_image), len(block.gcp_obs_image), order, start)
 
 
 def _residual_state(pb: _Problem, intr, rv, t, pts) -> tuple[float, np.ndarray, np.ndarray]:
@@ -234,46 +233,47 @@ def _residual_state(pb: _Problem, intr, rv, t, pts) -> tuple[float, np.ndarray, 
     return cost, r, w
 
 
-def _normal_equations(pb: _Problem, intr, rv, t, pts, w, r):
-    """Gauss-Newton normal equations: U (P×P), W (P×3N), V (N,3,3), gradients gc (P,), gp (N,3)."""
-    P, N, o_pt = pb.P, pb.N, pb.o_pt
-    _, Ji, Jp, JX = projection_jacobian(intr[pb.cam], rv[pb.o_img], t[pb.o_img], pts[o_pt])
-    sw = (np.sqrt(w) / pb.o_sig)[:, None, None]
-    Jc = np.concatenate([Ji, Jp], axis=2) * sw  # (n, 2, 11)
-    Jx = JX * sw
+@dataclass
+class _Normal:
+    """Gauss-Newton normal equations of one state: camera block ``U`` (P×P), point blocks
+    ``V`` (N,3,3), gradients ``gc`` (P,) and ``gp`` (N,3), and the weighted Jacobians
+    ``Jc`` (n,2,11) and ``Jx`` (n,2,3) from which the camera-point blocks ``W`` are formed
+    point by point (:mod:`kitegully.georef.schur`)."""
+
+    U: np.ndarray
+    V: np.ndarray
+    gc: np.ndarray
+    gp: np.ndarray
+    Jc: np.ndarray
+    Jx: np.ndarray
+
+
+def _normal_equations(pb: _Problem, intr, rv, t, pts, w, r) -> _Normal:
+    """Gauss-Newton normal equations at ``(intr, rv, t, pts)`` with Huber weights ``w`` and
+    normalised residuals ``r``. O(observations × 11²)."""
+    Jc, Jx = weighted_jacobians(intr, pb.cam, rv, t, pb.o_img, pts, pb.o_pt, np.sqrt(w) / pb.o_sig)
     rr = r * np.sqrt(w)[:, None]
-    Jc = np.where(pb.keep_c[:, None, :], Jc, 0.0)
-    ci = np.where(pb.keep_c, pb.cidx, 0)
-    U_vals = np.einsum("nki,nkj->nij", Jc, Jc)
-    U = _bincount2(ci[:, :, None] * P + ci[:, None, :], U_vals, P * P).reshape(P, P)
-    W_vals = np.einsum("nki,nkj->nij", Jc, Jx)  # (n, 11, 3)
-    W_cols = 3 * o_pt[:, None, None] + np.arange(3)[None, None, :]
-    W = coo_matrix((W_vals.ravel(), (np.broadcast_to(ci[:, :, None], W_vals.shape).ravel(), np.broadcast_to(W_cols, W_vals.shape).ravel())), shape=(P, 3 * N)).tocsr()
-    V = _bincount2(o_pt[:, None, None] * 9 + (np.arange(3)[:, None] * 3 + np.arange(3))[None], np.einsum("nki,nkj->nij", Jx, Jx), 9 * N).reshape(N, 3, 3)
-    gc = _bincount2(ci, np.einsum("nki,nk->ni", Jc, rr), P)
-    gp = _bincount2(3 * o_pt[:, None] + np.arange(3), np.einsum("nki,nk->ni", Jx, rr), 3 * N).reshape(N, 3)
+    U, V, gc, gp = accumulate_normal_equations(Jc, Jx, rr, pb.cidx, pb.o_pt, pb.P, pb.N)
     if pb.ng:
         V[pb.npt:] += np.diag(pb.prior_w)[None]
         gp[pb.npt:] += (pts[pb.npt:] - pb.gcp_prior) * pb.prior_w
-    return U, W, V, gc, gp
+    return _Normal(U, V, gc, gp, Jc, Jx)
 
 
-def _damped_step(pb: _Problem, U, W, V, gc, gp, lam: float) -> tuple[np.ndarray, np.ndarray] | None:
+def _damped_step(pb: _Problem, ne: _Normal, lam: float) -> tuple[np.ndarray, np.ndarray] | None:
     """Levenberg–Marquardt step with damping ``lam``: camera update by the Schur complement,
-    then the point updates; ``None`` when the reduced system is singular."""
-    N = pb.N
+    then the point updates; ``None`` when the reduced system is singular.
+    O(Σ tracks² × 11² × 3 + P³)."""
+    U, V = ne.U, ne.V
     Ud = U + lam * np.diag(np.diag(U) + 1e-9)
     Vd = V + lam * (V * np.eye(3)[None]) + 1e-12 * np.eye(3)[None]
     Vinv = np.linalg.inv(Vd)
-    Vinv_sp = _blockdiag(Vinv)
-    WV = W @ Vinv_sp
-    S = Ud - (WV @ W.T).toarray()
-    rhs = -gc + WV @ gp.ravel()
+    WVW, WVg = reduce_to_cameras(ne.Jc, ne.Jx, pb.cidx, pb.order, pb.start, Vinv, ne.gp, pb.P)
     try:
-        dc = np.linalg.solve(S, rhs)
+        dc = np.linalg.solve(Ud - WVW, -ne.gc + WVg)
     except np.linalg.LinAlgError:
         return None
-    dp = -(Vinv @ (gp + (W.T @ dc).reshape(N, 3))[:, :, None])[:, :, 0]
+    dp = point_steps(ne.Jc, ne.Jx, pb.cidx, pb.o_pt, Vinv, ne.gp, dc)
     return dc, dp
 
 
@@ -302,10 +302,10 @@ def _levenberg_marquardt(pb: _Problem, state: tuple) -> tuple[tuple, float, floa
     lam = 1e-3
     it = 0
     for it in range(1, s.max_iterations + 1):
-        U, W, V, gc, gp = _normal_equations(pb, *state, w, r)
+        ne = _normal_equations(pb, *state, w, r)
         improved = False
         for _ in range(10):
-            step = _damped_step(pb, U, W, V, gc, gp, lam)
+            step = _damped_step(pb, ne, lam)
             if step is None:
                 lam *= 10
                 continue
@@ -336,10 +336,11 @@ def _intrinsics_sd(pb: _Problem, state: tuple, w: np.ndarray, r: np.ndarray) -> 
     nc, nri = pb.nc, pb.nri
     if not nri:
         return np.zeros((nc, 0))
-    U, W, V, _, _ = _normal_equations(pb, *state, w, r)
+    ne = _normal_equations(pb, *state, w, r)
     # eigenvalues below 1e-9 x the block's largest: a point direction the rays do not fix
-    Vinv_sp = _blockdiag(np.linalg.pinv(V, rcond=1e-9, hermitian=True))
-    S = U - (W @ Vinv_sp @ W.T).toarray()
+    Vpinv = np.linalg.pinv(ne.V, rcond=1e-9, hermitian=True)
+    WVW, _ = reduce_to_cameras(ne.Jc, ne.Jx, pb.cidx, pb.order, pb.start, Vpinv, ne.gp, pb.P)
+    S = ne.U - WVW
     m = nc * nri
     d = np.sqrt(np.abs(np.diag(S)))
     d[~(d > 0)] = 1.0
@@ -387,11 +388,3 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
     log.info("GCP bundle adjustment: %d parameters, cost %.4g -> %.4g in %d iterations, tie RMS %.3f px",
              report["n_parameters"], cost0, cost, it, report["tie_rms_px"])
     return out, report
-
-
-def _blockdiag(blocks: np.ndarray) -> csr_matrix:
-    """Sparse block-diagonal matrix of (N, 3, 3) blocks."""
-    N = len(blocks)
-    rows = (3 * np.arange(N)[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
-    cols = (3 * np.arange(N)[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
-    return coo_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * N, 3 * N)).tocsr()

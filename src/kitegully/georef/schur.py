@@ -1,0 +1,258 @@
+"""Compiled kernels of the GCP bundle's normal equations and their Schur complement.
+
+The bundle's unknowns are P camera parameters (refined intrinsics and poses) and N
+points. Each observation ``o`` of point ``p`` contributes a 2 × 11 camera Jacobian
+``Jc[o]`` (5 intrinsics then 6 pose columns, weighted) and a 2 × 3 point Jacobian
+``Jx[o]``; ``ci[o]`` holds the global index of each of the 11 camera columns, −1 where the
+column is not an unknown (an intrinsic that is not refined).
+
+With ``W_o = Jc[o]ᵀ Jx[o]`` (11 × 3) and the damped 3 × 3 point blocks ``V_p``, the reduced
+camera system is ``S = U − Σ_p Σ_{o,o' ∈ p} W_o V_p⁻¹ W_o'ᵀ``. SciPy's sparse product
+``W V⁻¹ Wᵀ`` forms it through a P × 3N matrix with 33 entries per observation; these
+kernels accumulate it point by point instead, with no per-observation matrices kept
+(session 22: 7–11× faster per Levenberg–Marquardt iteration on a 528-photo block,
+``benchmarks/bundle_speed.py``).
+
+Observations are visited point by point through ``order`` (observation indices sorted by
+point) and ``start`` (``order[start[p]:start[p + 1]]`` are point ``p``'s observations).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+def point_order(o_pt: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Observations grouped by point: ``order`` and the CSR offsets ``start`` (n_points + 1)."""
+    order = np.argsort(o_pt, kind="stable")
+    start = np.zeros(n_points + 1, dtype=np.int64)
+    np.cumsum(np.bincount(o_pt, minlength=n_points), out=start[1:])
+    return order.astype(np.int64), start
+
+
+@njit(cache=True)
+def _rotate(r0, r1, r2, x0, x1, x2):
+    """Rodrigues rotation of one point (as :func:`kitegully.georef.geometry.rotate`)."""
+    theta = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if theta > 1e-12:
+        k0, k1, k2 = r0 / theta, r1 / theta, r2 / theta
+    else:
+        k0, k1, k2 = 0.0, 0.0, 0.0
+    c, s = np.cos(theta), np.sin(theta)
+    kd = (k0 * x0 + k1 * x1 + k2 * x2) * (1 - c)
+    return (x0 * c + (k1 * x2 - k2 * x1) * s + k0 * kd,
+            x1 * c + (k2 * x0 - k0 * x2) * s + k1 * kd,
+            x2 * c + (k0 * x1 - k1 * x0) * s + k2 * kd)
+
+
+@njit(cache=True)
+def weighted_jacobians(intr, cam, rv, t, o_img, pts, o_pt, weight):
+    """Camera and point Jacobians of every observation's pixel, times ``weight``.
+
+    The same derivatives as :func:`kitegully.georef.bundle.projection_jacobian` (analytic
+    except the rotation columns, central differences with h = 1e-6), one observation at a
+    time without the NumPy version's (n, ...) temporaries.
+
+    Parameters
+    ----------
+    intr : (n_cameras, 5) intrinsics; cam : (n,) camera of each observation.
+    rv, t : (n_images, 3) poses; o_img : (n,) image of each observation.
+    pts : (N, 3) points; o_pt : (n,) point of each observation.
+    weight : (n,) row weight (√Huber weight / σ).
+
+    Returns
+    -------
+    Jc : (n, 2, 11) (f, cx, cy, k1, k2, rotation vector, translation) and Jx : (n, 2, 3).
+    O(n) time.
+    """
+    n = len(o_img)
+    Jc = np.empty((n, 2, 11))
+    Jx = np.empty((n, 2, 3))
+    h = 1e-6
+    R = np.empty((3, 3))
+    dX = np.empty((3, 3))
+    for o in range(n):
+        c, i, p = cam[o], o_img[o], o_pt[o]
+        f, k1, k2 = intr[c, 0], intr[c, 3], intr[c, 4]
+        r0, r1, r2 = rv[i, 0], rv[i, 1], rv[i, 2]
+        X0, X1, X2 = pts[p, 0], pts[p, 1], pts[p, 2]
+        a0, a1, a2 = _rotate(r0, r1, r2, X0, X1, X2)
+        xc0, xc1, xc2 = a0 + t[i, 0], a1 + t[i, 1], a2 + t[i, 2]
+        u, v = xc0 / xc2, xc1 / xc2
+        rho = u * u + v * v
+        d = 1 + k1 * rho + k2 * rho * rho
+        dd = k1 + 2 * k2 * rho
+        w = weight[o]
+        Jc[o, 0, 0], Jc[o, 1, 0] = w * u * d, w * v * d
+        Jc[o, 0, 1], Jc[o, 1, 1] = w, 0.0
+        Jc[o, 0, 2], Jc[o, 1, 2] = 0.0, w
+        Jc[o, 0, 3], Jc[o, 1, 3] = w * f * u * rho, w * f * v * rho
+        Jc[o, 0, 4], Jc[o, 1, 4] = w * f * u * rho * rho, w * f * v * rho * rho
+        # d pixel / d (u, v) times d (u, v) / d xc
+        A00 = f * (d + 2 * u * u * dd)
+        A01 = f * 2 * u * v * dd
+        A11 = f * (d + 2 * v * v * dd)
+        iz = 1 / xc2
+        B0 = (iz, 0.0, -u * iz)
+        B1 = (0.0, iz, -v * iz)
+        J0 = (A00 * B0[0] + A01 * B1[0], A00 * B0[1] + A01 * B1[1], A00 * B0[2] + A01 * B1[2])
+        J1 = (A01 * B0[0] + A11 * B1[0], A01 * B0[1] + A11 * B1[1], A01 * B0[2] + A11 * B1[2])
+        for k in range(3):
+            Jc[o, 0, 8 + k], Jc[o, 1, 8 + k] = w * J0[k], w * J1[k]
+        # rotation columns: central differences of R(rv) X
+        for k in range(3):
+            e0, e1, e2 = h if k == 0 else 0.0, h if k == 1 else 0.0, h if k == 2 else 0.0
+            p0, p1, p2 = _rotate(r0 + e0, r1 + e1, r2 + e2, X0, X1, X2)
+            m0, m1, m2 = _rotate(r0 - e0, r1 - e1, r2 - e2, X0, X1, X2)
+            dX[k, 0], dX[k, 1], dX[k, 2] = (p0 - m0) / (2 * h), (p1 - m1) / (2 * h), (p2 - m2) / (2 * h)
+            Jc[o, 0, 5 + k] = w * (J0[0] * dX[k, 0] + J0[1] * dX[k, 1] + J0[2] * dX[k, 2])
+            Jc[o, 1, 5 + k] = w * (J1[0] * dX[k, 0] + J1[1] * dX[k, 1] + J1[2] * dX[k, 2])
+        # d xc / d X = R: its columns are the rotated unit vectors
+        for k in range(3):
+            R[0, k], R[1, k], R[2, k] = _rotate(r0, r1, r2, 1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0)
+        for k in range(3):
+            Jx[o, 0, k] = w * (J0[0] * R[0, k] + J0[1] * R[1, k] + J0[2] * R[2, k])
+            Jx[o, 1, k] = w * (J1[0] * R[0, k] + J1[1] * R[1, k] + J1[2] * R[2, k])
+    return Jc, Jx
+
+
+@njit(cache=True)
+def accumulate_normal_equations(Jc, Jx, rr, ci, o_pt, n_cam, n_points):
+    """Gauss–Newton blocks of the weighted Jacobian.
+
+    Parameters
+    ----------
+    Jc : (n, 2, 11) weighted camera Jacobians (columns with ``ci < 0`` are ignored).
+    Jx : (n, 2, 3) weighted point Jacobians.
+    rr : (n, 2) weighted residuals.
+    ci : (n, 11) global camera-parameter index of each column, −1 for none.
+    o_pt : (n,) point of each observation.
+    n_cam, n_points : P and N.
+
+    Returns
+    -------
+    U : (P, P) camera block JcᵀJc; V : (N, 3, 3) point blocks JxᵀJx; gc : (P,) and
+    gp : (N, 3) gradients Jᵀr.
+
+    Notes
+    -----
+    O(n · 11²) time, O(P² + N) memory.
+    """
+    U = np.zeros((n_cam, n_cam))
+    V = np.zeros((n_points, 3, 3))
+    gc = np.zeros(n_cam)
+    gp = np.zeros((n_points, 3))
+    for o in range(Jc.shape[0]):
+        p = o_pt[o]
+        for a in range(11):
+            ca = ci[o, a]
+            if ca < 0:
+                continue
+            gc[ca] += Jc[o, 0, a] * rr[o, 0] + Jc[o, 1, a] * rr[o, 1]
+            for b in range(11):
+                cb = ci[o, b]
+                if cb >= 0:
+                    U[ca, cb] += Jc[o, 0, a] * Jc[o, 0, b] + Jc[o, 1, a] * Jc[o, 1, b]
+        for i in range(3):
+            gp[p, i] += Jx[o, 0, i] * rr[o, 0] + Jx[o, 1, i] * rr[o, 1]
+            for j in range(3):
+                V[p, i, j] += Jx[o, 0, i] * Jx[o, 0, j] + Jx[o, 1, i] * Jx[o, 1, j]
+    return U, V, gc, gp
+
+
+@njit(cache=True)
+def reduce_to_cameras(Jc, Jx, ci, order, start, Vinv, gp, n_cam):
+    """The points' share of the reduced camera system and of its right-hand side.
+
+    Parameters
+    ----------
+    Jc, Jx, ci : as in :func:`accumulate_normal_equations`.
+    order, start : observations grouped by point (:func:`point_order`).
+    Vinv : (N, 3, 3) inverses (or pseudo-inverses) of the damped point blocks.
+    gp : (N, 3) point gradients.
+    n_cam : P.
+
+    Returns
+    -------
+    WVW : (P, P) ``Σ_p W_p V_p⁻¹ W_pᵀ``, so that ``S = U_damped − WVW``.
+    WVg : (P,) ``Σ_p W_p V_p⁻¹ g_p``, so that the right-hand side is ``−gc + WVg``.
+
+    Notes
+    -----
+    O(Σ_p m_p (m_p + 1) / 2 · 11² · 3) time for tracks of m_p observations, O(P²) memory.
+    """
+    WVW = np.zeros((n_cam, n_cam))
+    WVg = np.zeros(n_cam)
+    n_points = len(start) - 1
+    m_max = 0
+    for p in range(n_points):
+        m_max = max(m_max, start[p + 1] - start[p])
+    W = np.empty((m_max, 11, 3))
+    Y = np.empty((m_max, 11, 3))
+    for p in range(n_points):
+        o0 = start[p]
+        m = start[p + 1] - o0
+        for j in range(m):
+            o = order[o0 + j]
+            for a in range(11):
+                for k in range(3):
+                    W[j, a, k] = Jc[o, 0, a] * Jx[o, 0, k] + Jc[o, 1, a] * Jx[o, 1, k]
+            for a in range(11):
+                for k in range(3):
+                    Y[j, a, k] = W[j, a, 0] * Vinv[p, 0, k] + W[j, a, 1] * Vinv[p, 1, k] + W[j, a, 2] * Vinv[p, 2, k]
+                ca = ci[o, a]
+                if ca >= 0:
+                    WVg[ca] += Y[j, a, 0] * gp[p, 0] + Y[j, a, 1] * gp[p, 1] + Y[j, a, 2] * gp[p, 2]
+        # pairs (j, l) with l >= j; the (l, j) block is the transpose of the (j, l) one
+        for j in range(m):
+            oj = order[o0 + j]
+            for l in range(j, m):
+                ol = order[o0 + l]
+                for a in range(11):
+                    ca = ci[oj, a]
+                    if ca < 0:
+                        continue
+                    for b in range(11):
+                        cb = ci[ol, b]
+                        if cb >= 0:
+                            v = Y[j, a, 0] * W[l, b, 0] + Y[j, a, 1] * W[l, b, 1] + Y[j, a, 2] * W[l, b, 2]
+                            WVW[ca, cb] += v
+                            if l != j:
+                                WVW[cb, ca] += v
+    return WVW, WVg
+
+
+@njit(cache=True)
+def point_steps(Jc, Jx, ci, o_pt, Vinv, gp, dc):
+    """Point updates after the camera update ``dc``: ``dp_p = −V_p⁻¹ (g_p + W_pᵀ dc)``.
+
+    Parameters
+    ----------
+    Jc, Jx, ci, o_pt : as in :func:`accumulate_normal_equations`.
+    Vinv : (N, 3, 3) inverses of the damped point blocks.
+    gp : (N, 3) point gradients.
+    dc : (P,) camera update.
+
+    Returns
+    -------
+    dp : (N, 3). O(n · 11 · 3) time.
+    """
+    n_points = Vinv.shape[0]
+    q = gp.copy()
+    for o in range(Jc.shape[0]):
+        p = o_pt[o]
+        v0 = 0.0
+        v1 = 0.0
+        for a in range(11):
+            ca = ci[o, a]
+            if ca >= 0:
+                v0 += Jc[o, 0, a] * dc[ca]
+                v1 += Jc[o, 1, a] * dc[ca]
+        for k in range(3):
+            q[p, k] += Jx[o, 0, k] * v0 + Jx[o, 1, k] * v1
+    dp = np.empty((n_points, 3))
+    for p in range(n_points):
+        for k in range(3):
+            dp[p, k] = -(Vinv[p, k, 0] * q[p, 0] + Vinv[p, k, 1] * q[p, 1] + Vinv[p, k, 2] * q[p, 2])
+    return dp
