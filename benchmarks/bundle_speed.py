@@ -19,8 +19,10 @@ full site's size, in one run:
 
 Both solve the same damped step; the table gives the wall time of building the normal
 equations, of one damped step (reduction, dense solve, back-substitution), the step's largest
-relative difference between the two, peak memory of each and the speed-up, then the wall time
-of a whole adjustment (kernels only) for ``--iterations`` iterations.
+relative difference between the two, peak memory of each and the speed-up (kernels on one
+thread, as the reference), the kernels' iteration on ``--threads`` threads (they run point
+chunks in parallel, each with its own P x P sums), then the wall time of a whole adjustment
+(kernels, one thread) for ``--iterations`` iterations.
 
 The block: ``--photos`` nadir photos on a grid 150 m above ground (f 3500 px, 4000 x 3000 px),
 ``--points`` points on rough ground, each photo observing 45 % of the points in its footprint
@@ -44,6 +46,7 @@ import time
 import tracemalloc
 from pathlib import Path
 
+import numba
 import numpy as np
 from scipy.sparse import coo_matrix
 
@@ -138,6 +141,7 @@ def main(argv=None) -> int:
     ap.add_argument("--photos", type=int, default=528, help="photos in the block (the full site's epochs: 773 and 516)")
     ap.add_argument("--points", type=int, default=247000, help="tie points (epoch 2 at full size: 246 548)")
     ap.add_argument("--iterations", type=int, default=5, help="iterations of the timed whole adjustment")
+    ap.add_argument("--threads", type=int, default=2, help="numba threads of the kernels' parallel run (also timed on 1)")
     ap.add_argument("--out", type=Path, default=Path("results/benchmarks/bundle_speed.csv"))
     a = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
@@ -153,9 +157,16 @@ def main(argv=None) -> int:
     # compile once (numba cache) before timing
     _damped_step(pb, _normal_equations(pb, *state, w, r), lam)
 
+    numba.set_num_threads(1)
     (ne, t_k_normal, m_k_normal) = timed(lambda: _normal_equations(pb, *state, w, r))
     (step_k, t_k_step, m_k_step) = timed(lambda: _damped_step(pb, ne, lam))
     del ne
+    threads = max(1, min(a.threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(threads)
+    (ne, t_p_normal, _) = timed(lambda: _normal_equations(pb, *state, w, r))
+    (step_p, t_p_step, _) = timed(lambda: _damped_step(pb, ne, lam))
+    del ne
+    diff_threads = max(np.abs(step_k[0] - step_p[0]).max() / np.abs(step_k[0]).max(), np.abs(step_k[1] - step_p[1]).max() / np.abs(step_k[1]).max())
     t0 = time.perf_counter()
     (ref, t_r_total, m_r) = timed(lambda: reference_step(pb, state, w, r, lam))
     dc_r, dp_r, t_normal_end = ref
@@ -165,6 +176,7 @@ def main(argv=None) -> int:
     log.info("normal equations: kernels %.2f s, reference %.2f s; damped step: kernels %.2f s, reference %.2f s; step difference %.1e",
              t_k_normal, t_r_normal, t_k_step, t_r_step, diff)
 
+    numba.set_num_threads(1)
     s_iter = BundleSettings(max_iterations=a.iterations, rel_tolerance=0.0)
     (_, rep), t_adjust, _ = timed(lambda: adjust(block, survey, s_iter))
     rows = [
@@ -173,9 +185,11 @@ def main(argv=None) -> int:
         ("normal equations wall s", round(t_k_normal, 3), round(t_r_normal, 3), round(t_r_normal / t_k_normal, 1)),
         ("damped step wall s", round(t_k_step, 3), round(t_r_step, 3), round(t_r_step / t_k_step, 1)),
         ("one iteration (normal + 1 step) wall s", round(t_k_normal + t_k_step, 3), round(t_r_total, 3), round(t_r_total / (t_k_normal + t_k_step), 1)),
+        (f"one iteration on {threads} threads wall s (ratio: speed-up over 1 thread)", round(t_p_normal + t_p_step, 3), "", round((t_k_normal + t_k_step) / (t_p_normal + t_p_step), 2)),
+        (f"step max relative difference, 1 vs {threads} threads", f"{diff_threads:.1e}", "", ""),
         ("peak traced memory MB", round(max(m_k_normal, m_k_step)), round(m_r), round(m_r / max(m_k_normal, m_k_step), 1)),
         ("step max relative difference", f"{diff:.1e}", "", ""),
-        (f"adjust, {rep['n_iterations']} iterations, wall s", round(t_adjust, 1), "", ""),
+        (f"adjust, {rep['n_iterations']} iterations, 1 thread, wall s", round(t_adjust, 1), "", ""),
         ("process peak RSS MB", round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024), "", ""),
     ]
     a.out.parent.mkdir(parents=True, exist_ok=True)

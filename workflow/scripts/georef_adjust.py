@@ -1,10 +1,14 @@
 """Rule georef_adjust: SfM model + GCP file -> georeferenced model, residual tables, products (thin adapter)."""
 
+import numba
+
 from kitegully.georef import GeorefParams, georeference
 from kitegully.logs import setup_script_logging
 from kitegully.seeds import rng_for
 
 log = setup_script_logging(snakemake.log[0])
+# the bundle's normal-equation kernels run point chunks on the job's threads
+numba.set_num_threads(max(1, min(int(snakemake.threads), numba.config.NUMBA_NUM_THREADS)))
 out = {k: snakemake.output[k] for k in
        ("model", "transform", "summary", "residuals", "loo", "calibration", "cameras", "cloud", "figure")}
 georeference(

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kitegully.georef.geometry import project, rotate
-from kitegully.georef.schur import accumulate_normal_equations, point_order, point_steps, reduce_to_cameras, weighted_jacobians
+from kitegully.georef.schur import accumulate_normal_equations, chunk_count, point_order, point_steps, reduce_to_cameras, weighted_jacobians
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +109,8 @@ def projection_jacobian(intr, rv, t, X):
 
     Returns ``p`` (n, 2), ``J_intr`` (n, 2, 5), ``J_pose`` (n, 2, 6) (rotation vector then
     translation) and ``J_X`` (n, 2, 3). Analytic except the rotation columns.
+    The NumPy reference of :func:`kitegully.georef.schur.weighted_jacobians`, which
+    :func:`adjust` uses (tests compare the two).
     """
     xc = rotate(rv, X) + t
     z = xc[:, 2]
@@ -253,7 +255,7 @@ def _normal_equations(pb: _Problem, intr, rv, t, pts, w, r) -> _Normal:
     normalised residuals ``r``. O(observations × 11²)."""
     Jc, Jx = weighted_jacobians(intr, pb.cam, rv, t, pb.o_img, pts, pb.o_pt, np.sqrt(w) / pb.o_sig)
     rr = r * np.sqrt(w)[:, None]
-    U, V, gc, gp = accumulate_normal_equations(Jc, Jx, rr, pb.cidx, pb.o_pt, pb.P, pb.N)
+    U, V, gc, gp = accumulate_normal_equations(Jc, Jx, rr, pb.cidx, pb.order, pb.start, pb.P, chunk_count(pb.P))
     if pb.ng:
         V[pb.npt:] += np.diag(pb.prior_w)[None]
         gp[pb.npt:] += (pts[pb.npt:] - pb.gcp_prior) * pb.prior_w
@@ -268,12 +270,12 @@ def _damped_step(pb: _Problem, ne: _Normal, lam: float) -> tuple[np.ndarray, np.
     Ud = U + lam * np.diag(np.diag(U) + 1e-9)
     Vd = V + lam * (V * np.eye(3)[None]) + 1e-12 * np.eye(3)[None]
     Vinv = np.linalg.inv(Vd)
-    WVW, WVg = reduce_to_cameras(ne.Jc, ne.Jx, pb.cidx, pb.order, pb.start, Vinv, ne.gp, pb.P)
+    WVW, WVg = reduce_to_cameras(ne.Jc, ne.Jx, pb.cidx, pb.order, pb.start, Vinv, ne.gp, pb.P, chunk_count(pb.P))
     try:
         dc = np.linalg.solve(Ud - WVW, -ne.gc + WVg)
     except np.linalg.LinAlgError:
         return None
-    dp = point_steps(ne.Jc, ne.Jx, pb.cidx, pb.o_pt, Vinv, ne.gp, dc)
+    dp = point_steps(ne.Jc, ne.Jx, pb.cidx, pb.order, pb.start, Vinv, ne.gp, dc)
     return dc, dp
 
 
@@ -339,7 +341,7 @@ def _intrinsics_sd(pb: _Problem, state: tuple, w: np.ndarray, r: np.ndarray) -> 
     ne = _normal_equations(pb, *state, w, r)
     # eigenvalues below 1e-9 x the block's largest: a point direction the rays do not fix
     Vpinv = np.linalg.pinv(ne.V, rcond=1e-9, hermitian=True)
-    WVW, _ = reduce_to_cameras(ne.Jc, ne.Jx, pb.cidx, pb.order, pb.start, Vpinv, ne.gp, pb.P)
+    WVW, _ = reduce_to_cameras(ne.Jc, ne.Jx, pb.cidx, pb.order, pb.start, Vpinv, ne.gp, pb.P, chunk_count(pb.P))
     S = ne.U - WVW
     m = nc * nri
     d = np.sqrt(np.abs(np.diag(S)))

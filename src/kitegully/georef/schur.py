@@ -20,7 +20,13 @@ point) and ``start`` (``order[start[p]:start[p + 1]]`` are point ``p``'s observa
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import get_num_threads, njit, prange
+
+
+def chunk_count(n_cam: int, max_bytes: float = 1e9) -> int:
+    """Parallel chunks for the camera-block kernels: numba's threads, capped so that their
+    private P × P sums stay under ``max_bytes``."""
+    return int(max(1, min(get_num_threads(), max_bytes // (8.0 * n_cam * n_cam))))
 
 
 def point_order(o_pt: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
@@ -46,7 +52,7 @@ def _rotate(r0, r1, r2, x0, x1, x2):
             x2 * c + (k0 * x1 - k1 * x0) * s + k2 * kd)
 
 
-@njit(cache=True)
+@njit(parallel=True, cache=True)
 def weighted_jacobians(intr, cam, rv, t, o_img, pts, o_pt, weight):
     """Camera and point Jacobians of every observation's pixel, times ``weight``.
 
@@ -70,9 +76,7 @@ def weighted_jacobians(intr, cam, rv, t, o_img, pts, o_pt, weight):
     Jc = np.empty((n, 2, 11))
     Jx = np.empty((n, 2, 3))
     h = 1e-6
-    R = np.empty((3, 3))
-    dX = np.empty((3, 3))
-    for o in range(n):
+    for o in prange(n):
         c, i, p = cam[o], o_img[o], o_pt[o]
         f, k1, k2 = intr[c, 0], intr[c, 3], intr[c, 4]
         r0, r1, r2 = rv[i, 0], rv[i, 1], rv[i, 2]
@@ -105,20 +109,33 @@ def weighted_jacobians(intr, cam, rv, t, o_img, pts, o_pt, weight):
             e0, e1, e2 = h if k == 0 else 0.0, h if k == 1 else 0.0, h if k == 2 else 0.0
             p0, p1, p2 = _rotate(r0 + e0, r1 + e1, r2 + e2, X0, X1, X2)
             m0, m1, m2 = _rotate(r0 - e0, r1 - e1, r2 - e2, X0, X1, X2)
-            dX[k, 0], dX[k, 1], dX[k, 2] = (p0 - m0) / (2 * h), (p1 - m1) / (2 * h), (p2 - m2) / (2 * h)
-            Jc[o, 0, 5 + k] = w * (J0[0] * dX[k, 0] + J0[1] * dX[k, 1] + J0[2] * dX[k, 2])
-            Jc[o, 1, 5 + k] = w * (J1[0] * dX[k, 0] + J1[1] * dX[k, 1] + J1[2] * dX[k, 2])
+            d0, d1, d2 = (p0 - m0) / (2 * h), (p1 - m1) / (2 * h), (p2 - m2) / (2 * h)
+            Jc[o, 0, 5 + k] = w * (J0[0] * d0 + J0[1] * d1 + J0[2] * d2)
+            Jc[o, 1, 5 + k] = w * (J1[0] * d0 + J1[1] * d1 + J1[2] * d2)
         # d xc / d X = R: its columns are the rotated unit vectors
         for k in range(3):
-            R[0, k], R[1, k], R[2, k] = _rotate(r0, r1, r2, 1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0)
-        for k in range(3):
-            Jx[o, 0, k] = w * (J0[0] * R[0, k] + J0[1] * R[1, k] + J0[2] * R[2, k])
-            Jx[o, 1, k] = w * (J1[0] * R[0, k] + J1[1] * R[1, k] + J1[2] * R[2, k])
+            c0, c1, c2 = _rotate(r0, r1, r2, 1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0)
+            Jx[o, 0, k] = w * (J0[0] * c0 + J0[1] * c1 + J0[2] * c2)
+            Jx[o, 1, k] = w * (J1[0] * c0 + J1[1] * c1 + J1[2] * c2)
     return Jc, Jx
 
 
 @njit(cache=True)
-def accumulate_normal_equations(Jc, Jx, rr, ci, o_pt, n_cam, n_points):
+def _chunks(start, n_chunks):
+    """Point ranges of ``n_chunks`` chunks with about equal numbers of observations."""
+    n_points = len(start) - 1
+    bounds = np.empty(n_chunks + 1, dtype=np.int64)
+    bounds[0] = 0
+    for c in range(1, n_chunks):
+        bounds[c] = np.searchsorted(start, start[-1] * c // n_chunks)
+    bounds[n_chunks] = n_points
+    for c in range(1, n_chunks + 1):
+        bounds[c] = min(max(bounds[c], bounds[c - 1]), n_points)
+    return bounds
+
+
+@njit(parallel=True, cache=True)
+def accumulate_normal_equations(Jc, Jx, rr, ci, order, start, n_cam, n_chunks):
     """Gauss–Newton blocks of the weighted Jacobian.
 
     Parameters
@@ -127,8 +144,9 @@ def accumulate_normal_equations(Jc, Jx, rr, ci, o_pt, n_cam, n_points):
     Jx : (n, 2, 3) weighted point Jacobians.
     rr : (n, 2) weighted residuals.
     ci : (n, 11) global camera-parameter index of each column, −1 for none.
-    o_pt : (n,) point of each observation.
-    n_cam, n_points : P and N.
+    order, start : observations grouped by point (:func:`point_order`).
+    n_cam : P.
+    n_chunks : point chunks run in parallel, each with its own P × P camera block.
 
     Returns
     -------
@@ -137,32 +155,46 @@ def accumulate_normal_equations(Jc, Jx, rr, ci, o_pt, n_cam, n_points):
 
     Notes
     -----
-    O(n · 11²) time, O(P² + N) memory.
+    O(n · 11²) time, O(n_chunks · P² + N) memory.
     """
-    U = np.zeros((n_cam, n_cam))
+    n_points = len(start) - 1
+    Uc = np.zeros((n_chunks, n_cam, n_cam))
+    gcc = np.zeros((n_chunks, n_cam))
     V = np.zeros((n_points, 3, 3))
-    gc = np.zeros(n_cam)
     gp = np.zeros((n_points, 3))
-    for o in range(Jc.shape[0]):
-        p = o_pt[o]
-        for a in range(11):
-            ca = ci[o, a]
-            if ca < 0:
-                continue
-            gc[ca] += Jc[o, 0, a] * rr[o, 0] + Jc[o, 1, a] * rr[o, 1]
-            for b in range(11):
-                cb = ci[o, b]
-                if cb >= 0:
-                    U[ca, cb] += Jc[o, 0, a] * Jc[o, 0, b] + Jc[o, 1, a] * Jc[o, 1, b]
-        for i in range(3):
-            gp[p, i] += Jx[o, 0, i] * rr[o, 0] + Jx[o, 1, i] * rr[o, 1]
-            for j in range(3):
-                V[p, i, j] += Jx[o, 0, i] * Jx[o, 0, j] + Jx[o, 1, i] * Jx[o, 1, j]
-    return U, V, gc, gp
+    bounds = _chunks(start, n_chunks)
+    for c in prange(n_chunks):
+        for p in range(bounds[c], bounds[c + 1]):
+            for q in range(start[p], start[p + 1]):
+                o = order[q]
+                for a in range(11):
+                    ca = ci[o, a]
+                    if ca < 0:
+                        continue
+                    gcc[c, ca] += Jc[o, 0, a] * rr[o, 0] + Jc[o, 1, a] * rr[o, 1]
+                    for b in range(11):
+                        cb = ci[o, b]
+                        if cb >= 0:
+                            Uc[c, ca, cb] += Jc[o, 0, a] * Jc[o, 0, b] + Jc[o, 1, a] * Jc[o, 1, b]
+                for i in range(3):
+                    gp[p, i] += Jx[o, 0, i] * rr[o, 0] + Jx[o, 1, i] * rr[o, 1]
+                    for j in range(3):
+                        V[p, i, j] += Jx[o, 0, i] * Jx[o, 0, j] + Jx[o, 1, i] * Jx[o, 1, j]
+    return _sum_chunks(Uc), V, _sum_chunks(gcc), gp
 
 
-@njit(cache=True)
-def reduce_to_cameras(Jc, Jx, ci, order, start, Vinv, gp, n_cam):
+@njit(parallel=True, cache=True)
+def _sum_chunks(a):
+    """Sum over the first axis (the chunks' private copies), in parallel over rows."""
+    out = np.zeros(a.shape[1:])
+    for r in prange(a.shape[1]):
+        for c in range(a.shape[0]):
+            out[r] += a[c, r]
+    return out
+
+
+@njit(parallel=True, cache=True)
+def reduce_to_cameras(Jc, Jx, ci, order, start, Vinv, gp, n_cam, n_chunks):
     """The points' share of the reduced camera system and of its right-hand side.
 
     Parameters
@@ -172,6 +204,7 @@ def reduce_to_cameras(Jc, Jx, ci, order, start, Vinv, gp, n_cam):
     Vinv : (N, 3, 3) inverses (or pseudo-inverses) of the damped point blocks.
     gp : (N, 3) point gradients.
     n_cam : P.
+    n_chunks : point chunks run in parallel, each with its own P × P sum.
 
     Returns
     -------
@@ -180,56 +213,61 @@ def reduce_to_cameras(Jc, Jx, ci, order, start, Vinv, gp, n_cam):
 
     Notes
     -----
-    O(Σ_p m_p (m_p + 1) / 2 · 11² · 3) time for tracks of m_p observations, O(P²) memory.
+    O(Σ_p m_p (m_p + 1) / 2 · 11² · 3) time for tracks of m_p observations,
+    O(n_chunks · P²) memory.
     """
-    WVW = np.zeros((n_cam, n_cam))
-    WVg = np.zeros(n_cam)
     n_points = len(start) - 1
     m_max = 0
     for p in range(n_points):
         m_max = max(m_max, start[p + 1] - start[p])
-    W = np.empty((m_max, 11, 3))
-    Y = np.empty((m_max, 11, 3))
-    for p in range(n_points):
-        o0 = start[p]
-        m = start[p + 1] - o0
-        for j in range(m):
-            o = order[o0 + j]
-            for a in range(11):
-                for k in range(3):
-                    W[j, a, k] = Jc[o, 0, a] * Jx[o, 0, k] + Jc[o, 1, a] * Jx[o, 1, k]
-            for a in range(11):
-                for k in range(3):
-                    Y[j, a, k] = W[j, a, 0] * Vinv[p, 0, k] + W[j, a, 1] * Vinv[p, 1, k] + W[j, a, 2] * Vinv[p, 2, k]
-                ca = ci[o, a]
-                if ca >= 0:
-                    WVg[ca] += Y[j, a, 0] * gp[p, 0] + Y[j, a, 1] * gp[p, 1] + Y[j, a, 2] * gp[p, 2]
-        # pairs (j, l) with l >= j; the (l, j) block is the transpose of the (j, l) one
-        for j in range(m):
-            oj = order[o0 + j]
-            for l in range(j, m):
-                ol = order[o0 + l]
+    WVWc = np.zeros((n_chunks, n_cam, n_cam))
+    WVgc = np.zeros((n_chunks, n_cam))
+    bounds = _chunks(start, n_chunks)
+    for c in prange(n_chunks):
+        W = np.empty((m_max, 11, 3))
+        Y = np.empty((m_max, 11, 3))
+        WVW = WVWc[c]
+        WVg = WVgc[c]
+        for p in range(bounds[c], bounds[c + 1]):
+            o0 = start[p]
+            m = start[p + 1] - o0
+            for j in range(m):
+                o = order[o0 + j]
                 for a in range(11):
-                    ca = ci[oj, a]
-                    if ca < 0:
-                        continue
-                    for b in range(11):
-                        cb = ci[ol, b]
-                        if cb >= 0:
-                            v = Y[j, a, 0] * W[l, b, 0] + Y[j, a, 1] * W[l, b, 1] + Y[j, a, 2] * W[l, b, 2]
-                            WVW[ca, cb] += v
-                            if l != j:
-                                WVW[cb, ca] += v
-    return WVW, WVg
+                    for k in range(3):
+                        W[j, a, k] = Jc[o, 0, a] * Jx[o, 0, k] + Jc[o, 1, a] * Jx[o, 1, k]
+                for a in range(11):
+                    for k in range(3):
+                        Y[j, a, k] = W[j, a, 0] * Vinv[p, 0, k] + W[j, a, 1] * Vinv[p, 1, k] + W[j, a, 2] * Vinv[p, 2, k]
+                    ca = ci[o, a]
+                    if ca >= 0:
+                        WVg[ca] += Y[j, a, 0] * gp[p, 0] + Y[j, a, 1] * gp[p, 1] + Y[j, a, 2] * gp[p, 2]
+            # pairs (j, l) with l >= j; the (l, j) block is the transpose of the (j, l) one
+            for j in range(m):
+                oj = order[o0 + j]
+                for l in range(j, m):
+                    ol = order[o0 + l]
+                    for a in range(11):
+                        ca = ci[oj, a]
+                        if ca < 0:
+                            continue
+                        for b in range(11):
+                            cb = ci[ol, b]
+                            if cb >= 0:
+                                v = Y[j, a, 0] * W[l, b, 0] + Y[j, a, 1] * W[l, b, 1] + Y[j, a, 2] * W[l, b, 2]
+                                WVW[ca, cb] += v
+                                if l != j:
+                                    WVW[cb, ca] += v
+    return _sum_chunks(WVWc), _sum_chunks(WVgc)
 
 
-@njit(cache=True)
-def point_steps(Jc, Jx, ci, o_pt, Vinv, gp, dc):
+@njit(parallel=True, cache=True)
+def point_steps(Jc, Jx, ci, order, start, Vinv, gp, dc):
     """Point updates after the camera update ``dc``: ``dp_p = −V_p⁻¹ (g_p + W_pᵀ dc)``.
 
     Parameters
     ----------
-    Jc, Jx, ci, o_pt : as in :func:`accumulate_normal_equations`.
+    Jc, Jx, ci, order, start : as in :func:`accumulate_normal_equations`.
     Vinv : (N, 3, 3) inverses of the damped point blocks.
     gp : (N, 3) point gradients.
     dc : (P,) camera update.
@@ -239,20 +277,21 @@ def point_steps(Jc, Jx, ci, o_pt, Vinv, gp, dc):
     dp : (N, 3). O(n · 11 · 3) time.
     """
     n_points = Vinv.shape[0]
-    q = gp.copy()
-    for o in range(Jc.shape[0]):
-        p = o_pt[o]
-        v0 = 0.0
-        v1 = 0.0
-        for a in range(11):
-            ca = ci[o, a]
-            if ca >= 0:
-                v0 += Jc[o, 0, a] * dc[ca]
-                v1 += Jc[o, 1, a] * dc[ca]
-        for k in range(3):
-            q[p, k] += Jx[o, 0, k] * v0 + Jx[o, 1, k] * v1
     dp = np.empty((n_points, 3))
-    for p in range(n_points):
+    for p in prange(n_points):
+        q0, q1, q2 = gp[p, 0], gp[p, 1], gp[p, 2]
+        for j in range(start[p], start[p + 1]):
+            o = order[j]
+            v0 = 0.0
+            v1 = 0.0
+            for a in range(11):
+                ca = ci[o, a]
+                if ca >= 0:
+                    v0 += Jc[o, 0, a] * dc[ca]
+                    v1 += Jc[o, 1, a] * dc[ca]
+            q0 += Jx[o, 0, 0] * v0 + Jx[o, 1, 0] * v1
+            q1 += Jx[o, 0, 1] * v0 + Jx[o, 1, 1] * v1
+            q2 += Jx[o, 0, 2] * v0 + Jx[o, 1, 2] * v1
         for k in range(3):
-            dp[p, k] = -(Vinv[p, k, 0] * q[p, 0] + Vinv[p, k, 1] * q[p, 1] + Vinv[p, k, 2] * q[p, 2])
+            dp[p, k] = -(Vinv[p, k, 0] * q0 + Vinv[p, k, 1] * q1 + Vinv[p, k, 2] * q2)
     return dp
