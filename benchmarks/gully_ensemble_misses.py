@@ -77,6 +77,9 @@ def run(results: Path, names: list[str] | None, heads: str, sets: dict, out: Pat
         # metres as on missed ones is no cause)
         row["reference near a filled flat (%)"] = 100 * df.loc[df["near_flat_any"], "length_m"].sum() / ref
         row["reference near a shrub/tree (%)"] = 100 * df.loc[df["near_object"], "length_m"].sum() / ref
+        tnm = df["reason"] == "traced, not mapped"
+        for w in ("head reach", "gap", "tail", "never mapped"):
+            row[f"traced, not mapped: {w} (%)"] = 100 * df.loc[tnm & (df["traced_where"] == w), "length_m"].sum() / ref
         leaves = df["reason"] == "beside: path leaves the gully"
         for lab, m in (("matched", df["reason"] == "matched"), ("path leaves", leaves)):
             tot = df.loc[m, "length_m"].sum()

@@ -151,7 +151,7 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     same = gid_of_vertex[vi] == gno
     # each used head as snapped (cell centre): distance to the nearest true centreline, and to its own gully's
     snapped = np.full((len(used), 2), np.nan)
-    hc = res.network.head_cells
+    hc = res.network.head_cells[:len(used)]  # heads only: edge inlets are traced after them
     ok = hc >= 0
     snapped[ok] = grid.flat_xy(hc[ok])
     d_dig, i_dig = tree.query(used, k=1) if len(used) else (np.zeros(0), np.zeros(0, int))
@@ -185,6 +185,17 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
             reason[k] = "beside: head snapped off the gully"
         else:
             reason[k] = "beside: path leaves the gully"
+    # where the unmapped traced cells lie on their path (nearest traced cell of each such sample)
+    keep = res.gully if res.bridged is None else res.gully | res.bridged
+    net = res.network
+    where_cell = unmapped_position(net.cells, net.pos_down, keep.ravel()[net.cells])
+    where = np.full(len(pts), "", dtype=object)
+    tnm = np.flatnonzero(reason == "traced, not mapped")
+    if tnm.size and net.cells.size:
+        unm = np.flatnonzero(where_cell != "mapped")
+        if unm.size:
+            _d, ii = cKDTree(grid.flat_xy(net.cells[unm])).query(pts[tnm], k=1)
+            where[tnm] = where_cell[unm][ii]
     tol_cells = int(np.ceil(tol / grid.cell))
     near_flat = _near(raised, tol_cells, pts, grid)
     near_nodata = _near(nodata, tol_cells, pts, grid, outside=True)
@@ -201,7 +212,7 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
         del lc, obj
     df = pd.DataFrame({"gully_no": gno, "reason": reason, "length_m": step, "near_flat": near_flat & miss,
                        "near_flat_any": near_flat, "near_object": near_object, "near_nodata": near_nodata & miss,
-                       "kind": [kind_of_gully.get(int(i), "?") for i in gno]})
+                       "traced_where": where, "kind": [kind_of_gully.get(int(i), "?") for i in gno]})
     tab = df.pivot_table(index="gully_no", columns="reason", values="length_m", aggfunc="sum", fill_value=0.0)
     heads_t = th.set_index("gully_id")
     first = cl.sort_values(["gully_id"]).groupby("gully_id").first()
@@ -213,6 +224,50 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     if samples_out:
         return tab.reset_index(), totals, scores, res, df, heads_tab
     return tab.reset_index(), totals, scores, res
+
+
+def unmapped_position(cells: np.ndarray, pos_down: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """Where each traced cell lies relative to the mapped cells of its path.
+
+    Parameters
+    ----------
+    cells, pos_down : ndarray int64
+        The traced network (:class:`kitegully.gully.network.GullyNetwork`).
+    kept : ndarray bool
+        Per traced cell: on the gully map.
+
+    Returns
+    -------
+    ndarray of str
+        ``mapped``, ``head reach``, ``gap``, ``tail`` or ``never mapped`` per traced cell.
+        O(L) for L traced cells (Kahn's order of the downstream forest).
+    """
+    n = cells.size
+    indeg = np.bincount(pos_down[pos_down >= 0], minlength=n)
+    up_mapped = np.zeros(n, dtype=bool)
+    order = []
+    stack = list(np.flatnonzero(indeg == 0))
+    indeg = indeg.copy()
+    while stack:  # heads first, then downstream as each cell's upstream cells are done
+        i = stack.pop()
+        order.append(i)
+        j = pos_down[i]
+        if j >= 0:
+            up_mapped[j] |= up_mapped[i] | kept[i]
+            indeg[j] -= 1
+            if indeg[j] == 0:
+                stack.append(j)
+    down_mapped = np.zeros(n, dtype=bool)
+    for i in reversed(order):  # outlets first
+        j = pos_down[i]
+        if j >= 0:
+            down_mapped[i] = kept[j] | down_mapped[j]
+    out = np.full(n, "never mapped", dtype=object)
+    out[up_mapped & down_mapped] = "gap"
+    out[~up_mapped & down_mapped] = "head reach"
+    out[up_mapped & ~down_mapped] = "tail"
+    out[kept] = "mapped"
+    return out
 
 
 def _near(mask: np.ndarray, radius_cells: int, pts: np.ndarray, grid, outside: bool = False) -> np.ndarray:

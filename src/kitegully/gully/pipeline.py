@@ -17,6 +17,7 @@ from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden
 from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
                                    head_scale_relief, incision_map, surface_roughness, visible_incisions)
+from kitegully.gully.inlets import edge_inlets
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully import InputError
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
@@ -104,6 +105,11 @@ class GullyParams:
         harmonic interpolation of the DSM around them, and traced reaches hidden by them
         between two mapped reaches count as mapped. Needs the orthophoto and
         ``gully.automatic_heads``.
+    edge_inlets : bool
+        Also trace from where a channel enters the DEM across its outer edge
+        (:mod:`kitegully.gully.inlets`; optional, off by default): a depth-patch channel two
+        cells inside the edge whose path stays in the patches until 2σ (``sigma_m``) from
+        the edge. Such a channel's head lies outside the survey, so nobody can digitise it.
     """
 
     sigma_m: float = 10.0
@@ -120,6 +126,7 @@ class GullyParams:
     buffer_m: float = 15.0
     trace_ground: bool = False
     crowns: CrownParams = CrownParams()
+    edge_inlets: bool = False
 
     @property
     def needs_ground_surface(self) -> bool:
@@ -129,9 +136,9 @@ class GullyParams:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "GullyParams":
-        """Build from the ``gully:`` config section (keys of the same names; ``trace_ground``
-        and ``crowns`` are optional, default off)."""
-        optional = {"trace_ground", "crowns"}
+        """Build from the ``gully:`` config section (keys of the same names; ``trace_ground``,
+        ``crowns`` and ``edge_inlets`` are optional, default off)."""
+        optional = {"trace_ground", "crowns", "edge_inlets"}
         kw = {k: cfg[k] for k in cls.__dataclass_fields__ if k not in optional or k in cfg}
         if "crowns" in kw:
             kw["crowns"] = CrownParams.from_config(kw["crowns"])
@@ -172,6 +179,9 @@ class GullyResult:
     #: Crown mask (``gully.crowns``; None when off) and the traced cells bridged under it (counted as mapped).
     crowns: np.ndarray | None = None
     bridged: np.ndarray | None = None
+    #: Flat indices of the cells where a channel enters the DEM across its edge, traced after the heads
+    #: (``edge_inlets``; empty when off).
+    inlets: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def map_gullies(
@@ -369,6 +379,15 @@ def map_gullies(
         inside_idx = np.concatenate([inside_idx, auto_idx])
         t["auto_heads_s"] = time.perf_counter() - t0
     del z_heads
+    inlet_idx = np.zeros(0, dtype=np.int64)
+    if params.edge_inlets:
+        t0 = time.perf_counter()
+        # [I] 2σ: within it the depth map's Gaussian window is cut by the edge, so a patch there may be an edge effect
+        inlet_idx = edge_inlets(labels, depth, np.isfinite(filled), filled, dirs, grid.cell, 2.0 * params.sigma_m)
+        inside_idx = np.concatenate([inside_idx, inlet_idx])
+        t["inlets_s"] = time.perf_counter() - t0
+        log.info("edge inlets: %d channels enter the DEM across its edge (paths in the depth patches >= %.3g m "
+                 "inside), %.1f s", inlet_idx.size, 2.0 * params.sigma_m, t["inlets_s"])
 
     t0 = time.perf_counter()
     network = trace_network(filled, inside_idx, dirs)
@@ -401,7 +420,7 @@ def map_gullies(
     )
     return GullyResult(
         smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised,
-        n_flat, t, auto_idx, hidden, bridged,
+        n_flat, t, auto_idx, hidden, bridged, inlet_idx,
     )
 
 
@@ -587,6 +606,7 @@ def gully_summary(res: GullyResult, grid: GridSpec, params: GullyParams, dem_sou
         ("head source (gully.heads)", heads),
         ("gully heads", int(n_heads)),
         ("automatic heads", int(res.auto_heads.size)),
+        ("channels entering across the DEM edge (edge_inlets)", int(res.inlets.size)),
         ("heads on the DEM", int(res.heads_inside.sum())),
         ("head snapping", f"{params.head_snap} cell within {params.head_snap_radius_m} m"),
         ("tracing DEM smoothing sigma (m)", params.trace_smoothing_m),

@@ -1,0 +1,120 @@
+"""Channels that enter the DEM across its edge (``gully.edge_inlets``).
+
+The paper traces the network from gully heads digitised on the DEM (Feurer et al. 2018,
+Fig. 3 g-j). A channel whose head lies upstream of the surveyed area, such as a wadi that
+enters the kite survey from the catchment above it, has no head on the DEM, so no path
+runs down its reach above the first tributary that joins it, although the DEM shows it and
+the field network maps it. A person digitising heads on the hillshade would mark where such
+a channel enters; this module finds those points from the data:
+
+* the *outer edge* is the DEM's nodata connected to the grid's border (the survey's outline),
+  not interior holes such as open water;
+* a *candidate* is the deepest cell of each run of depth-patch cells (steps e-f: depth
+  > threshold, patch volume >= the minimum) two cells inside that edge (a cell next to
+  nodata is an outlet, where every traced path ends);
+* it is an *inlet* when its D8 path runs inside the depth patches until it is at least
+  ``reach_m`` from the edge: the channel carries water into the DEM. A channel leaving the
+  DEM drains straight to the edge, a pit or a short scour at the edge stays near it.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from kitegully.terrain.flow import trace_paths
+
+
+def outer_edge_distance(valid: np.ndarray) -> np.ndarray:
+    """Distance (cells) of every cell from the DEM's outer edge: nodata connected to the grid border.
+
+    Parameters
+    ----------
+    valid : ndarray bool (H, W)
+        Cells with an elevation.
+
+    Returns
+    -------
+    ndarray float32 (H, W)
+        Euclidean distance (cells) to the nearest outer-nodata cell or to the border frame
+        (one cell beyond the grid); 0 on outer nodata. Interior holes do not count as edge.
+        O(n) (labelling and OpenCV's exact distance transform).
+    """
+    nodata = np.pad(~np.asarray(valid, dtype=bool), 1, constant_values=True)
+    labels, _n = ndimage.label(nodata, structure=np.ones((3, 3), dtype=bool))
+    outside = labels == labels[0, 0]
+    del labels
+    dist = cv2.distanceTransform(np.logical_not(outside).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return dist[1:-1, 1:-1]
+
+
+def edge_inlets(
+    patches: np.ndarray,
+    depth: np.ndarray,
+    valid: np.ndarray,
+    filled: np.ndarray,
+    directions: np.ndarray | None,
+    cell_m: float,
+    reach_m: float,
+) -> np.ndarray:
+    """Start cells of channels that enter the DEM across its outer edge.
+
+    Parameters
+    ----------
+    patches : ndarray int (H, W)
+        Kept depth patches (> 0), :func:`kitegully.gully.patches.depth_patches`.
+    depth : ndarray (H, W)
+        The depth map the patches come from (m).
+    valid : ndarray bool (H, W)
+        Cells of the DEM the paths are traced on (open water and the survey's outside False).
+    filled, directions
+        The depression-free DEM and its D8 directions (or None for steepest descent), as
+        :func:`kitegully.terrain.flow.trace_paths` takes them.
+    cell_m : float
+        Cell size (m).
+    reach_m : float
+        How far from the edge (m) a candidate's path must get while it stays in the depth
+        patches ([I] the stage uses 2σ of the depth map: within it the smoothing's window is
+        cut by the edge, so a patch there may be an edge effect rather than a channel).
+
+    Returns
+    -------
+    ndarray int64
+        Flat indices of the inlet cells, one per channel crossing of the edge, deepest first.
+
+    Notes
+    -----
+    O(n) for the edge distance plus O(L) for the candidates' paths (each followed only while
+    it stays in the patches, and only until it reaches ``reach_m``).
+    """
+    if patches.shape != valid.shape or depth.shape != valid.shape:
+        raise ValueError("patches, depth and valid must have the same shape")
+    if not reach_m > 0:
+        raise ValueError(f"reach_m must be > 0, got {reach_m!r}")
+    dist = outer_edge_distance(valid)
+    in_patch = (patches > 0) & valid
+    # two cells in: not next to nodata (an outlet there ends every path), the diagonal too
+    ring = in_patch & (dist > 1.5) & (dist <= 2.5)
+    if not ring.any():
+        return np.zeros(0, dtype=np.int64)
+    runs, n = ndimage.label(ring, structure=np.ones((3, 3), dtype=bool))
+    idx = np.flatnonzero(runs.ravel())
+    run_of = runs.ravel()[idx]
+    d = np.nan_to_num(depth.ravel()[idx], nan=-np.inf)
+    order = np.lexsort((-d, run_of))  # per run, deepest first
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = run_of[order][1:] != run_of[order][:-1]
+    cands = idx[order[first]]
+    cands = cands[np.argsort(-np.nan_to_num(depth.ravel()[cands], nan=-np.inf), kind="stable")]
+    reach_cells = reach_m / cell_m
+    flat_patch = in_patch.ravel()
+    flat_dist = dist.ravel()
+    out = []
+    for c in cands:
+        cells, _down, _starts, _ends = trace_paths(filled, np.array([c], dtype=np.int64), directions)
+        inside = flat_patch[cells]
+        stop = int(np.argmin(inside)) if not inside.all() else cells.size
+        if stop and flat_dist[cells[:stop]].max() >= reach_cells:
+            out.append(int(c))
+    return np.asarray(out, dtype=np.int64)

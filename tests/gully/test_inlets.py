@@ -1,0 +1,103 @@
+"""kitegully.gully.inlets: channels entering the DEM across its edge, on constructed DEMs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kitegully.gully.depth import depth_map
+from kitegully.gully.inlets import edge_inlets, outer_edge_distance
+from kitegully.gully.patches import depth_patches
+from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.io.raster import GridSpec
+from kitegully.terrain.fill import priority_flood_fill
+
+CELL = 0.5
+NX, NY = 240, 100  # 120 m along x, 50 m across
+YC = 25.0  # channel centreline (m)
+SIGMA = 6.0
+
+
+def _grid():
+    return GridSpec(x0=0.0, y0=NY * CELL, cell=CELL, width=NX, height=NY, crs="EPSG:32632")
+
+
+def plane_with_channel(slope_x: float, channel_x=(0.0, 120.0), scour_at_edge=False, seed=3):
+    """A plane falling by ``slope_x`` per metre of x (negative: rising) with a 1 m deep, 4 m wide V channel
+    along y = YC over ``channel_x``, 2 cm noise; ``scour_at_edge`` adds a 3 m long, 0.8 m deep hollow at the
+    lower edge y = 0 (x 60-63 m)."""
+    grid = _grid()
+    xs, ys = grid.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    z = 100.0 - slope_x * X
+    d = np.abs(Y - YC)
+    on = (X >= channel_x[0]) & (X <= channel_x[1])
+    z = z - np.where(on, np.clip(1.0 - d / 2.0, 0.0, None), 0.0)
+    if scour_at_edge:
+        z = z - np.where((X >= 60.0) & (X <= 63.0) & (Y <= 3.0), 0.8, 0.0)
+    z = z + np.random.default_rng(seed).normal(0.0, 0.02, z.shape)
+    return grid, z.astype(np.float32), xs, ys
+
+
+def _inlets(z, grid, reach_m=2 * SIGMA):
+    _s, depth = depth_map(z, grid.cell, SIGMA)
+    labels, _t = depth_patches(depth, grid.cell, 0.25, 1.0)
+    filled, _n = priority_flood_fill(z.astype(np.float64), 1e-4)
+    return edge_inlets(labels, depth, np.isfinite(filled), filled, None, grid.cell, reach_m)
+
+
+def test_a_channel_entering_across_the_edge_is_found_where_it_enters():
+    grid, z, xs, ys = plane_with_channel(0.05)  # falls towards +x: the channel enters at x = 0
+    ins = _inlets(z, grid)
+    assert ins.size == 1
+    r, c = np.divmod(ins, grid.width)
+    assert xs[c[0]] < 2.0 and abs(ys[r[0]] - YC) <= 1.0
+
+
+def test_a_channel_leaving_across_the_edge_is_no_inlet():
+    # rises towards +x: the channel enters at x = 120 m and leaves at x = 0
+    grid, z, xs, ys = plane_with_channel(-0.05)
+    ins = _inlets(z, grid)
+    assert ins.size == 1
+    assert xs[np.divmod(ins, grid.width)[1][0]] > 118.0
+
+
+def test_a_channel_starting_inside_the_dem_and_a_scour_at_the_edge_give_none():
+    # the channel starts 30 m inside (its head is on the DEM), a short deep hollow touches the edge
+    grid, z, _xs, _ys = plane_with_channel(0.05, channel_x=(30.0, 120.0), scour_at_edge=True)
+    _s, depth = depth_map(z, grid.cell, SIGMA)
+    labels, _t = depth_patches(depth, grid.cell, 0.25, 1.0)
+    assert labels[-6:, 120:127].any(), "the scour is a kept depth patch at the edge"
+    # the channel leaves at x = 120 m (downstream): no inlet there either
+    assert _inlets(z, grid).size == 0
+
+
+def test_interior_nodata_is_not_the_edge_but_outer_nodata_is():
+    valid = np.ones((50, 60), dtype=bool)
+    valid[20:30, 25:35] = False  # open water inside the survey
+    valid[:, :5] = False  # the survey's outline
+    dist = outer_edge_distance(valid)
+    assert dist[25, 30] > 0 and dist[25, 24] == pytest.approx(20.0)
+    assert dist[25, 5] == pytest.approx(1.0) and dist[25, 2] == 0.0
+    assert dist[0, 30] == pytest.approx(1.0)  # one cell from the grid's border frame
+
+
+def test_the_pipeline_traces_from_the_inlet_only_when_asked():
+    grid, z, xs, ys = plane_with_channel(0.05)
+    base = dict(sigma_m=SIGMA, head_snap="lowest", head_snap_radius_m=0.5, trace_smoothing_m=0.5,
+                water_min_area_m2=None)
+    none = np.zeros(0)
+    off = map_gullies(z, grid, none, none, GullyParams(**base))
+    on = map_gullies(z, grid, none, none, GullyParams(**base, edge_inlets=True))
+    assert off.network.cells.size == 0 and off.inlets.size == 0
+    assert on.inlets.size == 1
+    r, c = np.divmod(on.network.cells, grid.width)
+    assert np.abs(ys[r] - YC).max() <= 1.0  # the path follows the channel
+    assert xs[c].max() > 119.0  # down to the far edge
+    assert on.extracted_lines["length_m"].sum() > 100.0
+
+
+def test_edge_inlets_needs_a_positive_reach():
+    grid, z, _xs, _ys = plane_with_channel(0.05)
+    with pytest.raises(ValueError, match="reach_m"):
+        _inlets(z, grid, reach_m=0.0)
