@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from kitegully.gully.depth import depth_map
+from kitegully.gully.heads import HeadDetectionParams
 from kitegully.gully.inlets import edge_inlets, outer_edge_distance
 from kitegully.gully.patches import depth_patches
 from kitegully.gully.pipeline import GullyParams, map_gullies
@@ -16,6 +17,8 @@ CELL = 0.5
 NX, NY = 240, 100  # 120 m along x, 50 m across
 YC = 25.0  # channel centreline (m)
 SIGMA = 6.0
+IP = HeadDetectionParams(scale_m=2.0, relief_k=3.0, dsm_sigma_z_m=0.02, slope_window_m=1.0, area_slope_a=0.025,
+                         area_slope_b=0.4, min_channel_length_m=10.0)
 
 
 def _grid():
@@ -39,11 +42,24 @@ def plane_with_channel(slope_x: float, channel_x=(0.0, 120.0), scour_at_edge=Fal
     return grid, z.astype(np.float32), xs, ys
 
 
-def _inlets(z, grid, reach_m=2 * SIGMA):
+def _inlets(z, grid, reach_m=2 * SIGMA, incised=None):
     _s, depth = depth_map(z, grid.cell, SIGMA)
     labels, _t = depth_patches(depth, grid.cell, 0.25, 1.0)
     filled, _n = priority_flood_fill(z.astype(np.float64), 1e-4)
-    return edge_inlets(labels, depth, np.isfinite(filled), filled, None, grid.cell, reach_m)
+    return edge_inlets(labels, depth, np.isfinite(filled), filled, None, grid.cell, reach_m, incised=incised)
+
+
+def slope_foot(seed=5):
+    """A 40 % slope along y = 0-15 m above a 2 % plain (the concave foot is deep in the σ-scale depth map), with
+    a convergent hollow in it: no channel, the slope falls towards -y, away from the edge at y = 50 m."""
+    grid = _grid()
+    xs, ys = grid.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    yt = 50.0 - Y  # distance from the top edge (m)
+    z = 100.0 - 0.02 * yt + 0.38 * np.clip(15.0 - yt, 0.0, None)
+    z = z - 1.5 * np.exp(-((X - 60.0) / 10.0) ** 2) * np.clip(1.0 - yt / 40.0, 0.0, None)
+    z = z + np.random.default_rng(seed).normal(0.0, 0.02, z.shape)
+    return grid, z.astype(np.float32)
 
 
 def test_a_channel_entering_across_the_edge_is_found_where_it_enters():
@@ -72,6 +88,20 @@ def test_a_channel_starting_inside_the_dem_and_a_scour_at_the_edge_give_none():
     assert _inlets(z, grid).size == 0
 
 
+def test_a_concave_slope_foot_is_no_inlet_once_incision_is_asked_for():
+    from kitegully.gully.heads import head_scale_relief
+
+    grid, z = slope_foot()
+    relief, rough = head_scale_relief(z, grid.cell, IP)
+    incised = relief >= IP.relief_k * max(IP.dsm_sigma_z_m, rough)
+    assert _inlets(z, grid).size >= 1, "the slope foot's depth patch reaches 2 sigma in from the edge"
+    assert _inlets(z, grid, incised=incised).size == 0
+    # the entering channel is incised all the way and stays an inlet
+    grid, z, xs, ys = plane_with_channel(0.05)
+    relief, rough = head_scale_relief(z, grid.cell, IP)
+    assert _inlets(z, grid, incised=relief >= IP.relief_k * max(IP.dsm_sigma_z_m, rough)).size == 1
+
+
 def test_interior_nodata_is_not_the_edge_but_outer_nodata_is():
     valid = np.ones((50, 60), dtype=bool)
     valid[20:30, 25:35] = False  # open water inside the survey
@@ -88,7 +118,7 @@ def test_the_pipeline_traces_from_the_inlet_only_when_asked():
                 water_min_area_m2=None)
     none = np.zeros(0)
     off = map_gullies(z, grid, none, none, GullyParams(**base))
-    on = map_gullies(z, grid, none, none, GullyParams(**base, edge_inlets=True))
+    on = map_gullies(z, grid, none, none, GullyParams(**base, edge_inlets=True), incision=IP)
     assert off.network.cells.size == 0 and off.inlets.size == 0
     assert on.inlets.size == 1
     r, c = np.divmod(on.network.cells, grid.width)
@@ -97,7 +127,9 @@ def test_the_pipeline_traces_from_the_inlet_only_when_asked():
     assert on.extracted_lines["length_m"].sum() > 100.0
 
 
-def test_edge_inlets_needs_a_positive_reach():
+def test_edge_inlets_needs_a_positive_reach_and_the_incision_parameters():
     grid, z, _xs, _ys = plane_with_channel(0.05)
     with pytest.raises(ValueError, match="reach_m"):
         _inlets(z, grid, reach_m=0.0)
+    with pytest.raises(ValueError, match="automatic_heads"):
+        map_gullies(z, grid, np.zeros(0), np.zeros(0), GullyParams(sigma_m=SIGMA, edge_inlets=True))

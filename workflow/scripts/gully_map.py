@@ -21,7 +21,7 @@ if source == "truth_plus_noise":
     log.warning("mapping on the truth-plus-noise stand-in DEM: NOT the photogrammetric DSM (gully.dem)")
 hx, hy = read_heads(inp.heads, crs) if heads != "automatic" else (np.zeros(0), np.zeros(0))
 auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"), params.head_snap,
-                             needed=params.needs_ground_surface)
+                             needed=params.needs_incision_params)
 tiled = {k: read_raster(inp[k])[0] for k in ("filled", "smoothed", "depth", "trace_surface")
          if k in inp.keys()}  # tiled sites: merged tiles and the surface the tiled fill was made from
 if "crowns" in inp.keys():  # tiled sites with gully.crowns: the mask the tiled fill's surface was made with

@@ -109,7 +109,9 @@ class GullyParams:
         Also trace from where a channel enters the DEM across its outer edge
         (:mod:`kitegully.gully.inlets`; optional, off by default): a depth-patch channel two
         cells inside the edge whose path stays in the patches until 2σ (``sigma_m``) from
-        the edge. Such a channel's head lies outside the survey, so nobody can digitise it.
+        the edge, at least half of the way incised at the head scale (needs
+        ``gully.automatic_heads``). Such a channel's head lies outside the survey, so nobody
+        can digitise it.
     """
 
     sigma_m: float = 10.0
@@ -133,6 +135,12 @@ class GullyParams:
         """``crowns`` and ``trace_ground`` stand on the incision map's ground surface and threshold
         (``gully.automatic_heads``), whatever the heads are."""
         return self.crowns.enabled or self.trace_ground
+
+    @property
+    def needs_incision_params(self) -> bool:
+        """Rules that read ``gully.automatic_heads`` whatever the heads are: the ground surface's and
+        ``edge_inlets`` (its channels must be incised at the head scale)."""
+        return self.needs_ground_surface or self.edge_inlets
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "GullyParams":
@@ -267,6 +275,8 @@ def map_gullies(
     ip = incision if incision is not None else auto_heads
     if params.head_snap in ("incision", "relief", "posterior") and np.size(heads_x) and ip is None:
         raise ValueError(f"head_snap {params.head_snap!r} needs the incision-map parameters (gully.automatic_heads)")
+    if params.edge_inlets and ip is None:
+        raise ValueError("gully.edge_inlets needs the incision-map parameters (gully.automatic_heads)")
     if filled is not None:
         if not (resolve or least_cost):
             raise ValueError("a filled DEM from the tiled fill is the epsilon = 0 fill: it needs gully.flat_routing: "
@@ -344,10 +354,16 @@ def map_gullies(
     t0 = time.perf_counter()
     incised = relief = None
     relief_noise = None
-    if params.head_snap in ("relief", "posterior") and np.size(heads_x):
+    snap_on_relief = params.head_snap in ("relief", "posterior") and np.size(heads_x)
+    if snap_on_relief or params.edge_inlets:
         # on the observed cells only, as the detector's incision map: a head never snaps into an interpolated gap
         relief, rough = head_scale_relief(dem, grid.cell, ip, workers)
         relief_noise = max(float(ip.dsm_sigma_z_m), rough)
+    incised_at_head_scale = None
+    if params.edge_inlets:
+        with np.errstate(invalid="ignore"):
+            incised_at_head_scale = relief >= ip.relief_k * relief_noise
+    if snap_on_relief:
         if params.head_snap == "posterior":
             log.info("head snapping: posterior of the digitising error (SD %.3g m) and the head-scale relief "
                      "(spread %.3g m = max(σ_z %.3g m, ρ %.3g m), k %.3g)", params.head_snap_radius_m / 3.0,
@@ -360,7 +376,7 @@ def map_gullies(
         log.info("head snapping: %d incised cells lead into a channel (candidates)", int(incised.sum()))
     inside_idx, inside = snap_heads(
         z_heads, grid, heads_x, heads_y, params.head_snap_radius_m, params.head_snap, depth=depth, patches=labels,
-        smoothed=smoothed, incised=incised, relief=relief, relief_noise_m=relief_noise, relief_k=ip.relief_k if ip else 3.0,
+        smoothed=smoothed, incised=incised, relief=relief if snap_on_relief else None, relief_noise_m=relief_noise, relief_k=ip.relief_k if ip else 3.0,
     )
     del incised, relief
     t["snap_s"] = time.perf_counter() - t0
@@ -383,11 +399,14 @@ def map_gullies(
     if params.edge_inlets:
         t0 = time.perf_counter()
         # [I] 2σ: within it the depth map's Gaussian window is cut by the edge, so a patch there may be an edge effect
-        inlet_idx = edge_inlets(labels, depth, np.isfinite(filled), filled, dirs, grid.cell, 2.0 * params.sigma_m)
+        inlet_idx = edge_inlets(labels, depth, np.isfinite(filled), filled, dirs, grid.cell, 2.0 * params.sigma_m,
+                                incised=incised_at_head_scale)
         inside_idx = np.concatenate([inside_idx, inlet_idx])
         t["inlets_s"] = time.perf_counter() - t0
         log.info("edge inlets: %d channels enter the DEM across its edge (paths in the depth patches >= %.3g m "
-                 "inside), %.1f s", inlet_idx.size, 2.0 * params.sigma_m, t["inlets_s"])
+                 "inside, half of it incised at the head scale), %.1f s", inlet_idx.size, 2.0 * params.sigma_m,
+                 t["inlets_s"])
+    del incised_at_head_scale
 
     t0 = time.perf_counter()
     network = trace_network(filled, inside_idx, dirs)
