@@ -216,13 +216,16 @@ def fabricate_orthophoto(results: Path, grid: GridSpec) -> None:
 
 
 def test_tiled_site_with_crowns_maps_as_untiled(tmp_path):
-    """gully.crowns on a tiled site (issue 21): crown mask and tracing surface in one job, tiled fill, same map."""
+    """gully.crowns on a tiled site (issue 21): crown mask and tracing surface in one job, tiled fill, same map.
+
+    ``gully.edge_inlets`` is on too: the trunk leaves the DEM across its edge and no channel enters, so
+    there is no inlet, tiled or not."""
     runs = {}
     for name, tiled in (("untiled", False), ("tiled", True)):
         results = tmp_path / name
         info = fabricate_twin(results / "tiny_twin" / "twin")
         fabricate_orthophoto(results / "tiny_twin", info["grid"])
-        overlay = {"gully": {"crowns": {"enabled": True, "window_m": 1.0},
+        overlay = {"gully": {"crowns": {"enabled": True, "window_m": 1.0}, "edge_inlets": True,
                              "automatic_heads": {"dsm_sigma_z_m": 0.05}}}  # the fabricated DSM's stated noise
         if tiled:
             overlay["tiling"] = {"tile_m": 100.0, "extent": None}  # 2 x 2 tiles of the site's 200 m extent
@@ -244,6 +247,7 @@ def test_tiled_site_with_crowns_maps_as_untiled(tmp_path):
     st = dict(pd.read_csv(t / "gully_summary.csv").values)
     assert {k: v for k, v in su.items() if "time" not in k and "(s)" not in k} == \
         {k: v for k, v in st.items() if "time" not in k and "(s)" not in k}
+    assert int(su["channels entering across the DEM edge (edge_inlets)"]) == 0
 
 
 def _merge(base: dict, overlay: dict) -> dict:
