@@ -9,9 +9,11 @@ a channel enters; this module finds those points from the data:
 
 * the *outer edge* is the DEM's nodata connected to the grid's border (the survey's outline),
   not interior holes such as open water;
-* a *candidate* is the deepest cell of each run of depth-patch cells (steps e-f: depth
-  > threshold, patch volume >= the minimum) two cells inside that edge (a cell next to
-  nodata is an outlet, where every traced path ends);
+* a *candidate* is a depth-patch cell (steps e-f: depth > threshold, patch volume >= the
+  minimum) two cells inside that edge (a cell next to nodata is an outlet, where every
+  traced path ends); every candidate is tried, and each run of them along the edge gives at
+  most one inlet, its deepest that qualifies (on a ragged photogrammetric edge the deepest
+  may lie beside a nodata notch in the channel's floor and drain out into it);
 * it is an *inlet* when its D8 path runs inside the depth patches until it is at least
   ``reach_m`` from the edge (the channel carries water into the DEM: a channel leaving the
   DEM drains straight to the edge, a pit or a short scour at the edge stays near it), and
@@ -87,45 +89,58 @@ def edge_inlets(
     Returns
     -------
     ndarray int64
-        Flat indices of the inlet cells, one per channel crossing of the edge, deepest first.
+        Flat indices of the inlet cells, at most one per run of candidates, deepest first.
 
     Notes
     -----
-    O(n) for the edge distance plus O(L) for the candidates' paths (each followed only while
-    it stays in the patches, and only until it reaches ``reach_m``).
+    O(n) for the edge distance plus O(L) for the candidates' paths (traced together, merging
+    where they meet) and O(k·r), vectorised, to follow the k candidates while they stay in
+    the patches, r ≈ 4·``reach_m``/``cell_m`` steps at most.
     """
     if patches.shape != valid.shape or depth.shape != valid.shape or (incised is not None and incised.shape != valid.shape):
         raise ValueError("patches, depth, valid and incised must have the same shape")
     if not reach_m > 0:
         raise ValueError(f"reach_m must be > 0, got {reach_m!r}")
-    dist = outer_edge_distance(valid)
-    in_patch = (patches > 0) & valid
-    # two cells in: not next to nodata (an outlet there ends every path), the diagonal too
-    ring = in_patch & (dist > 1.5) & (dist <= 2.5)
+    dist = outer_edge_distance(valid).ravel()
+    in_patch = ((patches > 0) & valid).ravel()
+    reach_cells = reach_m / cell_m
+    # candidates: patch cells two cells inside the edge (not next to nodata: an outlet there ends every path),
+    # all of them: the deepest may lie beside a nodata notch of a ragged edge, into which it drains
+    ring = (in_patch & (dist > 1.5) & (dist <= 2.5)).reshape(valid.shape)
     if not ring.any():
         return np.zeros(0, dtype=np.int64)
-    runs, n = ndimage.label(ring, structure=np.ones((3, 3), dtype=bool))
-    idx = np.flatnonzero(runs.ravel())
-    run_of = runs.ravel()[idx]
-    d = np.nan_to_num(depth.ravel()[idx], nan=-np.inf)
-    order = np.lexsort((-d, run_of))  # per run, deepest first
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = run_of[order][1:] != run_of[order][:-1]
-    cands = idx[order[first]]
-    cands = cands[np.argsort(-np.nan_to_num(depth.ravel()[cands], nan=-np.inf), kind="stable")]
-    reach_cells = reach_m / cell_m
-    flat_patch = in_patch.ravel()
-    flat_dist = dist.ravel()
-    flat_incised = None if incised is None else np.asarray(incised, dtype=bool).ravel()
-    out = []
-    for c in cands:
-        cells, _down, _starts, _ends = trace_paths(filled, np.array([c], dtype=np.int64), directions)
-        inside = flat_patch[cells]
-        stop = int(np.argmin(inside)) if not inside.all() else cells.size
-        far = np.flatnonzero(flat_dist[cells[:stop]] >= reach_cells)
-        if not far.size:
-            continue
-        stretch = cells[: far[0] + 1]
-        if flat_incised is None or 2 * np.count_nonzero(flat_incised[stretch]) >= stretch.size:
-            out.append(int(c))
-    return np.asarray(out, dtype=np.int64)
+    runs, _n = ndimage.label(ring, structure=np.ones((3, 3), dtype=bool))
+    cand = np.flatnonzero(runs.ravel())
+    cells, down, _starts, _ends = trace_paths(filled, cand, directions)  # paths merge where they meet
+    order = np.argsort(cells, kind="stable")
+    sorted_cells, next_of = cells[order], down[order]
+    flat_incised = np.ones_like(in_patch) if incised is None else np.asarray(incised, dtype=bool).ravel()
+    pos = cand.copy()
+    alive = np.ones(cand.size, dtype=bool)
+    ok = np.zeros(cand.size, dtype=bool)
+    walked = np.zeros(cand.size, dtype=np.int64)
+    n_incised = np.zeros(cand.size, dtype=np.int64)
+    for _step in range(int(np.ceil(4 * reach_cells)) + 8):  # a path wanders at most ~4x the straight distance
+        alive &= in_patch[pos]
+        walked += alive
+        n_incised += alive & flat_incised[pos]
+        reached = alive & (dist[pos] >= reach_cells)
+        ok |= reached & (2 * n_incised >= walked)
+        alive &= ~reached
+        if not alive.any():
+            break
+        nxt = next_of[np.searchsorted(sorted_cells, pos[alive])]
+        idx = np.flatnonzero(alive)
+        alive[idx[nxt < 0]] = False
+        pos[idx[nxt >= 0]] = nxt[nxt >= 0]
+    acc = cand[ok]
+    if not acc.size:
+        return np.zeros(0, dtype=np.int64)
+    # one inlet per run of candidates along the edge: its deepest accepted cell
+    lab = runs.ravel()[acc]
+    key = np.lexsort((-np.nan_to_num(depth.ravel()[acc], nan=-np.inf), lab))
+    first = np.ones(acc.size, dtype=bool)
+    first[1:] = lab[key][1:] != lab[key][:-1]
+    out = acc[key][first]
+    out = out[np.argsort(-np.nan_to_num(depth.ravel()[out], nan=-np.inf), kind="stable")]
+    return out.astype(np.int64)
