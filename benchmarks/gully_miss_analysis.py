@@ -81,7 +81,7 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
     """Per-gully table of reference, matched and missed length by reason; and the run's scores.
 
     Returns ``(per_gully, totals, scores, result)``, with ``samples_out`` also the per-sample
-    table (``gully_no, reason, length_m, near_flat, near_nodata, kind``) and the per-head
+    table (``x, y, gully_no, reason, length_m, near_flat, near_nodata, traced_where, kind``) and the per-head
     table (distances of each used head, digitised and snapped, to the true centrelines).
     A head is ``snapped_on_gully`` within ``on_gully_m`` of its gully's true centreline
     (default 2 m: the 1 m matching window plus the widest head's half width, 0.75 m, rounded up).
@@ -210,7 +210,7 @@ def analyse(cfg: dict, site: Path, heads: str, step: float = 1.0, head_reach_m: 
         obj = np.isin(lc, [CODE["shrub"], CODE["tree"]])
         near_object = _near(obj, int(np.ceil(1.0 / grid.cell)), pts, grid)
         del lc, obj
-    df = pd.DataFrame({"gully_no": gno, "reason": reason, "length_m": step, "near_flat": near_flat & miss,
+    df = pd.DataFrame({"x": pts[:, 0], "y": pts[:, 1], "gully_no": gno, "reason": reason, "length_m": step, "near_flat": near_flat & miss,
                        "near_flat_any": near_flat, "near_object": near_object, "near_nodata": near_nodata & miss,
                        "traced_where": where, "kind": [kind_of_gully.get(int(i), "?") for i in gno]})
     tab = df.pivot_table(index="gully_no", columns="reason", values="length_m", aggfunc="sum", fill_value=0.0)
