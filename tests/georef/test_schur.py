@@ -40,8 +40,12 @@ def test_weighted_jacobians_equal_the_numpy_jacobian():
     weight = np.random.default_rng(0).uniform(0.5, 2.0, len(pb.o_img))
     Jc, Jx = weighted_jacobians(intr, pb.cam, rv, t, pb.o_img, pts, pb.o_pt, weight)
     _, Ji, Jp, JX = projection_jacobian(intr[pb.cam], rv[pb.o_img], t[pb.o_img], pts[pb.o_pt])
-    np.testing.assert_allclose(Jc, np.concatenate([Ji, Jp], axis=2) * weight[:, None, None], rtol=1e-7, atol=1e-6)
-    np.testing.assert_allclose(Jx, JX * weight[:, None, None], rtol=1e-7, atol=1e-6)
+    # per column, against that column's scale: the rotation columns (up to ~5e3 px/rad) are sums of terms that
+    # cancel, and the compiled and NumPy formulas round differently there (5e-10 of the scale measured on an AMD
+    # EPYC, 1.7e-6 px absolute on an element of 3.1; elementwise atol 1e-6 failed there)
+    for got, want in ((Jc, np.concatenate([Ji, Jp], axis=2) * weight[:, None, None]), (Jx, JX * weight[:, None, None])):
+        scale = np.abs(want).max(axis=(0, 1))
+        assert (np.abs(got - want).max(axis=(0, 1)) <= 1e-8 * np.maximum(scale, 1.0)).all()
 
 
 def test_schur_step_equals_the_full_damped_normal_equations():
