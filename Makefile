@@ -157,7 +157,8 @@ polygons-benchmarks: $(STAMP)
 
 # Speed of the heavy stages (issue 21), each beside its reference in one run: the dense kernels
 # against the former revision's (benchmarks/out/dense_kernels_speed.md, ~6 min on a loaded machine),
-# the gully stage at 80 M cells against the former revision's and the fill against GRASS r.fill.dir
+# the gully stage at 80 M cells with the full site's settings (no former revision since session 23: the
+# old one cannot run head_snap posterior or edge_inlets; --against REV in gully_benchmark.py) and the fill against GRASS r.fill.dir
 # and pysheds (results/benchmarks/gully_benchmark.md, ~30 min loaded, 7-9 min near idle; installs grass-core with apt
 # and pysheds in its own venv on first use).
 speed-benchmarks: $(STAMP)

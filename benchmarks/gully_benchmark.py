@@ -53,7 +53,9 @@ SRC = os.environ.get("KITEGULLY_BENCH_SRC", str(REPO / "src"))
 # main at the end of session 9 (before session 10's CPU work on the gully stage); session 9 compared
 # with 55a02f9 (main at session-8 end), session 6 with 3974773 (main at session-5 end, which no longer
 # runs the sites' current gully settings)
-FORMER = "969daf7"
+# Since session 21 (head_snap: posterior) and session 23 (gully.edge_inlets) that revision cannot run the full
+# site's gully settings, so by default no former revision is timed: pass --against REV for one that knows them.
+FORMER = ""
 # the 80 M-cell site of issue 21: its gully settings are the ones timed (the default twin's need
 # checkpoints for head_snap: relief and an orthophoto for gully.crowns, which the synthetic DEM has not)
 SITE = "kamech_full"
@@ -126,6 +128,9 @@ def site_gully_config() -> dict:
 
     g = yaml.safe_load((REPO / "config" / "sites" / f"{SITE}.yaml").read_text())["gully"]
     g["crowns"] = {"enabled": False}  # the synthetic catchment has no orthophoto (gully.crowns needs one)
+    # no checkpoints either: the synthetic DEM's stated noise (synthetic_catchment adds 0.05 m) for the incision map
+    # that head_snap relief/posterior and edge_inlets read
+    g["automatic_heads"] = {**g["automatic_heads"], "dsm_sigma_z_m": 0.05}
     return g
 
 
@@ -155,7 +160,8 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     out = Path(out_dir)
     # the four rasters the gully_map rule writes (session 6 timed depth and map only), the depth
     # rasters as the rule writes them (on_depth: beside the fill where the code knows it)
-    params = GullyParams.from_config(site_gully_config())
+    g = site_gully_config()
+    params = GullyParams.from_config(g)
 
     def write_depth(s, d):
         write_raster(out / "depth.tif", d, grid)
@@ -163,8 +169,14 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
 
     import inspect
 
-    early = "on_depth" in inspect.signature(map_gullies).parameters
-    res = map_gullies(dem, grid, heads[0], heads[1], params, workers=threads, **({"on_depth": write_depth} if early else {}))
+    sig = inspect.signature(map_gullies).parameters
+    early = "on_depth" in sig
+    kw = {"on_depth": write_depth} if early else {}
+    if "incision" in sig:  # as the gully_map rule passes them (head_snap relief/posterior, edge_inlets)
+        from kitegully.gully.heads import HeadDetectionParams
+
+        kw["incision"] = HeadDetectionParams.from_config(g["automatic_heads"])
+    res = map_gullies(dem, grid, heads[0], heads[1], params, workers=threads, **kw)
     t1 = time.perf_counter()
     if not early:  # a former revision: after the mapping, as its rule did
         write_depth(res.smoothed, res.depth)
