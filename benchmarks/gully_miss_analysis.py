@@ -47,6 +47,7 @@ from kitegully.evaluate.gully_run import score_gully_run
 from kitegully.evaluate.network import footprint, scored_reference
 from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints
 from kitegully.gully.inputs import read_heads
+from kitegully.gully.network import topological_order
 from kitegully.gully.pipeline import GullyParams, map_gullies, tracing_surface
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
@@ -240,25 +241,17 @@ def unmapped_position(cells: np.ndarray, pos_down: np.ndarray, kept: np.ndarray)
     -------
     ndarray of str
         ``mapped``, ``head reach``, ``gap``, ``tail`` or ``never mapped`` per traced cell.
-        O(L) for L traced cells (Kahn's order of the downstream forest).
+        O(L) for L traced cells (:func:`kitegully.gully.network.topological_order`).
     """
     n = cells.size
-    indeg = np.bincount(pos_down[pos_down >= 0], minlength=n)
+    order, _indeg = topological_order(np.asarray(pos_down, dtype=np.int64))  # heads first
     up_mapped = np.zeros(n, dtype=bool)
-    order = []
-    stack = list(np.flatnonzero(indeg == 0))
-    indeg = indeg.copy()
-    while stack:  # heads first, then downstream as each cell's upstream cells are done
-        i = stack.pop()
-        order.append(i)
+    for i in order:
         j = pos_down[i]
         if j >= 0:
             up_mapped[j] |= up_mapped[i] | kept[i]
-            indeg[j] -= 1
-            if indeg[j] == 0:
-                stack.append(j)
     down_mapped = np.zeros(n, dtype=bool)
-    for i in reversed(order):  # outlets first
+    for i in order[::-1]:  # outlets first
         j = pos_down[i]
         if j >= 0:
             down_mapped[i] = kept[j] | down_mapped[j]

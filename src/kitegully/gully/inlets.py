@@ -85,6 +85,9 @@ def edge_inlets(
         How far from the edge (m) a candidate's path must get while it stays in the depth
         patches ([I] the stage uses 2σ of the depth map: within it the smoothing's window is
         cut by the edge, so a patch there may be an edge effect rather than a channel).
+    incised : ndarray bool (H, W), optional
+        Cells incised at the head scale; when given, at least half of a candidate's path up to
+        ``reach_m`` from the edge must be incised (a channel, not a concave slope foot).
 
     Returns
     -------
