@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density bundle-speed
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density bundle-speed dense-final-window
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -82,6 +82,13 @@ kamech-full-estimate: $(STAMP)
 # only; ~10 min) -> benchmarks/out/dense_view_cap_full.md; then the default twin's whole DSM -> _twin.md.
 FULL_RESULTS ?= results/kamech_full
 TWIN_RESULTS ?= results/kamech_twin
+# Evaluation only, on a finished default run (results/kamech_twin): the last dense pass with a
+# 3 x 3 window against the site's 5 x 5, in boxes around the 32 true gully heads, scored against
+# the twin's true DSM (docs/stages/05_dense_validate.md). About 2 min on 2 idle cores.
+dense-final-window: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/dense_final_window.py --results results/kamech_twin \
+		--variant "site:" --variant "w3:final_window_half_cells=1"
+
 dense-view-cap: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/dense_view_cap.py --site config/sites/kamech_full.yaml \
 		--results $(FULL_RESULTS) --rows 5888:6912 --cols 4864:5888 --caps none,20,none@64 --repeats 2 \

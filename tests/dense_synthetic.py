@@ -26,6 +26,16 @@ def step(z0=100.0, height=1.5, x_step=0.0):
     return lambda x, y: z0 + np.where(np.asarray(x) > x_step, height, 0.0) + 0.0 * np.asarray(y)
 
 
+def trench(z0=100.0, depth=0.5, width=0.4, x_centres=(-3.0, 0.0, 3.0)):
+    """Straight vertical-walled trenches along y (narrow gully floors) cut into a plane."""
+    def f(x, y):
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        d = np.min([np.abs(x - cx) for cx in x_centres], axis=0)
+        return np.where(d < width / 2, z0 - depth, z0) + 0.0 * y
+    f.x_centres, f.depth, f.width = x_centres, depth, width
+    return f
+
+
 def pillars(z0=100.0, height=3.0, radius=1.0, centres=((-3.0, -3.0), (3.0, -2.5), (-2.5, 3.0), (2.5, 3.0), (0.0, 0.0))):
     """Vertical-walled cylinders (tree-crown-like objects) standing on a plane."""
     def f(x, y):

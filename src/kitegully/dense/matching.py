@@ -77,6 +77,10 @@ class MatchParams:
         refine window misses the ground. Each further pass searches again around the
         level-0 surface of the previous pass (masked cells take the nearest valid cell's
         elevation); the masking rules are the same in every pass.
+    final_window_half_cells : int or None
+        Correlation window half-size of the last pass at the finest level (``None`` = the
+        same as ``window_half_cells``). Used only with ``final_passes`` ≥ 2, where that pass
+        searches a few steps around a surface the wider window has already fixed.
     max_views : int or None
         At most this many images match a tile (block plus halo), chosen from those whose
         frame meets it by :func:`kitegully.dense.view_selection.select_views` (coverage
@@ -104,8 +108,9 @@ class MatchParams:
     nan_cost: float = 1.0
     final_passes: int = 1
     max_views: int | None = None
+    final_window_half_cells: int | None = None
 
-    OPTIONAL: ClassVar[tuple[str, ...]] = ("max_views",)  # keys a config section may leave out
+    OPTIONAL: ClassVar[tuple[str, ...]] = ("max_views", "final_window_half_cells")  # keys a config section may leave out
     REQUIRED: ClassVar[tuple[str, ...]] = ()  # set below: every other field
 
     @classmethod
@@ -117,6 +122,11 @@ class MatchParams:
             raise InputError("dense.matching.min_views: must be at least 2")
         if p.final_passes < 1:
             raise InputError("dense.matching.final_passes: must be at least 1")
+        if p.final_window_half_cells is not None and (isinstance(p.final_window_half_cells, bool)
+                                                      or not isinstance(p.final_window_half_cells, (int, np.integer))
+                                                      or p.final_window_half_cells < 1):
+            raise InputError("dense.matching.final_window_half_cells: must be null or an integer >= 1 (a 3 x 3 "
+                             f"window or wider), got {p.final_window_half_cells!r}")
         if p.max_views is not None and (isinstance(p.max_views, bool) or not isinstance(p.max_views, (int, np.integer))
                                         or p.max_views < p.min_views):
             raise InputError(f"dense.matching.max_views: must be null or an integer >= min_views ({p.min_views}), "
@@ -195,7 +205,7 @@ def _label_range(params: MatchParams, z_prev: np.ndarray | None, zlo: float, zhi
 
 def _ncc_volume(views: ViewSet, cache: PyramidCache, idx: list[int], cams: tuple, levels: np.ndarray,
                 xl: np.ndarray, yl: np.ndarray, base: np.ndarray, dz: float, K: int,
-                params: MatchParams) -> tuple[np.ndarray, np.ndarray]:
+                params: MatchParams, half: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Multi-view NCC (K, h, w) and usable image count per label, from the images
     resampled at each label's elevation (``cams`` = stacked R, C and intrinsics)."""
     Rs, Cs, Ps = cams
@@ -209,7 +219,7 @@ def _ncc_volume(views: ViewSet, cache: PyramidCache, idx: list[int], cams: tuple
     nvw = np.empty((K, hl, wl), np.int16)
     # the texture test is against the image noise, which the 2x2-mean pyramid halves per level
     min_std = params.min_std_dn / 2.0 ** levels.astype(np.float64)
-    multiview_ncc_stack(stack, params.window_half_cells, min_std, score, nvw)
+    multiview_ncc_stack(stack, params.window_half_cells if half is None else half, min_std, score, nvw)
     return score, nvw
 
 
@@ -249,6 +259,13 @@ def _sgm_winner_reference(score: np.ndarray, K: int, params: MatchParams) -> tup
     return d, off
 
 
+def _kept(ok: np.ndarray, d: np.ndarray, base: np.ndarray, dz: float, K: int, zlo: float, zhi: float) -> np.ndarray:
+    """``ok`` without the winners on the tile's lowest or highest searchable elevation: they have no
+    cost minimum inside the bounds, so the surface is not there (or not seen)."""
+    at_bound = ((d == 0) & (base <= zlo + 1e-6)) | ((d == K - 1) & (base + (K - 1) * dz >= zhi - 1e-6))
+    return ok & ~at_bound
+
+
 def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarray, cell: float,
                z_range: tuple[float, float], params: MatchParams) -> TileResult:
     """Match one tile coarse to fine.
@@ -286,6 +303,8 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     z_prev = None
     # coarse to fine, then ``final_passes − 1`` more passes at level 0 around the level-0 surface
     schedule = list(range(L - 1, -1, -1)) + [0] * (params.final_passes - 1)
+    narrow_final = params.final_passes >= 2 and params.final_window_half_cells not in (None, params.window_half_cells)
+    wide = None
     for n_pass, lev in enumerate(schedule):
         last = n_pass == len(schedule) - 1
         level_grid = tile.coarsened(2 ** lev)
@@ -293,7 +312,9 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         xl, yl = level_grid.cell_centres()
         dz = params.z_step_cells * cl * hb
         base, K, dz = _label_range(params, z_prev, zlo, zhi, dz, hl, wl)
-        score, nvw = _ncc_volume(views, cache, idx, (Rs, Cs, Ps), view_levels(views, idx, zmid, cl), xl, yl, base, dz, K, params)
+        half = params.final_window_half_cells if (last and narrow_final) else params.window_half_cells
+        score, nvw = _ncc_volume(views, cache, idx, (Rs, Cs, Ps), view_levels(views, idx, zmid, cl), xl, yl, base, dz, K,
+                                 params, half)
         d, off = _sgm_winner(score, K, params)
         r, c = np.indices(d.shape)
         z = base + (d + off) * dz
@@ -304,17 +325,23 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
             # keep only confident cells as the prior of the next level (or pass); the others take
             # the value of the nearest confident cell (ambiguous low-texture/low-base areas)
             good = seen & (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
+            if narrow_final and n_pass == len(schedule) - 2:
+                # the wide-window surface the narrow last pass refines: it stands where that pass cannot judge
+                wide = (np.where(_kept(good, d, base, dz, K, zlo, zhi), z, np.nan), ncc, nv)
             zf = np.where(good, z, np.nan)
             if not np.isfinite(zf).any():
                 return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16), len(idx))
             zf = fill_nearest(zf)
             z_prev = ndimage.median_filter(zf, size=3, mode="nearest")
         else:
-            keep = (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
-            # a winner on the tile's lowest or highest searchable elevation has no cost
-            # minimum inside the bounds: the surface is not there (or not seen)
-            at_bound = ((d == 0) & (base <= zlo + 1e-6)) | ((d == K - 1) & (base + (K - 1) * dz >= zhi - 1e-6))
-            keep &= ~at_bound
+            keep = _kept((nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation),
+                         d, base, dz, K, zlo, zhi)
+            if wide is not None:
+                # a 3 x 3 window fails the texture or correlation test more often than the wider one
+                # (fewer samples): there the previous pass's elevation is kept, not lost
+                back = ~keep & np.isfinite(wide[0])
+                z, ncc, nv = np.where(back, wide[0], z), np.where(back, wide[1], ncc), np.where(back, wide[2], nv)
+                keep |= back
             z = np.where(keep, z, np.nan).astype(np.float32)
             log.debug("tile level %d: %d labels, %d views, %.0f%% kept", lev, K, len(idx), 100 * keep.mean())
             return TileResult(z, np.where(np.isfinite(ncc), ncc, np.nan).astype(np.float32), nv.astype(np.int16), len(idx))
