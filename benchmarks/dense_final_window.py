@@ -9,8 +9,9 @@ small window gives in a full search.
 
 This script matches boxes around the default twin's true gully heads with the site's matcher
 settings and with the last pass's window changed, on its georeferenced model (the products of a
-default run: ``results/kamech_twin/georef`` and ``sfm/work``, or an ensemble member's with ``--results results/ens3``), and scores each DSM against the
-twin's true DSM by land cover (evaluation only: the truth is read here, never in a rule):
+default run: ``results/kamech_twin/georef`` and ``sfm/work``; an ensemble member's with
+``--results results/ens3``), and scores each DSM against the twin's true DSM by land cover
+(evaluation only: the truth is read here, never in a rule):
 
 - median and NMAD of DSM − true DSM on open ground (bare, ploughed, grass: noise and bias);
 - the same on gully cells (a positive median = floor raised by the window);
