@@ -80,7 +80,12 @@ class MatchParams:
     final_window_half_cells : int or None
         Correlation window half-size of the last pass at the finest level (``None`` = the
         same as ``window_half_cells``). Used only with ``final_passes`` ≥ 2, where that pass
-        searches a few steps around a surface the wider window has already fixed.
+        searches a few steps around a surface the wider window has already fixed. That pass
+        accepts a cell at the correlation :func:`equal_significance_correlation` gives for
+        its window (``min_correlation`` scaled so that a window of pure noise passes as
+        rarely as it does the wider window's test). That pass is matched with both windows
+        (the site's and this one, about 1.4 times its cost); a cell where the narrow window
+        fails its tests takes the site window's cell of the same pass.
     max_views : int or None
         At most this many images match a tile (block plus halo), chosen from those whose
         frame meets it by :func:`kitegully.dense.view_selection.select_views` (coverage
@@ -259,6 +264,30 @@ def _sgm_winner_reference(score: np.ndarray, K: int, params: MatchParams) -> tup
     return d, off
 
 
+def equal_significance_correlation(min_correlation: float, half_wide: int, half_narrow: int) -> float:
+    """The NCC threshold of a narrower window as significant as ``min_correlation`` of a wider one.
+
+    The NCC of two windows of n independent noise samples has a standard deviation of about
+    1/sqrt(n − 1), so a threshold t on the wide window (n_w samples) lies t·sqrt(n_w − 1)
+    noise SDs above zero; the narrow window (n_n samples) needs t·sqrt((n_w − 1)/(n_n − 1))
+    to stand as many SDs above it (averaging over views scales both alike).
+
+    Parameters
+    ----------
+    min_correlation
+        Threshold of the wide window.
+    half_wide, half_narrow
+        Window half-sizes (cells): windows of (2·half + 1)² samples.
+
+    Returns
+    -------
+    float
+        The narrow window's threshold (above 1 when no narrow window can pass it).
+    """
+    n_wide, n_narrow = (2 * half_wide + 1) ** 2, (2 * half_narrow + 1) ** 2
+    return float(min_correlation * np.sqrt((n_wide - 1) / (n_narrow - 1)))
+
+
 def _kept(ok: np.ndarray, d: np.ndarray, base: np.ndarray, dz: float, K: int, zlo: float, zhi: float) -> np.ndarray:
     """``ok`` without the winners on the tile's lowest or highest searchable elevation: they have no
     cost minimum inside the bounds, so the surface is not there (or not seen)."""
@@ -279,7 +308,8 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         (low, high) local elevation bounds of the search.
 
     Cost: O(Σ_levels H_l·W_l·K_l·(V·w² + directions)) with K_l labels and V images
-    (V ≤ ``params.max_views`` when set).
+    (V ≤ ``params.max_views`` when set); with ``final_window_half_cells`` the last pass is matched
+    with both windows.
     """
     H, W = len(ys), len(xs)
     L = params.levels
@@ -304,7 +334,6 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
     # coarse to fine, then ``final_passes − 1`` more passes at level 0 around the level-0 surface
     schedule = list(range(L - 1, -1, -1)) + [0] * (params.final_passes - 1)
     narrow_final = params.final_passes >= 2 and params.final_window_half_cells not in (None, params.window_half_cells)
-    wide = None
     for n_pass, lev in enumerate(schedule):
         last = n_pass == len(schedule) - 1
         level_grid = tile.coarsened(2 ** lev)
@@ -312,22 +341,23 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         xl, yl = level_grid.cell_centres()
         dz = params.z_step_cells * cl * hb
         base, K, dz = _label_range(params, z_prev, zlo, zhi, dz, hl, wl)
-        half = params.final_window_half_cells if (last and narrow_final) else params.window_half_cells
-        score, nvw = _ncc_volume(views, cache, idx, (Rs, Cs, Ps), view_levels(views, idx, zmid, cl), xl, yl, base, dz, K,
-                                 params, half)
-        d, off = _sgm_winner(score, K, params)
-        r, c = np.indices(d.shape)
-        z = base + (d + off) * dz
-        ncc = score[d, r, c]
-        nv = nvw[d, r, c]
-        seen = nvw.max(axis=0) >= params.min_views
+        levels_v = view_levels(views, idx, zmid, cl)
+        # the last pass matches with the site's window and, when set, with the narrower one too
+        halves = [params.window_half_cells] + ([params.final_window_half_cells] if last and narrow_final else [])
+        results = []
+        for half in halves:
+            score, nvw = _ncc_volume(views, cache, idx, (Rs, Cs, Ps), levels_v, xl, yl, base, dz, K, params, half)
+            d, off = _sgm_winner(score, K, params)
+            r, c = np.indices(d.shape)
+            results.append((d, base + (d + off) * dz, score[d, r, c], nvw[d, r, c]))
+            if not last:
+                seen = nvw.max(axis=0) >= params.min_views
+            del score, nvw
+        d, z, ncc, nv = results[0]
         if not last:
             # keep only confident cells as the prior of the next level (or pass); the others take
             # the value of the nearest confident cell (ambiguous low-texture/low-base areas)
             good = seen & (nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation)
-            if narrow_final and n_pass == len(schedule) - 2:
-                # the wide-window surface the narrow last pass refines: it stands where that pass cannot judge
-                wide = (np.where(_kept(good, d, base, dz, K, zlo, zhi), z, np.nan), ncc, nv)
             zf = np.where(good, z, np.nan)
             if not np.isfinite(zf).any():
                 return TileResult(nan, nan.copy(), np.zeros((H, W), np.int16), len(idx))
@@ -336,12 +366,15 @@ def match_tile(views: ViewSet, cache: PyramidCache, xs: np.ndarray, ys: np.ndarr
         else:
             keep = _kept((nv >= params.min_views) & np.isfinite(ncc) & (ncc >= params.min_correlation),
                          d, base, dz, K, zlo, zhi)
-            if wide is not None:
-                # a 3 x 3 window fails the texture or correlation test more often than the wider one
-                # (fewer samples): there the previous pass's elevation is kept, not lost
-                back = ~keep & np.isfinite(wide[0])
-                z, ncc, nv = np.where(back, wide[0], z), np.where(back, wide[1], ncc), np.where(back, wide[2], nv)
-                keep |= back
+            if len(results) == 2:
+                # the narrow window's cell where it passes its own (higher) threshold; elsewhere the
+                # site window's cell of this same pass stands (9 samples fail the texture and
+                # correlation tests more often than 25)
+                dn, zn, nccn, nvn = results[1]
+                t = equal_significance_correlation(params.min_correlation, params.window_half_cells, halves[1])
+                narrow = _kept((nvn >= params.min_views) & np.isfinite(nccn) & (nccn >= t), dn, base, dz, K, zlo, zhi)
+                z, ncc, nv = np.where(narrow, zn, z), np.where(narrow, nccn, ncc), np.where(narrow, nvn, nv)
+                keep |= narrow
             z = np.where(keep, z, np.nan).astype(np.float32)
             log.debug("tile level %d: %d labels, %d views, %.0f%% kept", lev, K, len(idx), 100 * keep.mean())
             return TileResult(z, np.where(np.isfinite(ncc), ncc, np.nan).astype(np.float32), nv.astype(np.int16), len(idx))
