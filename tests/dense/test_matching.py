@@ -260,7 +260,7 @@ def test_a_narrower_final_window_resolves_narrow_trenches():
     out = {}
     for half in (2, 1):
         # min_correlation 0.3 as on the Kamech sites (narrow pass 0.52); with this file's 0.5 the
-        # narrow pass needs 0.87 and most floor cells keep the 5 x 5 value (0.38 vs 0.36 m)
+        # narrow pass needs 0.87 and most floor cells keep the 5 x 5 value (0.39 vs 0.36 m)
         p = MatchParams(**{**PARAMS.__dict__, "final_passes": 2, "final_window_half_cells": half,
                            "min_correlation": 0.3})
         out[half] = dense_surface(views, GRID, p, tile_cells=96, overlap_cells=16, arrays=imgs)
