@@ -43,6 +43,7 @@ from polygons_ensemble import ENSEMBLE_DIR, member_config  # noqa: E402
 
 from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
+from kitegully.polygons.evaluation import observable_region  # noqa: E402
 from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
 from kitegully.polygons.conditioning import barrier_mask  # noqa: E402
 from kitegully.polygons.dem_prep import min_z_resample  # noqa: E402
@@ -74,6 +75,8 @@ def diagnose(member: str, root: Path) -> list[dict]:
     h, w = lab.shape
     for k in surfaces:
         surfaces[k] = surfaces[k][:h, :w]
+    # the truth a survey can see (outside the reservoir), as the polygons_evaluate rule
+    region = observable_region(res.grid, Raster.read(truth / "landcover.tif"), pd.read_csv(truth / "landcover_classes.csv"))
     rows = []
     base = None
     for name, z in surfaces.items():
@@ -81,7 +84,7 @@ def diagnose(member: str, root: Path) -> list[dict]:
         _, sec, _ = measure_sections(lab, res.polygons[thr], zf, level, res.grid, p.section_spacing_m, p.reference, p.smooth_step_m,
                                      p.snakes_alpha, p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes,
                                      p.ground_segment_m)
-        ev = evaluate_against_truth(res.polygons[thr], sec, t_poly, t_cl, res.grid, evcfg, u_exp)
+        ev = evaluate_against_truth(res.polygons[thr], sec, t_poly, t_cl, res.grid, evcfg, u_exp, region=region)
         e = ev["errors"].set_index("quantity")
         per = ev["sections"]
         tot = float((sec["area_m2"] * sec["slab_m"]).sum())

@@ -41,7 +41,7 @@ from kitegully.config import load_yaml  # noqa: E402
 from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
 from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
-from kitegully.polygons.evaluation import regenerate_table1  # noqa: E402
+from kitegully.polygons.evaluation import observable_region, regenerate_table1  # noqa: E402
 
 BASE = REPO / "config" / "sites" / "kamech_twin.yaml"
 ENSEMBLE_DIR = REPO / "config" / "sites" / "ensemble"
@@ -77,14 +77,17 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif") -> dic
     t0 = time.perf_counter()
     res = measure_polygons(r.data, r.grid, PolygonParams.from_config(poly), dem_name=str(dsm))
     run_s = time.perf_counter() - t0
+    # the truth a survey can see: the grid's extent less the reservoir (as the polygons_evaluate rule)
+    region = observable_region(res.grid, Raster.read(truth / "landcover.tif"), pd.read_csv(truth / "landcover_classes.csv"))
     ev = evaluate_against_truth(res.polygons[poly["morphometry"]["threshold_m"]], res.sections, read_vector(truth / "gully_polygons.gpkg"),
                                 read_vector(truth / "gully_centrelines.gpkg"), res.grid,
-                                {k: v for k, v in poly["evaluation"].items() if k != "operators"}, cfg["twin"]["gullies"]["u_shape_exponent"])
+                                {k: v for k, v in poly["evaluation"].items() if k != "operators"}, cfg["twin"]["gullies"]["u_shape_exponent"],
+                                region=region)
     sc = ev["scores"].set_index("kind")
     e = ev["errors"].set_index("quantity")
     thr = poly["morphometry"]["threshold_m"]
     _, comp, _ = regenerate_table1(res.polygons, read_vector(truth / "gully_polygons.gpkg"), read_vector(truth / "gully_centrelines.gpkg"), res.grid,
-                                   poly["evaluation"]["operators"], cfg["seed"], cfg["twin"]["gullies"]["u_shape_exponent"], thr)
+                                   poly["evaluation"]["operators"], cfg["seed"], cfg["twin"]["gullies"]["u_shape_exponent"], thr, region=region)
     t1 = dict(zip(comp["statistic"].str.split(" ").str[0], comp["value"]))
     row.update({"A_in_U_pct": t1["auto_in_union_pct"], "I_covered_pct": t1["intersection_covered_pct"], "U_covered_pct": t1["union_covered_pct"],
                 "A_over_I": t1["auto_over_intersection"], "auto_over_manual_pct": t1["mean_auto_over_mean_manual_pct"]})
@@ -92,7 +95,10 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif") -> dic
             "precision_all": sc.loc["all", "precision"], "sections": int(len(res.sections)),
             "width_med_abs_m": e.loc["width (m)", "median_abs_error"], "depth_med_abs_m": e.loc["depth (m)", "median_abs_error"],
             "depth_med_m": e.loc["depth (m)", "median_error"], "area_med_abs_m2": e.loc["area (m2)", "median_abs_error"],
-            "volume_error_pct": e.loc["volume, all sections vs all true gullies (m3)", "error_pct"], "run_s": run_s}
+            "volume_error_pct": e.loc["volume, all sections vs all true gullies (m3)", "error_pct"],
+            "volume_error_incl_unobservable_pct": e.loc["volume, all sections vs all true gullies incl. not observable (m3)", "error_pct"],
+            "unobservable_volume_pct": 100 * e.loc["true volume not observable (under open water, beyond the DEM) (m3)", "true"]
+            / e.loc["volume, all sections vs all true gullies incl. not observable (m3)", "true"], "run_s": run_s}
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:

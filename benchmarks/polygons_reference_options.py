@@ -39,6 +39,7 @@ from polygons_ensemble import ENSEMBLE_DIR, member_config  # noqa: E402
 
 from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
+from kitegully.polygons.evaluation import observable_region  # noqa: E402
 from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
 from kitegully.polygons.dem_prep import min_z_resample  # noqa: E402
 from kitegully.polygons.morphometry import measure_sections  # noqa: E402
@@ -71,6 +72,8 @@ def score(member: str, root: Path, options: list[str], cache: Path | None) -> li
     h, w = res.dem.shape
     zt = np.asarray(zt)[:h, :w]
     surfaces = {"dsm": res.dem, "true_dtm": np.where(np.isfinite(zt), zt, res.dem)}
+    # the truth a survey can see (outside the reservoir), as the polygons_evaluate rule
+    region = observable_region(res.grid, Raster.read(truth / "landcover.tif"), pd.read_csv(truth / "landcover_classes.csv"))
     rows = []
     for opt in options:
         ref, fit, no_rim = (opt.split(":") + ["", ""])[:3]
@@ -78,7 +81,7 @@ def score(member: str, root: Path, options: list[str], cache: Path | None) -> li
             _, sec, _ = measure_sections(res.labels[thr], res.polygons[thr], z, res.level, res.grid, p.section_spacing_m, ref, p.smooth_step_m,
                                          p.snakes_alpha, p.snakes_beta, p.branches, res.rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m,
                                          bank_fit_m=float(fit or 0.0), no_rim=no_rim or "outline")
-            ev = evaluate_against_truth(res.polygons[thr], sec, t_poly, t_cl, res.grid, evcfg, u_exp)
+            ev = evaluate_against_truth(res.polygons[thr], sec, t_poly, t_cl, res.grid, evcfg, u_exp, region=region)
             e = ev["errors"].set_index("quantity")
             per = ev["sections"]
             sc = ev["scores"].set_index("kind")

@@ -8,8 +8,9 @@ import pandas as pd
 import pytest
 import shapely
 
-from kitegully.io.raster import GridSpec
-from kitegully.polygons.evaluation import polygon_scores, table1, EvaluationParams
+from kitegully.io.raster import GridSpec, Raster
+from kitegully.polygons.evaluation import (EvaluationParams, clip_truth, evaluate_against_truth, observable_region, polygon_scores,
+                                           regenerate_table1, table1)
 from kitegully.polygons.manual import OperatorParams, operator_outlines
 
 from .polygon_synthetic import CRS
@@ -58,3 +59,49 @@ def test_scores_per_gully():
     assert row["recall"] == pytest.approx(0.5)
     assert row["precision"] == pytest.approx(400 / 600)  # mapped cells beyond the 10 m zone do not count for the gully
     assert sc.set_index("kind").loc["all", "precision"] == pytest.approx(0.5)
+
+
+def test_truth_under_open_water_is_left_out_and_reported():
+    # one 4 m wide gully, 80 m long; its lower 30 m lie under a reservoir (class 8) that no survey sees through
+    grid = GridSpec(0.0, 100.0, 0.5, 200, 200, CRS)
+    truth = gpd.GeoDataFrame({"gully_id": [0], "kind": ["gully"], "area_m2": [320.0]}, geometry=[shapely.box(10, 48, 90, 52)], crs=CRS)
+    lines = gpd.GeoDataFrame({"gully_id": [0, 0], "kind": ["gully", "gully"], "shape": ["V", "V"], "width_m": [4.0, 4.0],
+                              "depth_m": [1.0, 1.0], "depth_max_m": [1.0, 1.0], "length_m": [40.0, 40.0]},
+                             geometry=[shapely.LineString([(10, 50), (50, 50)]), shapely.LineString([(50, 50), (90, 50)])], crs=CRS)
+    lc = np.full((grid.height, grid.width), 3, np.uint8)
+    lc[:, 120:] = 8  # x >= 60 m: water
+    classes = pd.DataFrame({"code": [3, 8], "name": ["grass", "water"]})
+    region = observable_region(grid, Raster(lc, grid), classes)
+    assert region.area == pytest.approx(60 * 100)
+    polys, cl = clip_truth(truth, lines, region)
+    assert polys["area_m2"].iloc[0] == pytest.approx(200.0) and cl["length_m"].sum() == pytest.approx(50.0)
+    # a map of exactly the visible reach, one section per 10 m of it (true V area 2 m2)
+    auto = gpd.GeoDataFrame(geometry=[shapely.box(10, 48, 60, 52)], crs=CRS)
+    sections = gpd.GeoDataFrame({"polygon_id": 1, "station_m": np.arange(5) * 10.0, "width_m": 4.0, "depth_m": 1.0, "area_m2": 2.0, "slab_m": 10.0},
+                                geometry=[shapely.LineString([(x, 46), (x, 54)]) for x in (15, 25, 35, 45, 55)], crs=CRS)
+    cfg = {"zone_m": 10.0, "wide_gully_m": 2.0, "match_distance_m": 2.0}
+    ev = evaluate_against_truth(auto, sections, truth, lines, grid, cfg, 2.0, region=region)
+    sc = ev["scores"].set_index("kind")
+    assert sc.loc["all", "iou"] == pytest.approx(1.0)
+    e = ev["errors"].set_index("quantity")
+    assert e.loc["volume, all sections vs all true gullies (m3)", "error_pct"] == pytest.approx(0.0)
+    assert e.loc["true volume not observable (under open water, beyond the DEM) (m3)", "true"] == pytest.approx(60.0)
+    assert e.loc["volume, all sections vs all true gullies incl. not observable (m3)", "error_pct"] == pytest.approx(-37.5)
+    assert ev["volumes"]["volume_not_observable_m3"].iloc[0] == pytest.approx(60.0)
+    # without the region the reach under water counts as missed
+    whole = evaluate_against_truth(auto, sections, truth, lines, grid, cfg, 2.0)
+    assert whole["scores"].set_index("kind").loc["all", "recall"] == pytest.approx(50 / 80)
+
+
+def test_operators_do_not_digitise_under_open_water():
+    grid = GridSpec(0.0, 100.0, 0.5, 200, 200, CRS)
+    truth = gpd.GeoDataFrame({"gully_id": [0], "kind": ["gully"], "area_m2": [800.0]}, geometry=[shapely.box(10, 40, 90, 50)], crs=CRS)
+    lines = gpd.GeoDataFrame({"gully_id": [0], "kind": ["gully"], "shape": ["V"], "width_m": [10.0], "depth_m": [1.0], "depth_max_m": [1.0],
+                              "length_m": [80.0]}, geometry=[shapely.LineString([(10, 45), (90, 45)])], crs=CRS)
+    region = shapely.box(0, 0, 60, 100)
+    auto = {0.5: gpd.GeoDataFrame(geometry=[shapely.box(10, 40, 60, 50)], crs=CRS)}
+    habits = {"count": 3, "min_visible_depth_m": [0.2, 0.5], "edge_bias_sd_m": 0.5, "edge_noise_sd_m": [0.2, 0.6],
+              "edge_noise_wavelength_m": 10.0, "generalisation_m": [0.25, 1.5]}
+    _, _, ops = regenerate_table1(auto, truth, lines, grid, habits, 1, 2.0, region=region)
+    assert len(ops) == 3 and all(g.area > 100.0 for g in ops.geometry)
+    assert all(g.intersection(shapely.box(62, 0, 100, 100)).area < 1.0 for g in ops.geometry)

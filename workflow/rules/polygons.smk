@@ -127,6 +127,9 @@ if "polygons" in config:
         # U profile exponent of the true gullies: the photographed twin's or the DEM twin's (issue 16)
         POLY_U_EXPONENT = config["twin"]["gullies"]["u_shape_exponent"] if "twin" in config else config["dem_twin"]["u_shape_exponent"]
         POLY_TRUTH = {"truth": result("twin", "truth/gully_polygons.gpkg"), "centrelines": result("twin", "truth/gully_centrelines.gpkg")}
+        if "twin" in config:
+            # the photographed twin's land cover: its reservoir hides the gully bed from any survey (observable_region)
+            POLY_TRUTH |= {"landcover": result("twin", "truth/landcover.tif"), "classes": result("twin", "truth/landcover_classes.csv")}
 
         # Evaluation rules: the only polygon rules that read truth/.
         rule polygons_table1:

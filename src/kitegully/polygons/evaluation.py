@@ -16,6 +16,7 @@ import pandas as pd
 import scipy.ndimage as ndi
 import shapely
 from rasterio import features
+from shapely.geometry import shape
 
 from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
@@ -226,16 +227,85 @@ def morphometry_errors(sections: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame
     return per, pd.DataFrame(summ), gv.reset_index()
 
 
+def observable_region(grid: GridSpec, landcover=None, classes: pd.DataFrame | None = None,
+                      unseen_classes: tuple[str, ...] = ("water",)) -> shapely.Geometry:
+    """The part of the stage grid where a survey sees the ground: the grid's extent less open water.
+
+    A photogrammetric (or laser) survey of the twin sees the reservoir's flat surface, not the
+    gully carved in its bed (the twin's true DSM is level there), so reaches under water are
+    outside what any DEM of the site can measure; so is truth beyond the DEM's extent. The
+    network reference drops its reaches under water in the same way (``twin.survey``).
+
+    Parameters
+    ----------
+    grid : GridSpec
+        The stage grid (its extent bounds the region).
+    landcover : Raster, optional
+        The twin's true land-cover raster (``truth/landcover.tif``); None = no classes unseen.
+    classes : DataFrame, optional
+        ``code, name`` of its classes (``truth/landcover_classes.csv``).
+    unseen_classes : tuple of str
+        Class names whose ground no survey sees.
+
+    Returns
+    -------
+    shapely geometry
+        The observable region (polygon or multipolygon).
+    """
+    region = shapely.box(*grid.bounds)
+    if landcover is None or classes is None:
+        return region
+    codes = classes.loc[classes["name"].isin(unseen_classes), "code"].to_numpy()
+    mask = np.isin(landcover.data, codes)
+    if not mask.any():
+        return region
+    unseen = shapely.union_all([shape(g) for g, _v in
+                                features.shapes(mask.astype(np.uint8), mask=mask, transform=landcover.grid.transform)])
+    return shapely.difference(region, unseen)
+
+
+def clip_truth(truth_polys: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame,
+               region: shapely.Geometry | None) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
+    """The true gullies and centreline reaches inside ``region`` (areas and lengths recomputed).
+
+    Parameters
+    ----------
+    truth_polys, centrelines : GeoDataFrame
+        The twin's true gully polygons (``area_m2``) and centreline reaches (``length_m``).
+    region : shapely geometry or None
+        :func:`observable_region`; None returns the inputs unchanged.
+
+    Returns
+    -------
+    polygons, centrelines : GeoDataFrame
+        Clipped copies without the parts (and rows) outside ``region``.
+    """
+    if region is None:
+        return truth_polys, centrelines
+    out = []
+    for df, measure in ((truth_polys, "area_m2"), (centrelines, "length_m")):
+        c = df.copy()
+        c["geometry"] = shapely.intersection(c.geometry.values, region)
+        c = c[~c.geometry.is_empty].copy()
+        c[measure] = c.geometry.area if measure == "area_m2" else c.geometry.length
+        out.append(c.reset_index(drop=True))
+    return out[0], out[1]
+
+
 def regenerate_table1(auto: Mapping[float, gpd.GeoDataFrame], truth_polys: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame,
                       grid: GridSpec, operators_cfg: Mapping[str, Any], seed: int, u_exponent: float,
-                      auto_threshold: float = 0.5) -> tuple[pd.DataFrame, pd.DataFrame, gpd.GeoDataFrame]:
+                      auto_threshold: float = 0.5, region: shapely.Geometry | None = None) -> tuple[pd.DataFrame, pd.DataFrame, gpd.GeoDataFrame]:
     """Simulate the manual operators on the true outlines and build paper Table 1.
+
+    ``region`` (:func:`observable_region`): the operators digitise only what the shaded DEM
+    shows, so outlines under open water or beyond the DEM are not drawn.
 
     Returns (Table 1 statistics beside the paper, t = ``auto_threshold`` comparison with
     the manual union and intersection, the operators' outlines with their habits).
     """
     from kitegully.polygons.manual import OperatorParams, operator_outlines
 
+    truth_polys, centrelines = clip_truth(truth_polys, centrelines, region)
     truth = truth_table(centrelines, truth_polys, u_exponent)
     ops = operator_outlines(truth_polys, dict(zip(truth["gully_id"], truth["max_depth_m"].fillna(0.0))),
                             OperatorParams.from_config(operators_cfg), seed)
@@ -244,15 +314,32 @@ def regenerate_table1(auto: Mapping[float, gpd.GeoDataFrame], truth_polys: gpd.G
 
 
 def evaluate_against_truth(auto: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, truth_polys: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame,
-                           grid: GridSpec, cfg: Mapping[str, Any], u_exponent: float) -> dict[str, pd.DataFrame]:
+                           grid: GridSpec, cfg: Mapping[str, Any], u_exponent: float,
+                           region: shapely.Geometry | None = None) -> dict[str, pd.DataFrame]:
     """Polygon scores and morphometry errors against the twin's true gullies.
+
+    With ``region`` (:func:`observable_region`) the truth is what a survey can see: the
+    gullies' parts under open water or beyond the DEM are left out of every score, and
+    the volume they hold is reported beside the totals (rows "true volume not observable"
+    and "volume, all sections vs all true gullies incl. not observable").
 
     Returns a dict of tables: ``scores`` (per gully, ``all``, ``wide``), ``errors``
     (median / P90 absolute errors, volume totals), ``sections`` (per cross-section) and
-    ``volumes`` (per gully).
+    ``volumes`` (per gully, with ``volume_not_observable_m3``).
     """
     params = EvaluationParams.from_config(cfg)
+    whole = truth_table(centrelines, truth_polys, u_exponent)
+    truth_polys, centrelines = clip_truth(truth_polys, centrelines, region)
     truth = truth_table(centrelines, truth_polys, u_exponent)
     scores = polygon_scores(auto, truth_polys, truth, grid, params)
     per, summ, vol = morphometry_errors(sections, centrelines, truth, u_exponent, params)
+    unseen = whole.set_index("gully_id")["volume_true_m3"].sub(truth.set_index("gully_id")["volume_true_m3"], fill_value=0.0)
+    vol["volume_not_observable_m3"] = vol["gully_id"].map(unseen).fillna(0.0).to_numpy()
+    total_whole = float(whole["volume_true_m3"].sum())
+    measured = float((sections["area_m2"] * sections["slab_m"]).sum()) if len(sections) else 0.0
+    summ.loc[len(summ)] = {"quantity": "true volume not observable (under open water, beyond the DEM) (m3)", "sections": 0,
+                           "true": total_whole - float(truth["volume_true_m3"].sum())}
+    summ.loc[len(summ)] = {"quantity": "volume, all sections vs all true gullies incl. not observable (m3)", "sections": len(sections),
+                           "measured": measured, "true": total_whole,
+                           "error_pct": 100 * (measured - total_whole) / total_whole if total_whole else np.nan}
     return {"scores": scores, "errors": summ, "sections": per, "volumes": vol}
