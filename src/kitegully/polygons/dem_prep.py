@@ -145,14 +145,73 @@ def fill_moving_planes(z: np.ndarray, cell: float, neighbours: int = 10, radius_
     return out, n
 
 
-def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, radius_m: float) -> tuple[np.ndarray, GridSpec, dict]:
+def open_water(valid: np.ndarray, cell: float, window_m: float, min_area_m2: float) -> np.ndarray:
+    """Open water on a photogrammetric DSM: large regions where most of the surface found no match.
+
+    Image matching fails on water (no texture of its own, glints that move between the
+    photographs), so a reservoir shows as nodata sprinkled with a few matched cells at the
+    water surface. A cell is *unmatched ground* when less than half of the cells in the
+    ``window_m`` square around it hold data; 8-connected regions of such cells of at least
+    ``min_area_m2`` are open water (smaller ones are matching gaps the moving planes fill).
+    Stated limit: along the shore, a band up to half a window wide sees land in half its
+    window and stays land (its water-surface matches are kept).
+
+    Parameters
+    ----------
+    valid : ndarray bool (H, W)
+        Cells of the input DSM with data.
+    cell : float
+        Its cell size (m).
+    window_m : float
+        Side of the square window (m).
+    min_area_m2 : float
+        Smallest region that is open water (m²).
+
+    Returns
+    -------
+    ndarray bool (H, W)
+        Open-water cells on the input grid. O(n): one box filter and one labelling.
+    """
+    size = max(1, int(round(window_m / cell)))
+    share = ndi.uniform_filter(np.asarray(valid, dtype=np.float32), size=size, mode="nearest")
+    sparse = share < 0.5
+    if not sparse.any():
+        return sparse
+    labels, _n = ndi.label(sparse, structure=np.ones((3, 3), dtype=bool))
+    area = np.bincount(labels.ravel()) * cell * cell
+    big = area >= min_area_m2
+    big[0] = False
+    return big[labels]
+
+
+def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, radius_m: float,
+                water_min_area_m2: float | None = None, water_window_m: float = 4.5) -> tuple[np.ndarray, GridSpec, dict]:
     """Minimum-z resampling to ``cell`` then moving-plane filling of the empty cells.
 
-    Returns the prepared DEM (float32, NaN where still empty), its grid and counts.
+    With ``water_min_area_m2`` the open water of the input (:func:`open_water`, in a
+    ``water_window_m`` window) is taken out first and stays empty: no surface, so no
+    breaklines or pools there, and the fill drains into it as into the DEM's edge.
+
+    Returns the prepared DEM (float32, NaN where still empty), its grid and counts
+    (``water_cells``: stage cells of open water).
     """
     if not np.isfinite(z).any():
         raise InputError("polygons: the input DEM is all nodata")
+    water = None
+    if water_min_area_m2:
+        water = open_water(np.isfinite(z), grid.cell, water_window_m, water_min_area_m2)
+        z = np.where(water, np.nan, z)
     zr, tgrid = min_z_resample(z, grid, cell)
     n_empty = int((~np.isfinite(zr)).sum())
     filled, n_filled = fill_moving_planes(zr, cell, neighbours, radius_m)
-    return filled, tgrid, {"empty_cells": n_empty, "filled_cells": n_filled}
+    n_water = 0
+    if water is not None and water.any():
+        # a stage cell is water where the input cell under its centre is
+        cx, cy = tgrid.cell_centres()
+        _r, c = grid.index(cx, np.full_like(cx, cy[0]))
+        r, _c = grid.index(np.full_like(cy, cx[0]), cy)
+        wt = water[np.ix_(np.clip(r, 0, grid.height - 1), np.clip(c, 0, grid.width - 1))]
+        filled[wt] = np.nan
+        n_water = int(wt.sum())
+        log.info("open water: %d stage cells (%.0f m2) left empty", n_water, n_water * cell * cell)
+    return filled, tgrid, {"empty_cells": n_empty, "filled_cells": n_filled, "water_cells": n_water}

@@ -38,6 +38,10 @@ class PolygonParams:
         Moving-plane fill: nearest valid cells per plane [P 10].
     gap_radius_m : float
         Moving-plane fill: search radius (m) [P 10 m].
+    water_min_area_m2 : float or None
+        Open water of the input DSM (:func:`kitegully.polygons.dem_prep.open_water`, in the
+        curvature window): regions at least this large where most cells found no match stay
+        empty [I]; None = off (a TLS or LiDAR DTM).
     window_cells : int
         Side of Wood's quadratic window (cells, odd) [P 9].
     curvature : str
@@ -138,6 +142,7 @@ class PolygonParams:
     cell_m: float = 0.5
     gap_neighbours: int = 10
     gap_radius_m: float = 10.0
+    water_min_area_m2: float | None = None
     window_cells: int = 9
     curvature: str = "maximum"
     curvature_threshold_per_m: float = 0.2
@@ -182,7 +187,7 @@ class PolygonParams:
         """Build from the ``polygons:`` section (nested keys as in ``polygons.schema.yaml``)."""
         cfg = config_section(cfg, "polygons", ["cell_m", "gap_fill", "breaklines", "thalweg", "transects", "conditioning", "morphometry"],
                              optional=["dem_file", "dem_nodata", "evaluation", "figure_max_px"])
-        g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"])
+        g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"], optional=["water_min_area_m2"])
         b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"],
                            optional=["ground_segment_m"])
         t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m", "mask_closing_cells",
@@ -193,7 +198,7 @@ class PolygonParams:
         m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"],
                            optional=["ground_segment_m", "bank_fit_m", "no_rim"])
         return cls(
-            cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"],
+            cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"], water_min_area_m2=g.get("water_min_area_m2"),
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
             breakline_min_length_m=b["min_length_m"], upper_edges_only=b["upper_edges_only"],
             edge_ground_m=float(b.get("ground_segment_m", 0.0)),
@@ -343,8 +348,8 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     t0 = time.perf_counter()
     if grid_in.cell > p.cell_m * (1 + 1e-9):
         raise InputError(f"{dem_name}: cell {grid_in.cell} m is coarser than polygons.cell_m {p.cell_m} m")
-    dem, grid, prep = prepare_dem(dem_in, grid_in, p.cell_m, p.gap_neighbours, p.gap_radius_m)
-    window_m = p.window_cells * grid.cell
+    window_m = p.window_cells * p.cell_m
+    dem, grid, prep = prepare_dem(dem_in, grid_in, p.cell_m, p.gap_neighbours, p.gap_radius_m, p.water_min_area_m2, window_m)
     if min(grid.width, grid.height) < 2 * p.window_cells:
         raise InputError(f"{dem_name}: the DEM at {grid.cell} m ({grid.height} x {grid.width} cells) is too small for the "
                          f"{p.window_cells} x {p.window_cells} curvature window ({window_m:.1f} m); it needs at least {2 * p.window_cells} cells a side")
