@@ -48,7 +48,7 @@ def test_params_from_site_file_and_bad_keys(cfg):
         StereoParams.from_config(bad)
     bad = copy.deepcopy(cfg)
     bad["calibration"]["stations"] = "many"
-    with pytest.raises(InputError, match="stereo.calibration.stations: must be 'paper' or 'paper\\+convergent'"):
+    with pytest.raises(InputError, match="stereo.calibration.stations: must be one of paper, paper\\+convergent, paper\\+convergent\\+corners"):
         StereoParams.from_config(bad)
 
 

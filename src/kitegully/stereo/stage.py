@@ -82,6 +82,10 @@ def _positive(where: str, **vals: float) -> None:
             raise InputError(f"{where}.{k}: must be positive, got {v}")
 
 
+#: Calibration image sets (``stereo.calibration.stations``).
+STATIONS = ("paper", "paper+convergent", "paper+convergent+corners")
+
+
 @dataclass(frozen=True)
 class StereoParams:
     """Parameters of the stereo stage (config section ``stereo``; keys as below, nested).
@@ -90,9 +94,14 @@ class StereoParams:
     ----------
     calibration.stations : str
         ``"paper"`` = the paper's 6 parallel images shifted over the field at H ≈ 3 m;
-        ``"paper+convergent"`` = those 6 plus ``n_convergent`` convergent, rolled images.
+        ``"paper+convergent"`` = those 6 plus ``n_convergent`` convergent, rolled images;
+        ``"paper+convergent+corners"`` = those 14 plus ``n_corner`` convergent images turned
+        so the field's centre is imaged ``corner_fraction`` of the way to a frame corner.
         [I] see :func:`kitegully.stereo.calibration.convergent_poses`: near-nadir images
-        cannot separate f from the camera distance against a 0.2 mm field error.
+        cannot separate f from the camera distance against a 0.2 mm field error, and K1 is
+        only told from K2 where targets reach the frame's corners.
+    calibration.n_corner, calibration.corner_fraction : int, float
+        The corner images (optional; default 8 and 0.5).
     calibration.weighted_control : bool
         Adjust the field coordinates as observations with σ = ``field_sigma_mm``
         (free network with weighted control) instead of holding them fixed.
@@ -197,7 +206,7 @@ class StereoParams:
     }
 
     #: optional keys (default: targets simulated)
-    OPTIONAL: ClassVar[dict] = {"calibration": ("targets", "target_diameter_mm", "image_noise_dn")}
+    OPTIONAL: ClassVar[dict] = {"calibration": ("targets", "target_diameter_mm", "image_noise_dn", "n_corner", "corner_fraction")}
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "StereoParams":
@@ -217,8 +226,10 @@ class StereoParams:
     def _validate(self) -> None:
         c = self.calibration
         if c:
-            if c["stations"] not in ("paper", "paper+convergent"):
-                raise InputError(f"stereo.calibration.stations: must be 'paper' or 'paper+convergent', got {c['stations']!r}")
+            if c["stations"] not in STATIONS:
+                raise InputError(f"stereo.calibration.stations: must be one of {', '.join(STATIONS)}, got {c['stations']!r}")
+            if not 0.0 <= float(c.get("corner_fraction", 0.5)) < 1.0:
+                raise InputError(f"stereo.calibration.corner_fraction: must be in [0, 1), got {c['corner_fraction']!r}")
             _positive("stereo.calibration", H_m=c["H_m"], target_sigma_px=c["target_sigma_px"], field_sigma_mm=c["field_sigma_mm"])
         if self.calibration_test:
             _floats(self.calibration_test["H_m"], "stereo.calibration_test.H_m")
@@ -638,8 +649,11 @@ def _calibrate(cams_true, params: StereoParams, seed: int, stations: str, weight
     rng = rng_for(seed, "stereo", "calibration")
     field = calibration_field()
     poses = calibration_poses(H_m=c["H_m"])
-    if stations == "paper+convergent":
+    if stations.startswith("paper+convergent"):
         poses = poses + convergent_poses(c["H_m"], c["convergent_offset_m"], int(c["n_convergent"]))
+    if stations == "paper+convergent+corners":
+        poses = poses + convergent_poses(c["H_m"], c["convergent_offset_m"], int(c.get("n_corner", 8)),
+                                         corner_fraction=float(c.get("corner_fraction", 0.5)))
     known = ControlField(field.ids, field.xyz + rng.normal(0.0, c["field_sigma_mm"] * 1e-3, field.xyz.shape))
     out = {}
     for side, cam in cams_true.items():
