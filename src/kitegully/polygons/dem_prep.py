@@ -192,8 +192,33 @@ def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, rad
     ``water_window_m`` window) is taken out first and stays empty: no surface, so no
     breaklines or pools there, and the fill drains into it as into the DEM's edge.
 
-    Returns the prepared DEM (float32, NaN where still empty), its grid and counts
-    (``water_cells``: stage cells of open water).
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Input DEM (m), NaN nodata.
+    grid : GridSpec
+        Its grid.
+    cell : float
+        The stage's cell (m), not finer than ``grid.cell``.
+    neighbours, radius_m : int, float
+        Moving planes: nearest valid cells per plane and search radius (m).
+    water_min_area_m2 : float, optional
+        Smallest open water (m²); None = no water test (a TLS or LiDAR DTM).
+    water_window_m : float
+        Window of the water test (m); the stage passes its curvature window.
+
+    Returns
+    -------
+    dem : ndarray float32
+        The prepared DEM, NaN where still empty (open water, cells beyond the planes' reach).
+    grid : GridSpec
+        The stage grid.
+    counts : dict
+        ``empty_cells``, ``filled_cells`` and ``water_cells`` (stage cells of open water).
+
+    Notes
+    -----
+    O(n) in the input cells plus the moving planes' O(m log n).
     """
     if not np.isfinite(z).any():
         raise InputError("polygons: the input DEM is all nodata")
@@ -208,9 +233,9 @@ def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, rad
     if water is not None and water.any():
         # a stage cell is water where the input cell under its centre is
         cx, cy = tgrid.cell_centres()
-        _r, c = grid.index(cx, np.full_like(cx, cy[0]))
-        r, _c = grid.index(np.full_like(cy, cx[0]), cy)
-        wt = water[np.ix_(np.clip(r, 0, grid.height - 1), np.clip(c, 0, grid.width - 1))]
+        rows = np.clip(grid.index(np.full_like(cy, grid.x0), cy)[0], 0, grid.height - 1)
+        cols = np.clip(grid.index(cx, np.full_like(cx, grid.y0))[1], 0, grid.width - 1)
+        wt = water[np.ix_(rows, cols)]
         filled[wt] = np.nan
         n_water = int(wt.sum())
         log.info("open water: %d stage cells (%.0f m2) left empty", n_water, n_water * cell * cell)
