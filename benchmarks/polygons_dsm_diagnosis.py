@@ -43,7 +43,7 @@ from polygons_ensemble import ENSEMBLE_DIR, member_config  # noqa: E402
 
 from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
-from kitegully.polygons.evaluation import observable_region  # noqa: E402
+from kitegully.polygons.evaluation import observable_region_from_files  # noqa: E402
 from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
 from kitegully.polygons.conditioning import barrier_mask  # noqa: E402
 from kitegully.polygons.dem_prep import min_z_resample  # noqa: E402
@@ -76,7 +76,7 @@ def diagnose(member: str, root: Path) -> list[dict]:
     for k in surfaces:
         surfaces[k] = surfaces[k][:h, :w]
     # the truth a survey can see (outside the reservoir), as the polygons_evaluate rule
-    region = observable_region(res.grid, Raster.read(truth / "landcover.tif"), pd.read_csv(truth / "landcover_classes.csv"))
+    region = observable_region_from_files(res.grid, truth / "landcover.tif", truth / "landcover_classes.csv")
     rows = []
     base = None
     for name, z in surfaces.items():

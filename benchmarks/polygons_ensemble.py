@@ -41,7 +41,7 @@ from kitegully.config import load_yaml  # noqa: E402
 from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
 from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
-from kitegully.polygons.evaluation import observable_region, regenerate_table1  # noqa: E402
+from kitegully.polygons.evaluation import observable_region_from_files, regenerate_table1  # noqa: E402
 
 BASE = REPO / "config" / "sites" / "kamech_twin.yaml"
 ENSEMBLE_DIR = REPO / "config" / "sites" / "ensemble"
@@ -78,7 +78,7 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif") -> dic
     res = measure_polygons(r.data, r.grid, PolygonParams.from_config(poly), dem_name=str(dsm))
     run_s = time.perf_counter() - t0
     # the truth a survey can see: the grid's extent less the reservoir (as the polygons_evaluate rule)
-    region = observable_region(res.grid, Raster.read(truth / "landcover.tif"), pd.read_csv(truth / "landcover_classes.csv"))
+    region = observable_region_from_files(res.grid, truth / "landcover.tif", truth / "landcover_classes.csv")
     ev = evaluate_against_truth(res.polygons[poly["morphometry"]["threshold_m"]], res.sections, read_vector(truth / "gully_polygons.gpkg"),
                                 read_vector(truth / "gully_centrelines.gpkg"), res.grid,
                                 {k: v for k, v in poly["evaluation"].items() if k != "operators"}, cfg["twin"]["gullies"]["u_shape_exponent"],

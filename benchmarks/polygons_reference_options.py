@@ -39,7 +39,7 @@ from polygons_ensemble import ENSEMBLE_DIR, member_config  # noqa: E402
 
 from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
-from kitegully.polygons.evaluation import observable_region  # noqa: E402
+from kitegully.polygons.evaluation import observable_region_from_files  # noqa: E402
 from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
 from kitegully.polygons.dem_prep import min_z_resample  # noqa: E402
 from kitegully.polygons.morphometry import measure_sections  # noqa: E402
@@ -73,7 +73,7 @@ def score(member: str, root: Path, options: list[str], cache: Path | None) -> li
     zt = np.asarray(zt)[:h, :w]
     surfaces = {"dsm": res.dem, "true_dtm": np.where(np.isfinite(zt), zt, res.dem)}
     # the truth a survey can see (outside the reservoir), as the polygons_evaluate rule
-    region = observable_region(res.grid, Raster.read(truth / "landcover.tif"), pd.read_csv(truth / "landcover_classes.csv"))
+    region = observable_region_from_files(res.grid, truth / "landcover.tif", truth / "landcover_classes.csv")
     rows = []
     for opt in options:
         ref, fit, no_rim = (opt.split(":") + ["", ""])[:3]

@@ -1,18 +1,15 @@
 """Rule polygons_evaluate (twin only, evaluation): polygon scores and morphometry errors against the true gullies."""
 
 from kitegully.io.raster import Raster
-import pandas as pd
-
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
 from kitegully.logs import setup_script_logging
-from kitegully.polygons.evaluation import evaluate_against_truth, observable_region
+from kitegully.polygons.evaluation import evaluate_against_truth, observable_region_from_files
 
 log = setup_script_logging(snakemake.log[0])
 inp, out = snakemake.input, snakemake.output
 dem = Raster.read(inp.dem)
-landcover = (Raster.read(inp.landcover), pd.read_csv(inp.classes)) if "landcover" in inp.keys() else (None, None)
-region = observable_region(dem.grid, *landcover)
+region = observable_region_from_files(dem.grid, inp.get("landcover"), inp.get("classes"))
 tabs = evaluate_against_truth(read_vector(inp.polygons), read_vector(inp.sections), read_vector(inp.truth, crs=dem.crs),
                               read_vector(inp.centrelines, crs=dem.crs), dem.grid, snakemake.params.cfg, snakemake.params.u_exponent,
                               region=region)

@@ -264,6 +264,18 @@ def observable_region(grid: GridSpec, landcover=None, classes: pd.DataFrame | No
     return shapely.difference(region, unseen)
 
 
+def observable_region_from_files(grid: GridSpec, landcover_path=None, classes_path=None) -> shapely.Geometry:
+    """:func:`observable_region` from a twin's ``truth/landcover.tif`` and ``truth/landcover_classes.csv``.
+
+    Without the files (a DEM twin has no land cover) the region is the grid's extent.
+    """
+    if landcover_path is None or classes_path is None:
+        return observable_region(grid)
+    from kitegully.io.raster import Raster
+
+    return observable_region(grid, Raster.read(landcover_path), pd.read_csv(classes_path))
+
+
 def clip_truth(truth_polys: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame,
                region: shapely.Geometry | None) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame]:
     """The true gullies and centreline reaches inside ``region`` (areas and lengths recomputed).
