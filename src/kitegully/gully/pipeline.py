@@ -17,7 +17,7 @@ from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden
 from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
                                    head_scale_relief, incision_map, surface_roughness, visible_incisions)
-from kitegully.gully.inlets import edge_inlets
+from kitegully.gully.inlets import edge_inlets, route_courses
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully import InputError
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
@@ -107,11 +107,12 @@ class GullyParams:
         ``gully.automatic_heads``.
     edge_inlets : bool
         Also trace from where a channel enters the DEM across its outer edge
-        (:mod:`kitegully.gully.inlets`; optional, off by default): a depth-patch channel two
-        cells inside the edge whose path stays in the patches until 2σ (``sigma_m``) from
-        the edge, at least half of the way incised at the head scale (needs
-        ``gully.automatic_heads``). Such a channel's head lies outside the survey, so nobody
-        can digitise it.
+        (:mod:`kitegully.gully.inlets`; optional, off by default): a depth patch crossing
+        the edge band (2σ, ``sigma_m``) whose path from the band's end stays in the patches
+        another 2σ inward, at least half of that way and of its course across the band
+        incised at the head scale (needs ``gully.automatic_heads``); paths follow that course
+        from two cells inside the edge. Such a channel's head lies outside the survey, so
+        nobody can digitise it.
     """
 
     sigma_m: float = 10.0
@@ -399,13 +400,15 @@ def map_gullies(
     if params.edge_inlets:
         t0 = time.perf_counter()
         # [I] 2σ: within it the depth map's Gaussian window is cut by the edge, so a patch there may be an edge effect
-        inlet_idx = edge_inlets(labels, depth, np.isfinite(filled), filled, dirs, grid.cell, 2.0 * params.sigma_m,
-                                incised=incised_at_head_scale)
+        inlet_idx, courses = edge_inlets(labels, depth, np.isfinite(filled), filled, dirs, grid.cell, 2.0 * params.sigma_m,
+                                         incised=incised_at_head_scale)
+        if courses:  # across the edge band the paths follow the inlets' courses, then the DEM
+            dirs = route_courses(d8_directions(filled) if dirs is None else dirs, courses)
         inside_idx = np.concatenate([inside_idx, inlet_idx])
         t["inlets_s"] = time.perf_counter() - t0
-        log.info("edge inlets: %d channels enter the DEM across its edge (paths in the depth patches >= %.3g m "
-                 "inside, half of it incised at the head scale), %.1f s", inlet_idx.size, 2.0 * params.sigma_m,
-                 t["inlets_s"])
+        log.info("edge inlets: %d channels enter the DEM across its edge (depth patches crossing the %.3g m edge band "
+                 "and %.3g m beyond, half of each incised at the head scale), %.1f s", inlet_idx.size, 2.0 * params.sigma_m,
+                 2.0 * params.sigma_m, t["inlets_s"])
     del incised_at_head_scale
 
     t0 = time.perf_counter()
