@@ -28,6 +28,7 @@ import copy
 import json
 import logging
 import os
+import shlex
 import subprocess
 import sys
 import time
@@ -79,10 +80,11 @@ def deep_merge(a: dict, b: dict) -> dict:
     return out
 
 
-def members(names: list[str] | None, base: Path) -> list[tuple[str, list[Path]]]:
-    """(name, override files) per member; ``default`` has none."""
-    found = {"default": []}
-    found.update({p.stem: [p] for p in sorted(ENSEMBLE_DIR.glob("*.yaml"))})
+def members(names: list[str] | None, base: Path, member_dir: Path = ENSEMBLE_DIR) -> list[tuple[str, list[Path]]]:
+    """(name, override files) per member; ``default`` has none and belongs to the ensemble's folder only
+    (``config/sites/holdout``: the held-out twins alone)."""
+    found = {"default": []} if member_dir == ENSEMBLE_DIR else {}
+    found.update({p.stem: [p] for p in sorted(member_dir.glob("*.yaml"))})
     if names:
         unknown = [n for n in names if n not in found]
         if unknown:
@@ -119,11 +121,18 @@ def targets_for(cfg: dict, results: Path) -> dict[str, Path]:
     return t
 
 
-def run_snakemake(configfiles: list[Path], targets: list[Path], cores: int, dry_run: bool, log_path: Path) -> float:
-    """Run (or dry-run) Snakemake for ``targets``; returns wall seconds. Raises on failure."""
+def run_snakemake(configfiles: list[Path], targets: list[Path], cores: int, dry_run: bool, log_path: Path,
+                  extra_args: str = "") -> float:
+    """Run (or dry-run) Snakemake for ``targets``; returns wall seconds. Raises on failure.
+
+    ``extra_args``: more Snakemake options, shell-quoted (e.g. ``--rerun-triggers mtime
+    --forcerun gully_map``: remake the gully rules after a change of library code, not the chain
+    whose recorded parameters differ).
+    """
     # targets first: --configfile takes every argument after it
     cmd = [sys.executable, "-m", "snakemake", *map(str, targets), "--cores", str(cores),
-           *(["-n"] if dry_run else []), "--configfile", *map(str, configfiles)]
+           *(["-n"] if dry_run else []), *shlex.split(extra_args),
+           "--configfile", *map(str, configfiles)]
     env = dict(os.environ, PYTHONPATH=str(REPO / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
     t0 = time.perf_counter()
     with open(log_path, "w") as fh:
@@ -315,6 +324,12 @@ def main() -> None:
                     help="with --regully: comma-separated head sources to map (digitised, automatic, both)")
     ap.add_argument("--set", action="append", default=[],
                     help="with --regully: gully key=value (yaml value) overrides of every member's config")
+    ap.add_argument("--snakemake-args", default="",
+                    help="more snakemake options, one quoted string, e.g. '--rerun-triggers mtime --forcerun gully_map' "
+                         "(remake the gully rules after a change of library code without remaking the chain)")
+    ap.add_argument("--member-dir", default=str(ENSEMBLE_DIR.relative_to(REPO)),
+                    help="folder of member override files (config/sites/holdout: the held-out twins, never used to "
+                         "write or choose a method; without the default member)")
     ap.add_argument("--results", default="results")
     ap.add_argument("--out", default=None, help="default results/ensemble (results/ensemble_tiny with --tiny)")
     a = ap.parse_args()
@@ -326,13 +341,14 @@ def main() -> None:
     results = Path(a.results)  # relative to REPO, like the rule outputs
     out = REPO / (a.out or ("results/ensemble_tiny" if a.tiny else "results/ensemble"))
     rows = []
-    for name, files in members(names, base):
+    for name, files in members(names, base, REPO / a.member_dir):
         cfg, cfiles = member_config(base, files, name, out / "configs")
         t = targets_for(cfg, results)
         wall = float("nan")
         if not a.collect_only:
             log.info("%s: snakemake %s (%s)", name, "dry-run" if a.dry_run else "run", cfg["site"]["name"])
-            wall = run_snakemake(cfiles, list(t.values()), a.cores, a.dry_run, out / "configs" / f"{name}_snakemake.log")
+            wall = run_snakemake(cfiles, list(t.values()), a.cores, a.dry_run, out / "configs" / f"{name}_snakemake.log",
+                                 a.snakemake_args)
             log.info("%s: snakemake done in %.0f s", name, wall)
         if a.dry_run:
             continue
@@ -345,7 +361,7 @@ def main() -> None:
         rows.append(row)
         log.info("%s: %s", name, {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()})
     if a.dry_run:
-        log.info("dry run done for %d member(s)", len(members(names, base)))
+        log.info("dry run done for %d member(s)", len(members(names, base, REPO / a.member_dir)))
         return
     note = (f"Base site file {base.relative_to(REPO)}; members {', '.join(r['member'] for r in rows)}. "
             "Gully scores: paper protocol (reference lines fed by heads on the DEM), tolerances 2/5/15 m, "
