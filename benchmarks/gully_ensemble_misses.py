@@ -35,7 +35,7 @@ sys.path.insert(0, str(REPO / "src"))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
 from gully_miss_analysis import analyse  # noqa: E402
-from twin_ensemble import BASE, deep_merge, members  # noqa: E402
+from twin_ensemble import BASE, ENSEMBLE_DIR, deep_merge, members  # noqa: E402
 
 from kitegully.io.tables import write_table  # noqa: E402
 
@@ -53,11 +53,11 @@ def member_cfg(files: list[Path]) -> dict:
     return cfg
 
 
-def run(results: Path, names: list[str] | None, heads: str, sets: dict, out: Path) -> pd.DataFrame:
+def run(results: Path, names: list[str] | None, heads: str, sets: dict, out: Path, member_dir: Path = ENSEMBLE_DIR) -> pd.DataFrame:
     """Analyse every member; write the tables; return the per-member table (% of reference)."""
     out.mkdir(parents=True, exist_ok=True)
     rows, kinds = [], []
-    for name, files in members(names, BASE):
+    for name, files in members(names, BASE, member_dir):
         cfg = member_cfg(files)
         cfg["gully"].update(sets)
         site = results / (cfg["site"]["name"] if name != "default" else cfg["site"]["name"])
@@ -112,6 +112,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--results", required=True, help="results folder holding the members' site folders (read only)")
     ap.add_argument("--members", default=None)
+    ap.add_argument("--member-dir", default=str(ENSEMBLE_DIR.relative_to(REPO)), help="folder of member override files (config/sites/holdout)")
     ap.add_argument("--heads", default="digitised", choices=["digitised", "automatic", "both"])
     ap.add_argument("--set", action="append", default=[], help="gully key=value (yaml value) overrides")
     ap.add_argument("--out", default="results/ensemble_misses")
@@ -121,7 +122,7 @@ def main() -> None:
     for kv in a.set:
         k, v = kv.split("=", 1)
         sets[k] = yaml.safe_load(v)
-    res = run(Path(a.results), a.members.split(",") if a.members else None, a.heads, sets, REPO / a.out)
+    res = run(Path(a.results), a.members.split(",") if a.members else None, a.heads, sets, REPO / a.out, REPO / a.member_dir)
     with pd.option_context("display.width", 250, "display.max_columns", 40):
         print(res.round(1).T.to_string())
 

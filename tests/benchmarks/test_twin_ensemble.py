@@ -29,6 +29,34 @@ def test_members_are_default_plus_five():
         te.members(["nope"], te.BASE)
 
 
+def test_held_out_twins_are_their_own_members_without_the_default():
+    found = te.members(None, te.BASE, REPO / "config" / "sites" / "holdout")
+    assert [n for n, _ in found] == ["h1", "h2"]
+    cfgs = [te.deep_merge(te.yaml.safe_load(te.BASE.read_text()), te.yaml.safe_load(f[0].read_text())) for _, f in found]
+    ens_seeds = {te.yaml.safe_load(f.read_text())["seed"] for _, files in te.members(None, te.BASE) for f in files}
+    assert {c["seed"] for c in cfgs}.isdisjoint(ens_seeds | {2018})  # new draws, not an ensemble member's
+    for c in cfgs:  # the snapping radius follows the claimed digitising error, as in the ensemble
+        assert c["gully"]["head_snap_radius_m"] == pytest.approx(3 * c["twin"]["survey"]["heads_sigma_m"])
+
+
+def test_extra_snakemake_arguments_reach_the_command(tmp_path, monkeypatch):
+    seen = {}
+
+    class Done:
+        returncode = 0
+
+    def fake_run(cmd, **_kw):
+        seen["cmd"] = cmd
+        return Done()
+
+    monkeypatch.setattr(te.subprocess, "run", fake_run)
+    te.run_snakemake([Path("a.yaml")], [Path("t")], 2, False, tmp_path / "log", "--rerun-triggers mtime --forcerun gully_map")
+    cmd = seen["cmd"]
+    i = cmd.index("--rerun-triggers")
+    assert cmd[i:i + 4] == ["--rerun-triggers", "mtime", "--forcerun", "gully_map"]
+    assert cmd.index("--configfile") > i + 3  # --configfile takes every argument after it: it stays last
+
+
 def test_worst_row_takes_the_bad_side_of_each_column():
     df = pd.DataFrame({"member": ["a", "b"], "dig_good_fit_5m_pct": [90.0, 80.0], "dig_false_positive_5m_pct": [5.0, 9.0],
                        "camera_rmse_m": [0.2, 0.3], "checkpoint_mean_m": [0.05, -0.1], "dsm_coverage_pct": [99.0, 95.0]})
