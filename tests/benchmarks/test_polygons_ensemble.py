@@ -20,6 +20,11 @@ def test_member_config_merges_the_override_on_the_default_site():
     assert e["seed"] != d["seed"]
 
 
+def test_a_held_out_twin_is_found_in_its_own_folder():
+    h = pe.member_config("h1")
+    assert h["site"]["name"] == "h1" and h["polygons"] == pe.member_config("default")["polygons"]
+
+
 def test_a_member_without_a_dsm_is_skipped(tmp_path):
     row = pe.score_member("ens2", tmp_path)
     assert row["status"].startswith("skipped: no ") and row["status"].endswith("ens2/dense/dsm.tif")
