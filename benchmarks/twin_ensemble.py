@@ -341,7 +341,8 @@ def main() -> None:
     results = Path(a.results)  # relative to REPO, like the rule outputs
     out = REPO / (a.out or ("results/ensemble_tiny" if a.tiny else "results/ensemble"))
     rows = []
-    for name, files in members(names, base, REPO / a.member_dir):
+    chosen = members(names, base, REPO / a.member_dir)
+    for name, files in chosen:
         cfg, cfiles = member_config(base, files, name, out / "configs")
         t = targets_for(cfg, results)
         wall = float("nan")
@@ -361,7 +362,7 @@ def main() -> None:
         rows.append(row)
         log.info("%s: %s", name, {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()})
     if a.dry_run:
-        log.info("dry run done for %d member(s)", len(members(names, base, REPO / a.member_dir)))
+        log.info("dry run done for %d member(s)", len(chosen))
         return
     note = (f"Base site file {base.relative_to(REPO)}; members {', '.join(r['member'] for r in rows)}. "
             "Gully scores: paper protocol (reference lines fed by heads on the DEM), tolerances 2/5/15 m, "

@@ -163,8 +163,7 @@ def edge_inlets(
     lab = runs.ravel()[acc]
     key = np.lexsort((-np.nan_to_num(depth.ravel()[acc], nan=-np.inf), lab))
     starts, courses, depths, done = [], [], [], set()
-    for i in acc[key]:
-        run = int(runs.ravel()[i])
+    for i, run in zip(acc[key], lab[key]):
         if run in done:
             continue
         course = band_course(int(i), plab, dist2d, edge_ring, reach_cells)

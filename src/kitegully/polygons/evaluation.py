@@ -348,7 +348,7 @@ def evaluate_against_truth(auto: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, t
     unseen = whole.set_index("gully_id")["volume_true_m3"].sub(truth.set_index("gully_id")["volume_true_m3"], fill_value=0.0)
     vol["volume_not_observable_m3"] = vol["gully_id"].map(unseen).fillna(0.0).to_numpy()
     total_whole = float(whole["volume_true_m3"].sum())
-    measured = float((sections["area_m2"] * sections["slab_m"]).sum()) if len(sections) else 0.0
+    measured = float(summ.loc[summ["quantity"] == "volume, all sections vs all true gullies (m3)", "measured"].iloc[0])
     summ.loc[len(summ)] = {"quantity": "true volume not observable (under open water, beyond the DEM) (m3)", "sections": 0,
                            "true": total_whole - float(truth["volume_true_m3"].sum())}
     summ.loc[len(summ)] = {"quantity": "volume, all sections vs all true gullies incl. not observable (m3)", "sections": len(sections),
