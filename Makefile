@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble holdout gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density bundle-speed dense-final-window
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble holdout ensemble-change holdout-change gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density bundle-speed dense-final-window
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -52,6 +52,18 @@ ensemble: $(STAMP)
 # written or chosen): results/holdout/summary.csv and summary.md (about 2 x 7 min on 2 idle cores).
 holdout: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) --member-dir config/sites/holdout --out results/holdout $(ENSEMBLE_ARGS)
+
+# Epoch 2 and the change stage (issue 17) on every ensemble / held-out twin, on top of the chain that
+# `make ensemble` / `make holdout` ran (epoch-1 products reused; about 4.5 min per twin on 2 idle
+# cores), then the headcut measurement on the photogrammetric DSMs, the true DSMs and the true DTMs
+# (evaluation only): results/ensemble_change/, results/holdout_change/, results/benchmarks/headcut_ceilings*/.
+ensemble-change: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) --change --out results/ensemble_change $(ENSEMBLE_ARGS)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/headcut_ceilings.py --members kamech_twin,ens1,ens2,ens3,ens4,ens5
+
+holdout-change: $(STAMP)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) --change --member-dir config/sites/holdout --out results/holdout_change $(ENSEMBLE_ARGS)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/headcut_ceilings.py --members h1,h2 --out results/benchmarks/headcut_ceilings_holdout
 
 # Where the gully network misses reference length and which automatic heads are false, on every
 # ensemble member's DSM that `make ensemble` has written (evaluation only, reads the twins' truth;

@@ -66,10 +66,30 @@ TARGETS = {
     "obia": "obia/kite/accuracy.csv",
 }
 
+#: With ``--change`` (issue 17): the epoch-2 chain and the change stage of the same member.
+CHANGE_TARGET = "change/evaluation_summary.csv"
+
+#: Rows of the change stage's evaluation summary collected per member (column name, quantity).
+CHANGE_ROWS = {
+    "change_net_error_pct": "site_net_error_pct",
+    "change_truth_within_1sd": "target: truth within stated 1 sd",
+    "change_false_detection_pct": "false detection rate on unchanged cells, 95 %",
+    "headcut_n_retreated": "headcut |error| n, heads that retreated, lip, stated",
+    "headcut_median_error_retreated_m": "headcut |error| median, heads that retreated, lip, stated",
+    "headcut_p90_error_retreated_m": "headcut |error| p90, heads that retreated, lip, stated",
+    "headcut_n_stable": "headcut |error| n, stable heads, lip, stated",
+    "headcut_median_error_stable_m": "headcut |error| median, stable heads, lip, stated",
+    "headcut_true_surfaces_median_error_retreated_m": "headcut |error| median, heads that retreated, lip, method on the true surfaces",
+    "moritani_mae_m": "moritani MAE",
+    "moritani_b": "moritani b",
+}
+
 #: Columns where larger is worse (the "worst" row takes the maximum); others take the minimum.
 WORSE_IF_LARGER = ("camera_rmse_m", "camera_max_m", "checkpoint_abs_mean_m", "checkpoint_sd_m", "gsd_median_m",
-                   "false_positive", "false_negative", "head_median_distance_m", "chain_wall_s", "time_s", "mapping_s")
-NOT_SCORED = ("member", "seed", "base", "description", "checkpoint_mean_m")
+                   "false_positive", "false_negative", "head_median_distance_m", "chain_wall_s", "time_s", "mapping_s",
+                   "error", "false_detection", "moritani_mae")
+NOT_SCORED = ("member", "seed", "base", "description", "checkpoint_mean_m", "change_net_error_pct", "headcut_n_retreated",
+              "headcut_n_stable")
 
 
 def deep_merge(a: dict, b: dict) -> dict:
@@ -112,10 +132,13 @@ def member_config(base: Path, files: list[Path], name: str, out: Path) -> tuple[
     return cfg, [base, *files, ov]
 
 
-def targets_for(cfg: dict, results: Path) -> dict[str, Path]:
-    """Scored products, relative to the repository (Snakemake matches rule outputs as written)."""
+def targets_for(cfg: dict, results: Path, change: bool = False) -> dict[str, Path]:
+    """Scored products, relative to the repository (Snakemake matches rule outputs as written);
+    ``change``: also the change stage's evaluation (epoch 2 through the whole chain)."""
     site = results / cfg["site"]["name"]
     t = {k: site / v for k, v in TARGETS.items()}
+    if change:
+        t["change"] = site / CHANGE_TARGET
     if not cfg.get("obia", {}).get("kite_scale", {}).get("enabled", False):
         t.pop("obia")
     return t
@@ -166,6 +189,12 @@ def collect(cfg: dict, t: dict[str, Path], results: Path, regully: bool = False,
     row["dsm_coverage_pct"] = _quantity(t["dense"], "coverage_of_seen_pct") if t["dense"].exists() else nan
     if "obia" in t and t["obia"].exists():
         row["kite_bare_soil_oa_pct"] = float(pd.read_csv(t["obia"])["overall_accuracy"].iloc[0])
+    if "change" in t and t["change"].exists():
+        df = pd.read_csv(t["change"])
+        for col, key in CHANGE_ROWS.items():
+            s = df.loc[df["quantity"] == key, "value"]
+            row[col] = float(s.iloc[0]) if len(s) else nan
+        row["change_abs_net_error_pct"] = abs(row["change_net_error_pct"])
     site = results / cfg["site"]["name"]
     row.update(score_heads_both(cfg, site, regully, sources))
     return row
@@ -269,9 +298,10 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
     num = [c for c in df.columns if c not in NOT_SCORED and pd.api.types.is_numeric_dtype(df[c])]
     mean = {c: df[c].mean() for c in num}
     worst = {c: (df[c].max() if any(w in c for w in WORSE_IF_LARGER) else df[c].min()) for c in num}
-    if "checkpoint_mean_m" in df.columns and df["checkpoint_mean_m"].notna().any():  # signed: worst = largest |bias|
-        mean["checkpoint_mean_m"] = df["checkpoint_mean_m"].mean()
-        worst["checkpoint_mean_m"] = df["checkpoint_mean_m"].loc[df["checkpoint_mean_m"].abs().idxmax()]
+    for signed in ("checkpoint_mean_m", "change_net_error_pct"):  # signed: worst = largest |bias|
+        if signed in df.columns and df[signed].notna().any():
+            mean[signed] = df[signed].mean()
+            worst[signed] = df[signed].loc[df[signed].abs().idxmax()]
     mean["member"], worst["member"] = "mean", "worst"
     return pd.concat([df, pd.DataFrame([mean, worst])], ignore_index=True)
 
@@ -286,6 +316,12 @@ MD_COLUMNS = [
     ("auto_n_heads", "automatic heads"),
     ("auto_head_precision", "auto head precision"), ("auto_head_recall", "auto head recall"),
     ("kite_bare_soil_oa_pct", "kite bare-soil OA (%)"),
+    ("change_net_error_pct", "change: net error (%)"), ("change_truth_within_1sd", "change: truth within 1 SD"),
+    ("change_false_detection_pct", "change: false detections (%)"),
+    ("headcut_median_error_retreated_m", "headcut |error| median, retreated (m)"), ("headcut_n_retreated", "retreated heads"),
+    ("headcut_median_error_stable_m", "headcut |error| median, stable (m)"),
+    ("headcut_true_surfaces_median_error_retreated_m", "headcut on true surfaces, retreated (m)"),
+    ("moritani_mae_m", "Moritani MAE (m)"), ("moritani_b", "Moritani b"),
 ]
 
 
@@ -330,6 +366,9 @@ def main() -> None:
     ap.add_argument("--member-dir", default=str(ENSEMBLE_DIR.relative_to(REPO)),
                     help="folder of member override files (config/sites/holdout: the held-out twins, never used to "
                          "write or choose a method; without the default member)")
+    ap.add_argument("--change", action="store_true",
+                    help="also run and score epoch 2 and the change stage (issue 17: net volume, false detections, "
+                         "headcut retreat per member)")
     ap.add_argument("--results", default="results")
     ap.add_argument("--out", default=None, help="default results/ensemble (results/ensemble_tiny with --tiny)")
     a = ap.parse_args()
@@ -344,7 +383,7 @@ def main() -> None:
     chosen = members(names, base, REPO / a.member_dir)
     for name, files in chosen:
         cfg, cfiles = member_config(base, files, name, out / "configs")
-        t = targets_for(cfg, results)
+        t = targets_for(cfg, results, a.change)
         wall = float("nan")
         if not a.collect_only:
             log.info("%s: snakemake %s (%s)", name, "dry-run" if a.dry_run else "run", cfg["site"]["name"])

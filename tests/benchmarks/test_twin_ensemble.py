@@ -69,6 +69,28 @@ def test_worst_row_takes_the_bad_side_of_each_column():
     assert s.loc["worst", "dsm_coverage_pct"] == 95.0
 
 
+def test_change_rows_are_collected_and_their_worst_is_the_bad_side(tmp_path):
+    cfg = te.yaml.safe_load(te.BASE.read_text())
+    t = te.targets_for(cfg, tmp_path, change=True)
+    assert t["change"] == tmp_path / cfg["site"]["name"] / te.CHANGE_TARGET
+    assert "change" not in te.targets_for(cfg, tmp_path)
+    t["change"].parent.mkdir(parents=True)
+    rows = [(key, float(i)) for i, key in enumerate(te.CHANGE_ROWS.values())]
+    pd.DataFrame(rows, columns=["quantity", "value"]).assign(unit="-").to_csv(t["change"], index=False)
+    got = te.collect(cfg, {"change": t["change"], **{k: tmp_path / "missing" for k in te.TARGETS}}, tmp_path / "none")
+    for i, col in enumerate(te.CHANGE_ROWS):
+        assert got[col] == float(i)
+    assert got["change_abs_net_error_pct"] == abs(got["change_net_error_pct"])
+    df = pd.DataFrame({"member": ["a", "b"], "change_net_error_pct": [4.0, -30.0], "change_false_detection_pct": [0.7, 3.2],
+                       "headcut_median_error_retreated_m": [0.6, 1.4], "moritani_b": [0.9, 0.8], "headcut_n_retreated": [8, 13]})
+    s = te.summarise(df).set_index("member")
+    assert s.loc["worst", "change_net_error_pct"] == -30.0  # signed: the largest |error|
+    assert s.loc["worst", "change_false_detection_pct"] == 3.2
+    assert s.loc["worst", "headcut_median_error_retreated_m"] == 1.4
+    assert s.loc["worst", "moritani_b"] == 0.8
+    assert pd.isna(s.loc["worst", "headcut_n_retreated"])  # counts are not scored
+
+
 def test_regully_scores_three_head_sources_on_a_member_dsm(tmp_path):
     """--regully maps a member's DSM again for digitised, automatic and both heads (constructed member)."""
     import geopandas as gpd
