@@ -42,6 +42,11 @@ def test_quality_and_widening_sections():
     bare = {k: v for k, v in CHANGE.items() if k not in ("quality", "widening")}
     q = ChangeParams.from_config(bare)  # both optional: the dataclass defaults
     assert q.min_correlation == 0.5 and q.void_margin_m == 0.0 and q.widening_margin_m == 3.0
+    assert q.checkpoint_outlier_nmad == 4.0 and q.heteroscedastic is False
+    assert p.heteroscedastic is True  # the DEM site: photogrammetric DSMs with checkpoints on open ground
+    off = copy.deepcopy(CHANGE)
+    off["quality"]["checkpoint_outlier_nmad"] = None
+    assert ChangeParams.from_config(off).checkpoint_outlier_nmad is None
     bad = copy.deepcopy(CHANGE)
     bad["quality"]["min_ncc"] = 0.3
     with pytest.raises(InputError, match=r"change.quality: unknown key 'min_ncc'"):

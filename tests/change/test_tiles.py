@@ -14,6 +14,7 @@ from __future__ import annotations
 import geopandas as gpd
 import numpy as np
 import pandas as pd
+import pytest
 import rasterio
 from shapely.geometry import LineString, Point, box
 
@@ -113,3 +114,25 @@ def test_tiled_change_equals_untiled(tmp_path):
     num = a.columns[2:]
     np.testing.assert_allclose(b[num].to_numpy(float), a[num].to_numpy(float), rtol=1e-12, atol=1e-12)
     assert s["net_m3"] == s_ref["net_m3"] or abs(s["net_m3"] - s_ref["net_m3"]) < 1e-9
+
+
+def test_terrain_dependent_sigma_runs_untiled_and_is_refused_in_tile_jobs(tmp_path):
+    """The heteroscedastic σ is not in the tile jobs yet: a tiled site that asks for it is told so in one sentence."""
+    import dataclasses
+
+    from kitegully import InputError
+
+    epochs, masks, heads, secs = _site(tmp_path)
+    het = dataclasses.replace(PARAMS, heteroscedastic=True)
+    ref = _outs(tmp_path / "untiled")
+    detect_change(epochs, masks, heads, het, ref, site_crs=CRS, sections_path=secs)
+    sig = pd.read_csv(ref["sigma"])
+    assert "DoD factor" in set(sig["epoch"])
+    with rasterio.open(ref["sigma_dod"]) as r:
+        assert "heteroscedastic" in r.tags()["definition"]
+    w = tmp_path / "tiles"
+    w.mkdir()
+    plan_change(epochs, w / "plan.json", CRS)
+    with pytest.raises(InputError, match="heteroscedastic.*tiling section"):
+        tiling = TilingParams(30.0, 70.0, 80.0)
+        stable_tile(epochs, masks, w / "plan.json", het, tiling, tiling.names()[0], w / "t.npz", CRS)

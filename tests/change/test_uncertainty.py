@@ -64,3 +64,26 @@ def test_sigma_from_checkpoints(tmp_path):
     assert info["n"] == 300 and info["mean_m"] == pytest.approx(0.02, abs=0.015)
     e2 = load_epoch({"name": "e2", "dem": dem, "accuracy": {"rmse_m": 0.1}}, "k")
     assert epoch_sigma(e2, g)[0] == 0.1
+
+
+def test_checkpoint_blunders_are_counted_not_averaged_into_sigma(tmp_path):
+    """Two gross matching errors (metres) among 300 checkpoints of 0.05 m noise: sigma stays the noise's SD."""
+    g = grid(100)
+    X, Y = xy(g)
+    z = terrain(X, Y)
+    rng = np.random.default_rng(5)
+    zd = z + rng.normal(0.0, 0.05, (g.height, g.width))
+    r, c = rng.integers(5, 95, 300), rng.integers(5, 95, 300)
+    zd[r[0], c[0]] -= 9.7  # a mismatch at one checkpoint, as on an ensemble twin's epoch 2
+    zd[r[1], c[1]] += 1.1
+    dem = write(tmp_path / "d.tif", zd, g)
+    pd.DataFrame(dict(id=range(300), x=X[r, c], y=Y[r, c], z=z[r, c])).to_csv(tmp_path / "cp.csv", index=False)
+    e = load_epoch({"name": "e1", "dem": dem, "accuracy": {"checkpoints": str(tmp_path / "cp.csv")}}, "k")
+    s, info = epoch_sigma(e, g)
+    assert s == pytest.approx(0.05, rel=0.15)
+    assert info["blunders"] == 2 and info["n"] == 298 and "2 blunders" in info["source"]
+    assert info["sd_all_m"] > 0.5
+    s_all, info_all = epoch_sigma(e, g, outlier_nmad=None)
+    assert s_all == pytest.approx(info["sd_all_m"]) and info_all["blunders"] == 0
+    with pytest.raises(Exception, match="checkpoint_outlier_nmad"):
+        ChangeParams(checkpoint_outlier_nmad=0.0)

@@ -114,6 +114,7 @@ if "change" in config:
             params:
                 epochs=CHANGE["epochs"],
                 crs=config["site"]["crs"],
+                methods=CHANGE_PARAMS_METHODS,
             log:
                 logfile("change", "plan"),
             benchmark:

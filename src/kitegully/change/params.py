@@ -130,6 +130,17 @@ class ChangeParams:
         correlation can pass while its elevation does not. [I] the dense matcher's window
         half-width (``dense.matching.window_half_cells`` × cell: 2 × 0.2 = 0.4 m on the
         twin); 0 = no margin.
+    heteroscedastic : bool
+        σ_DoD grows with the terrain: the propagated checkpoint σ times the ratio of the
+        DoD's NMAD in the cell's (slope, curvature) bin on unchanged ground to its NMAD over
+        all of it, at least 1 (:mod:`kitegully.change.error_model`, Hugonnet et al. 2022).
+        [I] on for the photogrammetric twins: their checkpoints lie on open level ground,
+        where the DoD is most precise. Untiled sites only (a tiled site raises).
+    checkpoint_outlier_nmad : float or None
+        An epoch whose accuracy is given by checkpoints: checkpoints farther than this many
+        NMADs from the median error are blunders, counted and left out of its σ
+        (:func:`kitegully.change.uncertainty.epoch_sigma`). [I] 4, as ``coreg_outlier_nmad``:
+        a normal error passes with probability 0.99994; None = the SD of all.
     seed : int
         Master seed (variogram sampling).
     """
@@ -168,6 +179,8 @@ class ChangeParams:
     widening_end_m: float = 1.0
     min_correlation: float | None = 0.5
     void_margin_m: float = 0.0
+    checkpoint_outlier_nmad: float | None = 4.0
+    heteroscedastic: bool = False
     seed: int = 0
 
     @classmethod
@@ -190,7 +203,7 @@ class ChangeParams:
         w = config_section(sec.get("widening") or {"margin_m": cls.widening_margin_m, "min_depth_m": cls.widening_min_depth_m,
                                                     "end_m": cls.widening_end_m}, "change.widening", ("margin_m", "min_depth_m", "end_m"))
         q = config_section(sec.get("quality") or {"min_correlation": cls.min_correlation, "void_margin_m": cls.void_margin_m},
-                           "change.quality", ("min_correlation", "void_margin_m"))
+                           "change.quality", ("min_correlation", "void_margin_m"), optional=("checkpoint_outlier_nmad", "heteroscedastic"))
         return cls(
             coreg_enabled=bool(c["enabled"]), coreg_max_iterations=int(c["max_iterations"]),
             coreg_tolerance_m=float(c["tolerance_m"]), coreg_tilt=bool(c["tilt"]),
@@ -213,7 +226,11 @@ class ChangeParams:
             headcut_profile_step_m=float(h.get("profile_step_m", cls.headcut_profile_step_m)),
             headcut_max_retreat_m=float(h.get("max_retreat_m", cls.headcut_max_retreat_m)),
             min_correlation=None if q["min_correlation"] is None else float(q["min_correlation"]),
-            void_margin_m=float(q["void_margin_m"]), widening_margin_m=float(w["margin_m"]),
+            void_margin_m=float(q["void_margin_m"]),
+            checkpoint_outlier_nmad=(None if q.get("checkpoint_outlier_nmad", cls.checkpoint_outlier_nmad) is None
+                                     else float(q.get("checkpoint_outlier_nmad", cls.checkpoint_outlier_nmad))),
+            heteroscedastic=bool(q.get("heteroscedastic", cls.heteroscedastic)),
+            widening_margin_m=float(w["margin_m"]),
             widening_min_depth_m=float(w["min_depth_m"]), widening_end_m=float(w["end_m"]), seed=int(seed),
         )
 
@@ -232,6 +249,8 @@ class ChangeParams:
                 and self.headcut_max_retreat_m > 0 and 0 < self.headcut_profile_step_m <= self.headcut_window_m / 2):
             raise InputError("change.headcuts: window_m, thalweg_halfwidth_m, axis_length_m and max_retreat_m must be > 0 m and "
                              "profile_step_m in (0, window_m / 2]")
+        if self.checkpoint_outlier_nmad is not None and not self.checkpoint_outlier_nmad > 0:
+            raise InputError(f"change.quality.checkpoint_outlier_nmad must be > 0 or null, got {self.checkpoint_outlier_nmad}")
         if self.void_margin_m < 0:
             raise InputError(f"change.quality.void_margin_m must be >= 0 m, got {self.void_margin_m}")
         if not 0.0 < self.coherence_p_low < self.coherence_p_high < 1.0:

@@ -17,6 +17,7 @@ from kitegully.change import budget as bg
 from kitegully.change import plots, uncertainty as unc
 from kitegully.change.coregister import above_ground, coregister, nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
+from kitegully.change.error_model import heteroscedastic_sigma
 from kitegully.change.headcuts import COLUMNS as HEADCUT_COLUMNS, measure_headcut_retreat
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
 from kitegully.change.widening import COLUMNS as WIDENING_COLUMNS, measure_widening
@@ -92,13 +93,19 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     n_void = int((voids & np.isfinite(dod)).sum())
     dod[voids] = np.nan
     stable &= np.isfinite(dod)
-    s1, i1 = unc.epoch_sigma(e1, grid)
-    s2, i2 = unc.epoch_sigma(e2, grid)
+    s1, i1 = unc.epoch_sigma(e1, grid, params.checkpoint_outlier_nmad)
+    s2, i2 = unc.epoch_sigma(e2, grid, params.checkpoint_outlier_nmad)
     sigma = unc.propagate(s1, s2, dod.shape)
+    sigma_rows = [i1, i2]
+    if params.heteroscedastic:
+        sigma, row = heteroscedastic_sigma(sigma, z1, dod, np.isfinite(z1) & ~unstable & ~voids, grid.cell,
+                                          params.headcut_window_m)
+        sigma_rows.append(row)
     detected = unc.detect(dod, sigma, params)
 
     Raster(dod, grid).write(out["dod"], tags={"units": "m", "definition": "DEM2 (co-registered) - DEM1"})
-    Raster(sigma, grid).write(out["sigma_dod"], tags={"units": "m", "definition": "sqrt(s1^2 + s2^2)"})
+    Raster(sigma, grid).write(out["sigma_dod"], tags={"units": "m", "definition": "sqrt(s1^2 + s2^2)" + (
+        " x heteroscedastic factor (slope, curvature)" if params.heteroscedastic else "")})
     Raster(stable.astype(np.uint8), grid, 255).write(out["stable"], tags={"definition": "1 = stable ground used for co-registration"})
     for m in THRESHOLD_METHODS:
         Raster(unc.thresholded(dod, detected[m]), grid).write(out[f"thresholded_{m}"], tags={"units": "m", "threshold": m})
@@ -106,7 +113,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     vg, coreg_sd = uncertainty_model(dod, sigma, stable, grid, params, out, attribution)
     coreg.offset_sd_m = coreg_sd
     budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
-    return write_products(budget, coreg, [i1, i2], sigma, n_void, grid, z1, z2, dod, stable, heads_path, sections_path,
+    return write_products(budget, coreg, sigma_rows, sigma, n_void, grid, z1, z2, dod, stable, heads_path, sections_path,
                           params, out, [g.name for g in groups if ":" not in g.name], figure, attribution, t0)
 
 

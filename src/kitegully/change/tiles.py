@@ -136,7 +136,8 @@ def _sigma_window(epoch: Epoch, value: float | None, grid: GridSpec, rs: slice, 
 # ----------------------------------------------------------------------------- rules
 
 
-def plan_change(epochs: Sequence[Mapping[str, Any]], out_json: str | Path, site_crs: str | None = None) -> dict[str, Any]:
+def plan_change(epochs: Sequence[Mapping[str, Any]], out_json: str | Path, site_crs: str | None = None,
+                checkpoint_outlier_nmad: float | None = 4.0) -> dict[str, Any]:
     """Rule ``change_plan``: the highest epoch-1 elevation and both epochs' σ (number or raster) with their sources.
 
     O(cells): both DEMs on the common grid once (as the untiled stage).
@@ -147,7 +148,7 @@ def plan_change(epochs: Sequence[Mapping[str, Any]], out_json: str | Path, site_
     plan: dict[str, Any] = {"z1_max": float(np.nanmax(z1)), "shape": [grid.height, grid.width], "sigma": [], "sigma_info": []}
     del z1
     for e in (e1, e2):
-        s, info = unc.epoch_sigma(e, grid)
+        s, info = unc.epoch_sigma(e, grid, checkpoint_outlier_nmad)
         plan["sigma"].append(float(s) if np.ndim(s) == 0 else None)
         plan["sigma_info"].append({k: (v.item() if isinstance(v, np.generic) else v) for k, v in info.items()})
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
@@ -178,6 +179,9 @@ def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
 
     Returns the tile's stable cells. O(window cells · object window).
     """
+    if params.heteroscedastic:
+        raise InputError("change.quality.heteroscedastic: the terrain-dependent sigma is not yet computed in tile jobs; "
+                         "set it to false for a site with a tiling section")
     plan = json.loads(Path(plan_json).read_text())
     e1, e2, grid, t, rs, cs, cr, cc, z1, z2, gw, voids = _tile_surfaces(epochs, site_crs, tiling, name, params, 0)
     groups = bg.mask_groups(masks, gw)
