@@ -85,19 +85,29 @@ class Coregistration:
         return asdict(self)
 
 
-def above_ground(z: np.ndarray, cell: float, window_m: float, height_m: float, fill: float | None = None) -> np.ndarray:
-    """Cells standing more than ``height_m`` above the grey opening (a ``window_m`` square) of the box-smoothed surface.
+def height_above_ground(z: np.ndarray, cell: float, window_m: float, fill: float | None = None) -> np.ndarray:
+    """Height (m) of each cell above the grey opening (a ``window_m`` square) of the box-smoothed surface.
 
-    Shrubs, trees and buildings: not stable ground (vegetation grows and moves, dense
-    matching smooths it), dilated by half a window to catch their edges. Nodata cells take ``fill`` (default the
-    highest elevation of ``z``; a tile of a larger grid passes the whole grid's). O(cells · window).
+    Objects narrower than the window (shrubs, trees, buildings) stand above it, the ground
+    does not. Nodata cells take ``fill`` for the filters (default the highest elevation of
+    ``z``; a tile of a larger grid passes the whole grid's). O(cells · window).
     """
     k = max(3, int(round(window_m / cell)) | 1)
     zf = np.where(np.isfinite(z), z, np.nanmax(z) if fill is None else fill)
     # a box mean over a third of the window first: the opening is a lower envelope, and of a
     # noisy surface it sits ~3 σ low (white noise of 0.05 m alone then "stands" 0.15 m high)
     zf = ndimage.uniform_filter(zf, max(3, (k // 3) | 1), mode="nearest")
-    h = zf - ndimage.grey_opening(zf, size=(k, k))
+    return zf - ndimage.grey_opening(zf, size=(k, k))
+
+
+def above_ground(z: np.ndarray, cell: float, window_m: float, height_m: float, fill: float | None = None) -> np.ndarray:
+    """Cells standing more than ``height_m`` above the ground (:func:`height_above_ground`), dilated by half a window.
+
+    Shrubs, trees and buildings: not stable ground (vegetation grows and moves, dense
+    matching smooths it); the dilation catches their edges. O(cells · window).
+    """
+    k = max(3, int(round(window_m / cell)) | 1)
+    h = height_above_ground(z, cell, window_m, fill)
     obj = np.isfinite(h) & (h > height_m)
     return ndimage.binary_dilation(obj, structure=np.ones((k // 2 | 1, k // 2 | 1), bool))
 

@@ -1,14 +1,19 @@
 """Heteroscedastic DoD error: how the spread of elevation differences grows with the terrain.
 
-A DSM from dense matching is least precise where the surface is steep or sharply curved:
-gully walls and rims, shrub and tree crowns, buildings (the matching window smooths them and
-the two epochs' views see them differently). The checkpoints that give each epoch's σ sit on
-open, nearly level ground, so a uniform σ from them under-states the DoD's noise there, and
-thresholds at 1.96 σ flag such unchanged cells as change. After Hugonnet et al. (2022; xDEM's
-``infer_heteroscedasticity_from_stable``) the DoD's spread is binned by slope and curvature on
+A DSM from dense matching is least precise where the surface is steep or sharply curved and
+where it is not the ground: gully walls and rims, shrub and tree crowns, buildings (the
+matching window smooths them, wind moves the crowns, and the two epochs' views see them
+differently). The checkpoints that give each epoch's σ sit on open, nearly level ground, so a
+uniform σ from them under-states the DoD's noise there, and thresholds at 1.96 σ flag such
+unchanged cells as change. After Hugonnet et al. (2022; xDEM's
+``infer_heteroscedasticity_from_stable``) the DoD's spread is binned by terrain predictors on
 ground that has not changed (outside every unstable mask; plants included, they are part of the
 noise), and each cell's σ_DoD is the propagated checkpoint σ times the ratio of its bin's NMAD to
-the NMAD of all those cells (at least 1: the checkpoints' σ is the floor, never lowered).
+the NMAD of the bins the checkpoints fall in, the terrain that σ was measured on (of all unchanged
+cells when no epoch has checkpoints; at least 1: the checkpoints' σ is the floor). The
+predictors are the epoch-1 DEM's slope and curvature (Hugonnet's) and its height above the
+ground surface (what stands on the ground: crowns, whose DSM error slope and curvature at the
+matching window's scale only partly show).
 """
 
 from __future__ import annotations
@@ -21,53 +26,69 @@ import numpy as np
 import pandas as pd
 from scipy import ndimage
 
+from kitegully.change.coregister import height_above_ground
+
 log = logging.getLogger(__name__)
 
+#: Predictor names, in the order of :func:`terrain_predictors`.
+PREDICTORS = ("slope_deg", "curvature_per_m", "height_above_ground_m")
 
-def terrain_predictors(z: np.ndarray, cell: float, window_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Slope (degrees) and |Laplacian curvature| (1/m) of ``z`` box-smoothed over ``window_m``.
 
-    The box is the DEM's horizontal resolution (the matching window): finer relief is noise.
-    NaN cells take the grid mean for the filters and stay NaN. O(cells).
+def terrain_predictors(z: np.ndarray, cell: float, window_m: float, object_window_m: float,
+                       fill: float | None = None) -> list[np.ndarray]:
+    """Slope (degrees), |Laplacian curvature| (1/m) and height above the ground (m) of ``z``.
+
+    Slope and curvature are read on ``z`` box-smoothed over ``window_m`` (the DEM's horizontal
+    resolution, the matching window: finer relief is noise); the height above the ground is
+    :func:`kitegully.change.coregister.height_above_ground` over ``object_window_m`` (the
+    change stage's object filter window). NaN cells take ``fill`` (default the highest
+    elevation) for the filters and stay NaN. O(cells · object window).
     """
     ok = np.isfinite(z)
-    zf = np.where(ok, z, np.nanmean(z) if ok.any() else 0.0).astype(np.float64)
+    zf = np.where(ok, z, (np.nanmax(z) if ok.any() else 0.0) if fill is None else fill).astype(np.float64)
     k = max(1, int(round(window_m / cell)))
-    if k > 1:
-        zf = ndimage.uniform_filter(zf, k, mode="nearest")
-    gy, gx = np.gradient(zf, cell)
+    zs = ndimage.uniform_filter(zf, k, mode="nearest") if k > 1 else zf
+    gy, gx = np.gradient(zs, cell)
     slope = np.degrees(np.arctan(np.hypot(gx, gy)))
-    curv = np.abs(ndimage.laplace(zf, mode="nearest")) / (cell * cell)
-    slope[~ok], curv[~ok] = np.nan, np.nan
-    return slope.astype(np.float32), curv.astype(np.float32)
+    curv = np.abs(ndimage.laplace(zs, mode="nearest")) / (cell * cell)
+    height = height_above_ground(zf, cell, object_window_m)
+    out = []
+    for v in (slope, curv, height):
+        v = v.astype(np.float32)
+        v[~ok] = np.nan
+        out.append(v)
+    return out
 
 
 @dataclass
 class ErrorModel:
-    """NMAD of the DoD per (slope, curvature) bin on unchanged ground and the factor it gives each cell."""
+    """NMAD of the DoD per bin of the predictors on unchanged ground and the factor it gives each cell."""
 
-    slope_edges: np.ndarray
-    curvature_edges: np.ndarray
-    nmad: np.ndarray  # (slope bins, curvature bins), empty bins filled
+    edges: list[np.ndarray]
+    nmad: np.ndarray  # one axis per predictor, empty bins filled
     count: np.ndarray
     reference_nmad: float
 
-    def factor(self, slope: np.ndarray, curvature: np.ndarray) -> np.ndarray:
-        """σ multiplier per cell, ≥ 1 (NaN predictors: 1)."""
-        i = np.clip(np.searchsorted(self.slope_edges, np.nan_to_num(slope), side="right") - 1, 0, self.nmad.shape[0] - 1)
-        j = np.clip(np.searchsorted(self.curvature_edges, np.nan_to_num(curvature), side="right") - 1, 0, self.nmad.shape[1] - 1)
-        f = np.maximum(1.0, self.nmad[i, j] / self.reference_nmad)
-        return np.where(np.isfinite(slope) & np.isfinite(curvature), f, 1.0).astype(np.float32)
+    def _index(self, predictors: list[np.ndarray]) -> tuple[np.ndarray, ...]:
+        return tuple(np.clip(np.searchsorted(e, np.nan_to_num(v), side="right") - 1, 0, n - 1)
+                     for e, v, n in zip(self.edges, predictors, self.nmad.shape))
 
-    def table(self) -> pd.DataFrame:
-        """One row per bin: slope and curvature ranges, cells, NMAD (m), factor."""
+    def factor(self, predictors: list[np.ndarray]) -> np.ndarray:
+        """σ multiplier per cell, ≥ 1 (a cell with any NaN predictor: 1)."""
+        f = np.maximum(1.0, self.nmad[self._index(predictors)] / self.reference_nmad)
+        ok = np.logical_and.reduce([np.isfinite(v) for v in predictors])
+        return np.where(ok, f, 1.0).astype(np.float32)
+
+    def table(self, names: tuple[str, ...] = PREDICTORS) -> pd.DataFrame:
+        """One row per bin: each predictor's range, cells, NMAD (m), factor."""
         rows = []
-        for i in range(self.nmad.shape[0]):
-            for j in range(self.nmad.shape[1]):
-                rows.append(dict(slope_min_deg=self.slope_edges[i], slope_max_deg=self.slope_edges[i + 1],
-                                 curvature_min=self.curvature_edges[j], curvature_max=self.curvature_edges[j + 1],
-                                 cells=int(self.count[i, j]), nmad_m=float(self.nmad[i, j]),
-                                 factor=float(max(1.0, self.nmad[i, j] / self.reference_nmad))))
+        for idx in np.ndindex(*self.nmad.shape):
+            row: dict[str, Any] = {}
+            for name, e, i in zip(names, self.edges, idx):
+                row[f"{name}_min"], row[f"{name}_max"] = float(e[i]), float(e[i + 1])
+            row.update(cells=int(self.count[idx]), nmad_m=float(self.nmad[idx]),
+                       factor=float(max(1.0, self.nmad[idx] / self.reference_nmad)))
+            rows.append(row)
         return pd.DataFrame(rows)
 
 
@@ -75,20 +96,21 @@ def _nmad(v: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(v - np.median(v))))
 
 
-def fit_error_model(dod: np.ndarray, slope: np.ndarray, curvature: np.ndarray, unchanged: np.ndarray,
+def fit_error_model(dod: np.ndarray, predictors: list[np.ndarray], unchanged: np.ndarray,
                     bins: int = 10, min_cells: int = 100) -> ErrorModel | None:
-    """Bin the DoD's NMAD by slope and curvature quantiles over the ``unchanged`` cells.
+    """Bin the DoD's NMAD by quantiles of each predictor over the ``unchanged`` cells.
 
     Parameters
     ----------
-    dod : ndarray (H, W)
+    dod : ndarray
         DEM₂ − DEM₁ after co-registration (NaN voids).
-    slope, curvature : ndarray (H, W)
-        :func:`terrain_predictors` of DEM₁.
-    unchanged : ndarray (H, W) bool
+    predictors : list of ndarray
+        Arrays of ``dod``'s shape (:func:`terrain_predictors`).
+    unchanged : ndarray bool
         Cells assumed unchanged: outside every unstable mask, not voids (plants kept).
     bins : int
-        Quantile bins per predictor ([I] 10: 100 bins, each ≥ ``min_cells``).
+        Quantile bins per predictor ([I] 10; repeated edges are merged, so a predictor that
+        is 0 on most cells, such as the height above the ground, gets fewer).
     min_cells : int
         A bin with fewer cells takes the NMAD of the nearest filled bin (in bin indices;
         [I] 100: the NMAD's relative standard error is about 1.1 / √n = 11 %).
@@ -96,47 +118,54 @@ def fit_error_model(dod: np.ndarray, slope: np.ndarray, curvature: np.ndarray, u
     Returns
     -------
     ErrorModel or None
-        None when fewer than ``bins² · min_cells`` cells are unchanged or their NMAD is 0.
+        None when fewer than ``min_cells`` cells per bin of a full grid of bins are
+        unchanged, or their NMAD is 0.
 
     Notes
     -----
-    O(n log n) for the quantiles and one sort per bin over the n unchanged cells.
+    O(n log n) for the quantiles and the sort over the n unchanged cells.
     """
-    ok = unchanged & np.isfinite(dod) & np.isfinite(slope) & np.isfinite(curvature)
+    ok = unchanged & np.isfinite(dod)
+    for v in predictors:
+        ok &= np.isfinite(v)
     n = int(ok.sum())
-    if n < bins * bins * min_cells:
-        log.warning("error model: %d unchanged cells, fewer than %d: uniform sigma", n, bins * bins * min_cells)
+    need = bins ** len(predictors) * min_cells
+    if n < need:
+        log.warning("error model: %d unchanged cells, fewer than %d: uniform sigma", n, need)
         return None
-    d, s, c = dod[ok].astype(np.float64), slope[ok].astype(np.float64), curvature[ok].astype(np.float64)
+    d = dod[ok].astype(np.float64)
     ref = _nmad(d)
     if ref <= 0:
         return None
-    q = np.linspace(0.0, 1.0, bins + 1)
-    # quantile edges, repeated ones merged (a level plain has one slope): at most ``bins`` per predictor
-    se, ce = (np.unique(np.concatenate([[-np.inf], np.quantile(v, q)[1:-1], [np.inf]])) for v in (s, c))
-    ns, nc = se.size - 1, ce.size - 1
-    i = np.clip(np.searchsorted(se, s, side="right") - 1, 0, ns - 1)
-    j = np.clip(np.searchsorted(ce, c, side="right") - 1, 0, nc - 1)
-    flat = i * nc + j
+    q = np.linspace(0.0, 1.0, bins + 1)[1:-1]
+    edges, index = [], []
+    for v in predictors:
+        x = v[ok].astype(np.float64)
+        # quantile edges, repeated ones merged (a level plain has one slope): at most ``bins`` per predictor
+        e = np.unique(np.concatenate([[-np.inf], np.quantile(x, q), [np.inf]]))
+        edges.append(e)
+        index.append(np.clip(np.searchsorted(e, x, side="right") - 1, 0, e.size - 2))
+    shape = tuple(e.size - 1 for e in edges)
+    flat = np.ravel_multi_index(tuple(index), shape)
     order = np.argsort(flat, kind="stable")
-    counts = np.bincount(flat, minlength=ns * nc)
+    counts = np.bincount(flat, minlength=int(np.prod(shape)))
     starts = np.concatenate([[0], np.cumsum(counts)])
-    nm = np.full(ns * nc, np.nan)
-    for k in range(ns * nc):
-        if counts[k] >= min_cells:
-            nm[k] = _nmad(d[order[starts[k]:starts[k + 1]]])
-    nm = nm.reshape(ns, nc)
+    nm = np.full(counts.size, np.nan)
+    for k in np.flatnonzero(counts >= min_cells):
+        nm[k] = _nmad(d[order[starts[k]:starts[k + 1]]])
+    nm = nm.reshape(shape)
     filled = np.isfinite(nm)
     if not filled.all():
         idx = ndimage.distance_transform_edt(~filled, return_distances=False, return_indices=True)
         nm = nm[tuple(idx)]
-    log.info("error model: %d unchanged cells, NMAD %.3f m overall, %.3f-%.3f m per bin (%d of %d bins filled)",
-             n, ref, float(np.nanmin(nm)), float(np.nanmax(nm)), int(filled.sum()), ns * nc)
-    return ErrorModel(se, ce, nm, counts.reshape(ns, nc), ref)
+    log.info("error model: %d unchanged cells, NMAD %.3f m overall, %.3f-%.3f m per bin (%d of %d bins filled, shape %s)",
+             n, ref, float(np.min(nm)), float(np.max(nm)), int(filled.sum()), filled.size, shape)
+    return ErrorModel(edges, nm, counts.reshape(shape), ref)
 
 
 def heteroscedastic_sigma(sigma: np.ndarray, z1: np.ndarray, dod: np.ndarray, unchanged: np.ndarray, cell: float,
-                          window_m: float) -> tuple[np.ndarray, dict[str, Any]]:
+                          window_m: float, object_window_m: float,
+                          reference_cells: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """σ_DoD times the terrain factor of the error model fitted on ``unchanged`` cells.
 
     Parameters
@@ -154,6 +183,12 @@ def heteroscedastic_sigma(sigma: np.ndarray, z1: np.ndarray, dod: np.ndarray, un
     window_m : float
         The DEM's horizontal resolution (m; the matching window), at which slope and
         curvature are read.
+    object_window_m : float
+        The object filter's window (m) of the height above the ground.
+    reference_cells : (rows, cols) or None
+        The checkpoints' cells: ``sigma`` states the DEMs' error there, so the factor is each
+        bin's NMAD over the median NMAD of the checkpoints' bins (their terrain). None or no
+        checkpoint on the grid: over the NMAD of all unchanged cells.
 
     Returns
     -------
@@ -165,19 +200,30 @@ def heteroscedastic_sigma(sigma: np.ndarray, z1: np.ndarray, dod: np.ndarray, un
 
     Notes
     -----
-    O(n log n) over the n grid cells; two float32 predictor grids beside the inputs.
+    O(n log n) over the n grid cells; three float32 predictor grids beside the inputs.
     """
-    slope, curv = terrain_predictors(z1, cell, window_m)
-    model = fit_error_model(dod, slope, curv, unchanged)
+    preds = terrain_predictors(z1, cell, window_m, object_window_m)
+    model = fit_error_model(dod, preds, unchanged)
     if model is None:
         return sigma, {"epoch": "DoD factor", "source": "heteroscedastic: too few unchanged cells, uniform", "sigma_m": np.nan}
-    f = model.factor(slope, curv)
-    del slope, curv
+    if reference_cells is not None:
+        r, c = reference_cells
+        inside = (r >= 0) & (r < z1.shape[0]) & (c >= 0) & (c < z1.shape[1])
+        r, c = r[inside], c[inside]
+        at = [v[r, c] for v in preds]
+        ok_at = np.logical_and.reduce([np.isfinite(v) for v in at]) if r.size else np.zeros(0, bool)
+        if ok_at.any():
+            ref = float(np.median(model.nmad[model._index([v[ok_at] for v in at])]))
+            log.info("error model: the %d checkpoints' bins have a median NMAD of %.3f m (all unchanged cells %.3f m)",
+                     int(ok_at.sum()), ref, model.reference_nmad)
+            model.reference_nmad = ref
+    f = model.factor(preds)
+    del preds
     ok = np.isfinite(dod)
     med, p90, top = (float(v) for v in np.percentile(f[ok], [50, 90, 100])) if ok.any() else (1.0, 1.0, 1.0)
     log.info("heteroscedastic sigma: factor median %.2f, p90 %.2f, max %.2f (DoD NMAD on unchanged ground %.3f m)",
              med, p90, top, model.reference_nmad)
     return (sigma * f).astype(np.float32), {
         "epoch": "DoD factor", "sigma_m": np.nan,
-        "source": f"heteroscedastic: x NMAD(slope, curvature bin) / {model.reference_nmad:.3f} m, at least 1; "
-                  f"median {med:.2f}, p90 {p90:.2f}, max {top:.2f}"}
+        "source": f"heteroscedastic: x NMAD(slope, curvature, height-above-ground bin) / {model.reference_nmad:.3f} m, "
+                  f"at least 1; median {med:.2f}, p90 {p90:.2f}, max {top:.2f}"}

@@ -132,8 +132,9 @@ class ChangeParams:
         twin); 0 = no margin.
     heteroscedastic : bool
         σ_DoD grows with the terrain: the propagated checkpoint σ times the ratio of the
-        DoD's NMAD in the cell's (slope, curvature) bin on unchanged ground to its NMAD over
-        all of it, at least 1 (:mod:`kitegully.change.error_model`, Hugonnet et al. 2022).
+        DoD's NMAD in the cell's (slope, curvature, height above the ground) bin on unchanged
+        ground to the NMAD of the checkpoints' bins (of all unchanged cells when no epoch has
+        checkpoints), at least 1 (:mod:`kitegully.change.error_model`, Hugonnet et al. 2022).
         [I] on for the photogrammetric twins: their checkpoints lie on open level ground,
         where the DoD is most precise. Untiled sites only (a tiled site raises).
     checkpoint_outlier_nmad : float or None

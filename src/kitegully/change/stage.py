@@ -99,7 +99,8 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     sigma_rows = [i1, i2]
     if params.heteroscedastic:
         sigma, row = heteroscedastic_sigma(sigma, z1, dod, np.isfinite(z1) & ~unstable & ~voids, grid.cell,
-                                          params.headcut_window_m)
+                                          params.headcut_window_m, params.stable_object_window_m,
+                                          checkpoint_cells((e1, e2), grid))
         sigma_rows.append(row)
     detected = unc.detect(dod, sigma, params)
 
@@ -115,6 +116,19 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
     return write_products(budget, coreg, sigma_rows, sigma, n_void, grid, z1, z2, dod, stable, heads_path, sections_path,
                           params, out, [g.name for g in groups if ":" not in g.name], figure, attribution, t0)
+
+
+def checkpoint_cells(epochs: Sequence[Any], grid) -> tuple[np.ndarray, np.ndarray] | None:
+    """Grid (row, col) of the checkpoints of every epoch whose accuracy is given by checkpoints; None if none is."""
+    rows, cols = [], []
+    for e in epochs:
+        path = e.accuracy.get("checkpoints")
+        if path:
+            cp = pd.read_csv(path)
+            r, c = grid.rowcol(cp["x"].to_numpy(float), cp["y"].to_numpy(float))
+            rows.append(np.round(np.asarray(r)).astype(np.int64))
+            cols.append(np.round(np.asarray(c)).astype(np.int64))
+    return (np.concatenate(rows), np.concatenate(cols)) if rows else None
 
 
 def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, grid, params: ChangeParams,
