@@ -20,6 +20,17 @@ def _shrubs(z, cell):
     return z + 0.8 * clump, clump
 
 
+def _wall_and_shrubs(seed):
+    """The hill with shrub clumps, its predictors, and a DoD whose noise is 0.05 m on the plain,
+    0.12 m on the clumps and 0.15 m on the wall; returns (z, cell, predictors, dod, plain, wall, clump)."""
+    z, cell = _hill()
+    z, clump = _shrubs(z, cell)
+    preds = terrain_predictors(z, cell, 1.0, 3.0)
+    slope = preds[0]
+    dod = np.random.default_rng(seed).normal(0.0, np.where(slope > 15, 0.15, np.where(clump, 0.12, 0.05)))
+    return z, cell, preds, dod, (slope < 1) & ~clump, (slope > 29) & (slope < 31), clump
+
+
 def test_predictors_read_slope_curvature_and_what_stands_on_the_ground():
     z, cell = _hill()
     z, clump = _shrubs(z, cell)
@@ -32,17 +43,9 @@ def test_predictors_read_slope_curvature_and_what_stands_on_the_ground():
 
 
 def test_noise_that_grows_on_the_wall_and_the_crowns_gives_a_factor_there_and_one_on_the_plain():
-    z, cell = _hill()
-    z, clump = _shrubs(z, cell)
-    preds = terrain_predictors(z, cell, 1.0, 3.0)
-    slope = preds[0]
-    rng = np.random.default_rng(0)
-    sd = np.where(slope > 15, 0.15, np.where(clump, 0.12, 0.05))
-    dod = rng.normal(0.0, sd)
+    z, cell, preds, dod, plain, wall, clump = _wall_and_shrubs(0)
     model = fit_error_model(dod, preds, np.ones_like(z, bool), bins=6, min_cells=50)
     f = model.factor(preds)
-    plain = (slope < 1) & ~clump
-    wall = (slope > 29) & (slope < 31)
     assert np.median(f[plain]) == pytest.approx(1.0, abs=0.05)  # the floor: never below the checkpoints' sigma
     assert np.median(f[wall]) > 2.0
     assert np.median(f[clump]) > 1.6
@@ -72,16 +75,9 @@ def test_too_few_unchanged_cells_give_a_uniform_sigma_and_say_so():
 
 def test_the_factor_is_relative_to_the_checkpoints_terrain():
     """sigma states the DEMs' error at the checkpoints (open plain): a wall 3 x noisier gets 3 x sigma."""
-    z, cell = _hill()
-    z, clump = _shrubs(z, cell)
-    preds = terrain_predictors(z, cell, 1.0, 3.0)
-    slope = preds[0]
-    rng = np.random.default_rng(4)
-    plain = (slope < 1) & ~clump
-    dod = rng.normal(0.0, np.where(slope > 15, 0.15, np.where(clump, 0.12, 0.05)))
+    z, cell, preds, dod, plain, wall, _ = _wall_and_shrubs(4)
     sigma = np.full(z.shape, 0.05, np.float32)
     unchanged = np.ones_like(z, bool)
-    wall = (slope > 29) & (slope < 31)
     r, c = np.nonzero(plain)
     cps = (r[::400], c[::400])
     with_cp, row = heteroscedastic_sigma(sigma, z, dod, unchanged, cell, 1.0, 3.0, reference_cells=cps)

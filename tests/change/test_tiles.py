@@ -11,7 +11,10 @@ checkpoints, epoch 2's from an error raster. The sample of the co-registration i
 
 from __future__ import annotations
 
+import json
+
 import geopandas as gpd
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -116,23 +119,44 @@ def test_tiled_change_equals_untiled(tmp_path):
     assert s["net_m3"] == s_ref["net_m3"] or abs(s["net_m3"] - s_ref["net_m3"]) < 1e-9
 
 
-def test_terrain_dependent_sigma_runs_untiled_and_is_refused_in_tile_jobs(tmp_path):
-    """The heteroscedastic σ is not in the tile jobs yet: a tiled site that asks for it is told so in one sentence."""
+def test_tiled_change_with_the_terrain_dependent_sigma_equals_untiled(tmp_path, monkeypatch):
+    """The error model is fitted once on the same lattice cells from the tiles and applied per tile: sigma bit for bit."""
     import dataclasses
 
-    from kitegully import InputError
+    from kitegully.change import error_model as em
 
+    monkeypatch.setattr(em, "BINS", 3)  # a small grid: 27 bins of >= 20 cells
+    monkeypatch.setattr(em, "MIN_CELLS", 20)
+    monkeypatch.setattr(em, "MAX_SAMPLES", 6000)  # every 2nd row and column
     epochs, masks, heads, secs = _site(tmp_path)
+    epochs[1]["accuracy"] = {"sd_m": 0.04}  # checkpoints on epoch 1 only: the reference is theirs
     het = dataclasses.replace(PARAMS, heteroscedastic=True)
+    assert em.lattice_step(140 * 160) == 2
     ref = _outs(tmp_path / "untiled")
     detect_change(epochs, masks, heads, het, ref, site_crs=CRS, sections_path=secs)
-    sig = pd.read_csv(ref["sigma"])
-    assert "DoD factor" in set(sig["epoch"])
-    with rasterio.open(ref["sigma_dod"]) as r:
-        assert "heteroscedastic" in r.tags()["definition"]
+    sig = pd.read_csv(ref["sigma"]).set_index("epoch")
+    assert "median" in sig.loc["DoD factor", "source"]
+    tiling = TilingParams(30.0, 70.0, 80.0)
+    a, b = halos(het, 0.5)
+    assert b >= em.predictor_halo(0.5, het.headcut_window_m, het.stable_object_window_m)
     w = tmp_path / "tiles"
     w.mkdir()
     plan_change(epochs, w / "plan.json", CRS)
-    with pytest.raises(InputError, match="heteroscedastic.*tiling section"):
-        tiling = TilingParams(30.0, 70.0, 80.0)
-        stable_tile(epochs, masks, w / "plan.json", het, tiling, tiling.names()[0], w / "t.npz", CRS)
+    st = [w / f"{n}.stable.npz" for n in tiling.names()]
+    for n, f in zip(tiling.names(), st):
+        stable_tile(epochs, masks, w / "plan.json", het, tiling, n, f, CRS)
+    coregister_tiles(st[::-1], epochs, het, w / "coreg.json", CRS)
+    assert json.loads((w / "coreg.json").read_text())["error_model"] is not None
+    ct = [w / f"{n}.change.npz" for n in tiling.names()]
+    for n, s_, f in zip(tiling.names(), st, ct):
+        change_tile(epochs, masks, w / "plan.json", w / "coreg.json", s_, het, tiling, n, f, CRS)
+    out = _outs(tmp_path / "tiled")
+    merge_change(ct, w / "plan.json", w / "coreg.json", epochs, heads, het, out, site_crs=CRS, sections_path=secs)
+    for k in ("dod", "sigma_dod", *(f"thresholded_{m}" for m in THRESHOLD_METHODS)):
+        with rasterio.open(ref[k]) as x, rasterio.open(out[k]) as y:
+            assert x.tags() == y.tags()
+            assert np.array_equal(x.read(1), y.read(1), equal_nan=True), k
+    with rasterio.open(ref["sigma_dod"]) as x:
+        s_ = x.read(1)
+        assert "heteroscedastic" in x.tags()["definition"] and np.nanmax(s_) > np.nanmin(s_)
+    pd.testing.assert_frame_equal(pd.read_csv(ref["sigma"]), pd.read_csv(out["sigma"]), check_exact=False, rtol=1e-9)

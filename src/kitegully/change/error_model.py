@@ -19,6 +19,7 @@ matching window's scale only partly show).
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +33,13 @@ log = logging.getLogger(__name__)
 
 #: Predictor names, in the order of :func:`terrain_predictors`.
 PREDICTORS = ("slope_deg", "curvature_per_m", "height_above_ground_m")
+#: [I] Quantile bins per predictor and the fewest cells whose NMAD a bin keeps (~11 % standard error).
+BINS, MIN_CELLS = 10, 100
+#: [I] The model is fitted on the unchanged cells of a regular lattice of at most this many cells
+#: (every k-th row and column): 2 000 per bin of 10³, and the same cells whether the grid is one job or tiles.
+MAX_SAMPLES = 2_000_000
+#: Appended to the σ_DoD raster's definition tag when the factor is applied.
+SIGMA_FACTOR_TAG = " x heteroscedastic factor (slope, curvature, height above ground)"
 
 
 def terrain_predictors(z: np.ndarray, cell: float, window_m: float, object_window_m: float,
@@ -79,6 +87,25 @@ class ErrorModel:
         ok = np.logical_and.reduce([np.isfinite(v) for v in predictors])
         return np.where(ok, f, 1.0).astype(np.float32)
 
+    def to_json(self) -> dict[str, Any]:
+        """Plain lists (±inf edges as JSON's Infinity) for the tile jobs."""
+        return {"edges": [e.tolist() for e in self.edges], "nmad": self.nmad.tolist(), "count": self.count.tolist(),
+                "reference_nmad": self.reference_nmad}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "ErrorModel":
+        return cls([np.asarray(e, np.float64) for e in d["edges"]], np.asarray(d["nmad"], np.float64),
+                   np.asarray(d["count"], np.int64), float(d["reference_nmad"]))
+
+    def refer_to(self, predictors_at_checkpoints: list[np.ndarray]) -> None:
+        """Make the median NMAD of the checkpoints' bins the reference (σ was measured on their terrain)."""
+        ok = np.logical_and.reduce([np.isfinite(v) for v in predictors_at_checkpoints])
+        if ok.any():
+            ref = float(np.median(self.nmad[self._index([v[ok] for v in predictors_at_checkpoints])]))
+            log.info("error model: the %d checkpoints' bins have a median NMAD of %.3f m (all unchanged cells %.3f m)",
+                     int(ok.sum()), ref, self.reference_nmad)
+            self.reference_nmad = ref
+
     def table(self, names: tuple[str, ...] = PREDICTORS) -> pd.DataFrame:
         """One row per bin: each predictor's range, cells, NMAD (m), factor."""
         rows = []
@@ -96,8 +123,50 @@ def _nmad(v: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(v - np.median(v))))
 
 
+def lattice_step(n_cells: int, max_samples: int | None = None) -> int:
+    """Row and column step of the sampling lattice: at most ``max_samples`` (default :data:`MAX_SAMPLES`) of ``n_cells``."""
+    return max(1, math.ceil(math.sqrt(n_cells / (MAX_SAMPLES if max_samples is None else max_samples))))
+
+
+def predictor_halo(cell: float, window_m: float, object_window_m: float) -> int:
+    """Cells beyond a window that :func:`terrain_predictors` reads for the window's cells."""
+    k = max(1, int(round(window_m / cell)))
+    ko = max(3, int(round(object_window_m / cell)) | 1)
+    return max(k // 2 + 2, max(3, (ko // 3) | 1) // 2 + 2 * (ko // 2)) + 1
+
+
+def checkpoint_cells(epochs: Any, grid: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """Grid (row, col) of the checkpoints of every epoch whose accuracy is given by checkpoints; None if none is."""
+    rows, cols = [], []
+    for e in epochs:
+        path = e.accuracy.get("checkpoints")
+        if path:
+            cp = pd.read_csv(path)
+            r, c = grid.rowcol(cp["x"].to_numpy(float), cp["y"].to_numpy(float))
+            rows.append(np.round(np.asarray(r)).astype(np.int64))
+            cols.append(np.round(np.asarray(c)).astype(np.int64))
+    if not rows:
+        return None
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    inside = (r >= 0) & (r < grid.height) & (c >= 0) & (c < grid.width)
+    return r[inside], c[inside]
+
+
+def factor_row(factor: np.ndarray, dod: np.ndarray, model: ErrorModel | None) -> dict[str, Any]:
+    """The factor's row for ``sigma.csv``: its median, 90th percentile and maximum over the DoD's cells."""
+    if model is None:
+        return {"epoch": "DoD factor", "source": "heteroscedastic: too few unchanged cells, uniform", "sigma_m": np.nan}
+    ok = np.isfinite(dod)
+    med, p90, top = (float(v) for v in np.percentile(factor[ok], [50, 90, 100])) if ok.any() else (1.0, 1.0, 1.0)
+    log.info("heteroscedastic sigma: factor median %.2f, p90 %.2f, max %.2f (reference NMAD %.3f m)",
+             med, p90, top, model.reference_nmad)
+    return {"epoch": "DoD factor", "sigma_m": np.nan,
+            "source": f"heteroscedastic: x NMAD(slope, curvature, height-above-ground bin) / {model.reference_nmad:.3f} m, "
+                      f"at least 1; median {med:.2f}, p90 {p90:.2f}, max {top:.2f}"}
+
+
 def fit_error_model(dod: np.ndarray, predictors: list[np.ndarray], unchanged: np.ndarray,
-                    bins: int = 10, min_cells: int = 100) -> ErrorModel | None:
+                    bins: int | None = None, min_cells: int | None = None) -> ErrorModel | None:
     """Bin the DoD's NMAD by quantiles of each predictor over the ``unchanged`` cells.
 
     Parameters
@@ -108,12 +177,12 @@ def fit_error_model(dod: np.ndarray, predictors: list[np.ndarray], unchanged: np
         Arrays of ``dod``'s shape (:func:`terrain_predictors`).
     unchanged : ndarray bool
         Cells assumed unchanged: outside every unstable mask, not voids (plants kept).
-    bins : int
-        Quantile bins per predictor ([I] 10; repeated edges are merged, so a predictor that
-        is 0 on most cells, such as the height above the ground, gets fewer).
-    min_cells : int
+    bins : int, optional
+        Quantile bins per predictor (default :data:`BINS`; repeated edges are merged, so a
+        predictor that is 0 on most cells, such as the height above the ground, gets fewer).
+    min_cells : int, optional
         A bin with fewer cells takes the NMAD of the nearest filled bin (in bin indices;
-        [I] 100: the NMAD's relative standard error is about 1.1 / √n = 11 %).
+        default :data:`MIN_CELLS`).
 
     Returns
     -------
@@ -125,6 +194,8 @@ def fit_error_model(dod: np.ndarray, predictors: list[np.ndarray], unchanged: np
     -----
     O(n log n) for the quantiles and the sort over the n unchanged cells.
     """
+    bins = BINS if bins is None else bins
+    min_cells = MIN_CELLS if min_cells is None else min_cells
     ok = unchanged & np.isfinite(dod)
     for v in predictors:
         ok &= np.isfinite(v)
@@ -166,7 +237,7 @@ def fit_error_model(dod: np.ndarray, predictors: list[np.ndarray], unchanged: np
 def heteroscedastic_sigma(sigma: np.ndarray, z1: np.ndarray, dod: np.ndarray, unchanged: np.ndarray, cell: float,
                           window_m: float, object_window_m: float,
                           reference_cells: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-    """σ_DoD times the terrain factor of the error model fitted on ``unchanged`` cells.
+    """σ_DoD times the terrain factor of the error model fitted on the unchanged lattice cells.
 
     Parameters
     ----------
@@ -195,35 +266,23 @@ def heteroscedastic_sigma(sigma: np.ndarray, z1: np.ndarray, dod: np.ndarray, un
     sigma : ndarray (H, W) float32
         σ_DoD × factor (unchanged when there are too few unchanged cells for a model).
     row : dict
-        The factor's row for ``sigma.csv`` (``epoch`` "DoD factor", ``source`` with its
-        median, 90th percentile and maximum over the DoD's cells).
+        The factor's row for ``sigma.csv`` (:func:`factor_row`).
 
     Notes
     -----
-    O(n log n) over the n grid cells; three float32 predictor grids beside the inputs.
+    The model is fitted on the cells of every :func:`lattice_step`-th row and column, the
+    same cells as the tile jobs (:mod:`kitegully.change.tiles`) gather. O(n log n) over the
+    n grid cells; three float32 predictor grids beside the inputs.
     """
     preds = terrain_predictors(z1, cell, window_m, object_window_m)
-    model = fit_error_model(dod, preds, unchanged)
+    k = lattice_step(z1.size)
+    lattice = np.zeros(z1.shape, bool)
+    lattice[::k, ::k] = True
+    model = fit_error_model(dod, preds, unchanged & lattice)
     if model is None:
-        return sigma, {"epoch": "DoD factor", "source": "heteroscedastic: too few unchanged cells, uniform", "sigma_m": np.nan}
-    if reference_cells is not None:
-        r, c = reference_cells
-        inside = (r >= 0) & (r < z1.shape[0]) & (c >= 0) & (c < z1.shape[1])
-        r, c = r[inside], c[inside]
-        at = [v[r, c] for v in preds]
-        ok_at = np.logical_and.reduce([np.isfinite(v) for v in at]) if r.size else np.zeros(0, bool)
-        if ok_at.any():
-            ref = float(np.median(model.nmad[model._index([v[ok_at] for v in at])]))
-            log.info("error model: the %d checkpoints' bins have a median NMAD of %.3f m (all unchanged cells %.3f m)",
-                     int(ok_at.sum()), ref, model.reference_nmad)
-            model.reference_nmad = ref
+        return sigma, factor_row(np.ones(1), np.ones(1), None)
+    if reference_cells is not None and reference_cells[0].size:
+        model.refer_to([v[reference_cells] for v in preds])
     f = model.factor(preds)
     del preds
-    ok = np.isfinite(dod)
-    med, p90, top = (float(v) for v in np.percentile(f[ok], [50, 90, 100])) if ok.any() else (1.0, 1.0, 1.0)
-    log.info("heteroscedastic sigma: factor median %.2f, p90 %.2f, max %.2f (DoD NMAD on unchanged ground %.3f m)",
-             med, p90, top, model.reference_nmad)
-    return (sigma * f).astype(np.float32), {
-        "epoch": "DoD factor", "sigma_m": np.nan,
-        "source": f"heteroscedastic: x NMAD(slope, curvature, height-above-ground bin) / {model.reference_nmad:.3f} m, "
-                  f"at least 1; median {med:.2f}, p90 {p90:.2f}, max {top:.2f}"}
+    return (sigma * f).astype(np.float32), factor_row(f, dod, model)

@@ -136,7 +136,8 @@ class ChangeParams:
         ground to the NMAD of the checkpoints' bins (of all unchanged cells when no epoch has
         checkpoints), at least 1 (:mod:`kitegully.change.error_model`, Hugonnet et al. 2022).
         [I] on for the photogrammetric twins: their checkpoints lie on open level ground,
-        where the DoD is most precise. Untiled sites only (a tiled site raises).
+        where the DoD is most precise. Tiled sites fit the same model once from the tiles
+        (:mod:`kitegully.change.tiles`).
     checkpoint_outlier_nmad : float or None
         An epoch whose accuracy is given by checkpoints: checkpoints farther than this many
         NMADs from the median error are blunders, counted and left out of its σ

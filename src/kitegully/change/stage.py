@@ -17,7 +17,7 @@ from kitegully.change import budget as bg
 from kitegully.change import plots, uncertainty as unc
 from kitegully.change.coregister import above_ground, coregister, nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
-from kitegully.change.error_model import heteroscedastic_sigma
+from kitegully.change.error_model import SIGMA_FACTOR_TAG, checkpoint_cells, heteroscedastic_sigma
 from kitegully.change.headcuts import COLUMNS as HEADCUT_COLUMNS, measure_headcut_retreat
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
 from kitegully.change.widening import COLUMNS as WIDENING_COLUMNS, measure_widening
@@ -106,7 +106,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
 
     Raster(dod, grid).write(out["dod"], tags={"units": "m", "definition": "DEM2 (co-registered) - DEM1"})
     Raster(sigma, grid).write(out["sigma_dod"], tags={"units": "m", "definition": "sqrt(s1^2 + s2^2)" + (
-        " x heteroscedastic factor (slope, curvature)" if params.heteroscedastic else "")})
+        SIGMA_FACTOR_TAG if params.heteroscedastic else "")})
     Raster(stable.astype(np.uint8), grid, 255).write(out["stable"], tags={"definition": "1 = stable ground used for co-registration"})
     for m in THRESHOLD_METHODS:
         Raster(unc.thresholded(dod, detected[m]), grid).write(out[f"thresholded_{m}"], tags={"units": "m", "threshold": m})
@@ -116,19 +116,6 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     budget = bg.compute_budgets(dod, sigma, detected, groups, grid.cell, vg, coreg_sd)
     return write_products(budget, coreg, sigma_rows, sigma, n_void, grid, z1, z2, dod, stable, heads_path, sections_path,
                           params, out, [g.name for g in groups if ":" not in g.name], figure, attribution, t0)
-
-
-def checkpoint_cells(epochs: Sequence[Any], grid) -> tuple[np.ndarray, np.ndarray] | None:
-    """Grid (row, col) of the checkpoints of every epoch whose accuracy is given by checkpoints; None if none is."""
-    rows, cols = [], []
-    for e in epochs:
-        path = e.accuracy.get("checkpoints")
-        if path:
-            cp = pd.read_csv(path)
-            r, c = grid.rowcol(cp["x"].to_numpy(float), cp["y"].to_numpy(float))
-            rows.append(np.round(np.asarray(r)).astype(np.int64))
-            cols.append(np.round(np.asarray(c)).astype(np.int64))
-    return (np.concatenate(rows), np.concatenate(cols)) if rows else None
 
 
 def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, grid, params: ChangeParams,

@@ -16,8 +16,13 @@ config alone):
    deterministic sub-sample of at most ``coreg_max_samples`` cells as untiled is fitted
    (Nuth & Kääb shift + plane, :func:`kitegully.change.coregister.fit_shift_plane`), DEM₂
    resampled at the sampled cells only. Stats before co-registration from the tiles' dh.
-4. ``change_tile`` (per tile, halo B = void margin + half the coherence window + 1): the
-   co-registered DEM₂, DoD with voids, σ_DoD, the four thresholds (GCD's 5 × 5 spatial
+   With ``heteroscedastic``, the error model (:mod:`kitegully.change.error_model`) is fitted
+   here once, as untiled, on the unchanged cells of the sampling lattice that the stable-tile
+   jobs gathered with their predictors (DoD at those cells from the fitted co-registration),
+   referred to the checkpoints' bins, and written to the co-registration JSON.
+4. ``change_tile`` (per tile, halo B = void margin + half the coherence window + 1, at least
+   the error model's predictor footprint when it is on): the co-registered DEM₂, DoD with
+   voids, σ_DoD (× the model's factor), the four thresholds (GCD's 5 × 5 spatial
    coherence sees its neighbours across the seam through the halo) and, per budget row
    (mask, value) and method, the partial sums n, Σ erosion, Σ deposition, Σ σ².
 5. ``change_merge`` (once): the rasters written from the tiles' cores; the budgets from the
@@ -55,6 +60,7 @@ from scipy import ndimage
 
 from kitegully import InputError
 from kitegully.change import budget as bg
+from kitegully.change import error_model as em
 from kitegully.change import uncertainty as unc
 from kitegully.change.coregister import (Coregistration, _sample, above_ground, above_ground_halo, fit_shift_plane,
                                          residual_stats)
@@ -87,7 +93,11 @@ def halos(params: ChangeParams, cell: float) -> tuple[int, int]:
     """Cells read beyond a tile: (stable-ground pass, DoD/threshold pass)."""
     obj = above_ground_halo(cell, params.stable_object_window_m) if params.stable_max_object_height_m is not None else 0
     void = _void_halo(params, cell)
-    return void + obj + 1, void + params.coherence_window // 2 + 1
+    a, b = void + obj + 1, void + params.coherence_window // 2 + 1
+    if params.heteroscedastic:  # both passes read the error model's predictors of their core cells
+        ph = em.predictor_halo(cell, params.headcut_window_m, params.stable_object_window_m)
+        a, b = max(a, ph), max(b, ph)
+    return a, b
 
 
 def _window(grid: GridSpec, tiling: TilingParams, name: str, halo: int) -> tuple[Any, slice, slice, slice, slice]:
@@ -172,6 +182,55 @@ def _tile_surfaces(epochs: Sequence[Mapping[str, Any]], site_crs: str | None, ti
     return e1, e2, grid, t, rs, cs, cr, cc, z1, z2, gw, voids
 
 
+def _tile_predictors(z1: np.ndarray, grid: GridSpec, params: ChangeParams, plan: Mapping[str, Any]) -> list[np.ndarray]:
+    """The error model's predictors of a tile's read window (its halo covers their footprint: :func:`halos`)."""
+    return em.terrain_predictors(z1, grid.cell, params.headcut_window_m, params.stable_object_window_m, fill=plan["z1_max"])
+
+
+def _error_model_samples(e1: Epoch, e2: Epoch, z1: np.ndarray, unchanged: np.ndarray, grid: GridSpec, t: Any,
+                         cr: slice, cc: slice, params: ChangeParams, plan: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """The tile core's unchanged lattice cells (global row, col) and predictors, and the predictors at its checkpoints."""
+    preds = [v[cr, cc] for v in _tile_predictors(z1, grid, params, plan)]
+    k = em.lattice_step(int(plan["shape"][0]) * int(plan["shape"][1]))
+    rows = np.arange(t.r0, t.r0 + t.h)[:, None]
+    cols = np.arange(t.c0, t.c0 + t.w)[None, :]
+    sel = unchanged[cr, cc] & (rows % k == 0) & (cols % k == 0)
+    r, c = np.nonzero(sel)
+    out = {"em_rows": r + t.r0, "em_cols": c + t.c0, **{f"em_p{i}": v[sel] for i, v in enumerate(preds)}}
+    cps = em.checkpoint_cells((e1, e2), grid)
+    if cps is not None:
+        inside = (cps[0] >= t.r0) & (cps[0] < t.r0 + t.h) & (cps[1] >= t.c0) & (cps[1] < t.c0 + t.w)
+        for i, v in enumerate(preds):
+            out[f"em_cp{i}"] = v[cps[0][inside] - t.r0, cps[1][inside] - t.c0]
+    return out
+
+
+def _fit_tiled_error_model(stable_files: Sequence[str | Path], e1: Epoch, e2: Epoch, grid: GridSpec,
+                           co: Mapping[str, Any]) -> em.ErrorModel | None:
+    """The untiled error model from the tiles' lattice cells: DoD at those cells with the fitted co-registration."""
+    parts: dict[str, list[np.ndarray]] = {}
+    for f in stable_files:
+        with np.load(f) as z:
+            for k in z.files:
+                if k.startswith("em_"):
+                    parts.setdefault(k, []).append(z[k])
+    cat = {k: np.concatenate(v) for k, v in parts.items()}
+    rr, cc = cat["em_rows"], cat["em_cols"]
+    z1 = _z_at(e1.dem, grid, rr, cc)
+    if co["applied"]:
+        xs, ys = grid.cell_centres()
+        plane = (co["dz_m"] + co["tilt_x"] * (xs[cc] - co["x_centre"]) + co["tilt_y"] * (ys[rr] - co["y_centre"])).astype(np.float32)
+        z2 = _z_at(e2.dem, grid, rr, cc, co["dx_m"], co["dy_m"]) - plane
+    else:
+        z2 = _z_at(e2.dem, grid, rr, cc)
+    dod = dem_of_difference(z1, z2)
+    n = len(em.PREDICTORS)
+    model = em.fit_error_model(dod, [cat[f"em_p{i}"] for i in range(n)], np.ones(dod.shape, bool))
+    if model is not None and "em_cp0" in cat and cat["em_cp0"].size:
+        model.refer_to([cat[f"em_cp{i}"] for i in range(n)])
+    return model
+
+
 def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str, Any]], plan_json: str | Path,
                 params: ChangeParams, tiling: TilingParams, name: str, out_npz: str | Path,
                 site_crs: str | None = None) -> int:
@@ -179,14 +238,12 @@ def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
 
     Returns the tile's stable cells. O(window cells · object window).
     """
-    if params.heteroscedastic:
-        raise InputError("change.quality.heteroscedastic: the terrain-dependent sigma is not yet computed in tile jobs; "
-                         "set it to false for a site with a tiling section")
     plan = json.loads(Path(plan_json).read_text())
     e1, e2, grid, t, rs, cs, cr, cc, z1, z2, gw, voids = _tile_surfaces(epochs, site_crs, tiling, name, params, 0)
     groups = bg.mask_groups(masks, gw)
     unstable = bg.unstable_union(masks, groups, z1.shape)
-    stable = np.isfinite(z1) & ~unstable & ~voids
+    unchanged = np.isfinite(z1) & ~unstable & ~voids
+    stable = unchanged.copy()
     if params.stable_max_object_height_m is not None:
         stable &= ~above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m,
                                 fill=plan["z1_max"])
@@ -194,8 +251,9 @@ def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     tan_a = np.hypot(gx, -gy)
     base = stable & np.isfinite(z1) & np.isfinite(tan_a) & (tan_a <= np.tan(np.radians(params.coreg_max_slope_deg)))
     dh = np.where(stable, z2 - z1, np.nan)
+    extra = _error_model_samples(e1, e2, z1, unchanged, grid, t, cr, cc, params, plan) if params.heteroscedastic else {}
     Path(out_npz).parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out_npz, stable=stable[cr, cc], base=base[cr, cc], dh=dh[cr, cc], r0=t.r0, c0=t.c0)
+    np.savez_compressed(out_npz, stable=stable[cr, cc], base=base[cr, cc], dh=dh[cr, cc], r0=t.r0, c0=t.c0, **extra)
     n = int(stable[cr, cc].sum())
     log.info("tile %s: %d x %d cells, %.1f %% stable ground", name, t.h, t.w, 100.0 * n / max(t.h * t.w, 1))
     return n
@@ -249,6 +307,9 @@ def coregister_tiles(stable_files: Sequence[str | Path], epochs: Sequence[Mappin
             applied = True
     rec = {k: v for k, v in info.as_dict().items() if k not in ("after", "offset_sd_m")}
     rec["applied"] = applied
+    if params.heteroscedastic:
+        model = _fit_tiled_error_model(stable_files, e1, e2, grid, rec)
+        rec["error_model"] = model.to_json() if model is not None else None
     Path(out_json).write_text(json.dumps(rec, indent=2, default=float))
     log.info("co-registration from %d tiles: shift (%.3f, %.3f) m, dz %.3f m (applied: %s)", len(stable_files),
              info.dx_m, info.dy_m, info.dz_m, applied)
@@ -273,6 +334,10 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     s1 = _sigma_window(e1, plan["sigma"][0], grid, rs, cs)
     s2 = _sigma_window(e2, plan["sigma"][1], grid, rs, cs)
     sigma = unc.propagate(s1, s2, dod.shape)
+    factor = None
+    if co.get("error_model"):
+        factor = em.ErrorModel.from_json(co["error_model"]).factor(_tile_predictors(z1, grid, params, plan))
+        sigma = (sigma * factor).astype(np.float32)
     detected = unc.detect(dod, sigma, params)
     with np.load(stable_npz) as z:
         if (int(z["r0"]), int(z["c0"])) != (t.r0, t.c0):
@@ -293,6 +358,7 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
             sums[i, j] = bg.budget_sums(d, sg, inside & g.block(det))
     order = np.array([[-1 if g.name == "site" else spec_of[g.name.split(":")[0]], g.order] for g in groups], float)
     np.savez_compressed(out_npz, r0=t.r0, c0=t.c0, z1=z1[cr, cc], z2=z2[cr, cc].astype(np.float32), dod=dod, sigma=sigma,
+                        factor=np.ones_like(sigma) if factor is None else factor[cr, cc],
                         stable0=stable0, **{f"det_{m}": d for m, d in detected.items()}, n_void=n_void,
                         names=np.array([g.name for g in groups]), order=order, sums=sums, area=area)
     log.info("tile %s: DoD of %d valid cells, %d void cells", name, int(valid.sum()), n_void)
@@ -344,7 +410,8 @@ def merge_change(tile_files: Sequence[str | Path], plan_json: str | Path, coreg_
     plan = json.loads(Path(plan_json).read_text())
     co = json.loads(Path(coreg_json).read_text())
     keys = {"z1": (np.float32, np.nan), "z2": (np.float32, np.nan), "dod": (np.float32, np.nan),
-            "sigma": (np.float32, np.nan), "stable0": (bool, False), **{f"det_{m}": (bool, False) for m in THRESHOLD_METHODS}}
+            "sigma": (np.float32, np.nan), "factor": (np.float32, 1.0), "stable0": (bool, False),
+            **{f"det_{m}": (bool, False) for m in THRESHOLD_METHODS}}
     a = _assemble(tile_files, (grid.height, grid.width), keys)
     z1, z2, dod, sigma = a["z1"], a["z2"], a["dod"], a["sigma"]
     n_void = 0
@@ -352,11 +419,17 @@ def merge_change(tile_files: Sequence[str | Path], plan_json: str | Path, coreg_
         with np.load(f) as z:
             n_void += int(z["n_void"])
     stable = a["stable0"] & np.isfinite(dod)
-    coreg = Coregistration(**{k: v for k, v in co.items() if k != "applied"})
+    sigma_rows = list(plan["sigma_info"])
+    factor = a.pop("factor")
+    if params.heteroscedastic:
+        sigma_rows.append(em.factor_row(factor, dod, em.ErrorModel.from_json(co["error_model"]) if co.get("error_model") else None))
+    del factor
+    coreg = Coregistration(**{k: v for k, v in co.items() if k not in ("applied", "error_model")})
     coreg.after = residual_stats(np.where(a["stable0"], z2 - z1, np.nan)) if co["applied"] else coreg.before
     del a["stable0"]
     Raster(dod, grid).write(out["dod"], tags={"units": "m", "definition": "DEM2 (co-registered) - DEM1"})
-    Raster(sigma, grid).write(out["sigma_dod"], tags={"units": "m", "definition": "sqrt(s1^2 + s2^2)"})
+    Raster(sigma, grid).write(out["sigma_dod"], tags={"units": "m", "definition": "sqrt(s1^2 + s2^2)" + (
+        em.SIGMA_FACTOR_TAG if params.heteroscedastic else "")})
     Raster(stable.astype(np.uint8), grid, 255).write(out["stable"], tags={"definition": "1 = stable ground used for co-registration"})
     for m in THRESHOLD_METHODS:
         Raster(unc.thresholded(dod, a.pop(f"det_{m}")), grid).write(out[f"thresholded_{m}"], tags={"units": "m", "threshold": m})
@@ -364,7 +437,7 @@ def merge_change(tile_files: Sequence[str | Path], plan_json: str | Path, coreg_
     coreg.offset_sd_m = coreg_sd
     budget = budgets_from_tiles(tile_files, grid.cell, vg, coreg_sd)
     top = [m for m in dict.fromkeys(budget["mask"]) if ":" not in m]
-    summary = write_products(budget, coreg, plan["sigma_info"], sigma, n_void, grid, z1, z2, dod, stable, heads_path,
+    summary = write_products(budget, coreg, sigma_rows, sigma, n_void, grid, z1, z2, dod, stable, heads_path,
                              sections_path, params, out, top, figure, attribution, t0)
     summary["tiles"] = len(tile_files)
     return summary
