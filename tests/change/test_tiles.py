@@ -76,24 +76,31 @@ def _outs(d):
     return {k: str(d / v) for k, v in names.items()}
 
 
+def _run_tiles(tmp_path, epochs, masks, heads, secs, params, tiling):
+    """The five tile rules in order (stable tiles and change tiles merged in reverse order); (outputs, summary, work dir)."""
+    w = tmp_path / "tiles"
+    w.mkdir()
+    plan_change(epochs, w / "plan.json", CRS)
+    st = [w / f"{n}.stable.npz" for n in tiling.names()]
+    for n, f in zip(tiling.names(), st):
+        stable_tile(epochs, masks, w / "plan.json", params, tiling, n, f, CRS)
+    coregister_tiles(st[::-1], epochs, params, w / "coreg.json", CRS)
+    ct = [w / f"{n}.change.npz" for n in tiling.names()]
+    for n, s, f in zip(tiling.names(), st, ct):
+        change_tile(epochs, masks, w / "plan.json", w / "coreg.json", s, params, tiling, n, f, CRS)
+    out = _outs(tmp_path / "tiled")
+    summary = merge_change(ct[::-1], w / "plan.json", w / "coreg.json", epochs, heads, params, out, site_crs=CRS,
+                           sections_path=secs)
+    return out, summary, w
+
+
 def test_tiled_change_equals_untiled(tmp_path):
     epochs, masks, heads, secs = _site(tmp_path)
     ref = _outs(tmp_path / "untiled")
     s_ref = detect_change(epochs, masks, heads, PARAMS, ref, site_crs=CRS, sections_path=secs)
     tiling = TilingParams(30.0, 70.0, 80.0)  # 3 x 3 tiles
     assert halos(PARAMS, 0.5) == (11, 5)
-    w = tmp_path / "tiles"
-    w.mkdir()
-    plan_change(epochs, w / "plan.json", CRS)
-    st = [w / f"{n}.stable.npz" for n in tiling.names()]
-    for n, f in zip(tiling.names(), st):
-        stable_tile(epochs, masks, w / "plan.json", PARAMS, tiling, n, f, CRS)
-    coregister_tiles(st[::-1], epochs, PARAMS, w / "coreg.json", CRS)
-    ct = [w / f"{n}.change.npz" for n in tiling.names()]
-    for n, s, f in zip(tiling.names(), st, ct):
-        change_tile(epochs, masks, w / "plan.json", w / "coreg.json", s, PARAMS, tiling, n, f, CRS)
-    out = _outs(tmp_path / "tiled")
-    s = merge_change(ct[::-1], w / "plan.json", w / "coreg.json", epochs, heads, PARAMS, out, site_crs=CRS, sections_path=secs)
+    out, s, w = _run_tiles(tmp_path, epochs, masks, heads, secs, PARAMS, tiling)
     assert s["tiles"] == 9
     # every raster bit for bit (DoD with voids, sigma from the error raster, stable ground, the
     # four thresholds incl. the 5 x 5 coherence across the seams)
@@ -139,19 +146,8 @@ def test_tiled_change_with_the_terrain_dependent_sigma_equals_untiled(tmp_path, 
     tiling = TilingParams(30.0, 70.0, 80.0)
     a, b = halos(het, 0.5)
     assert b >= em.predictor_halo(0.5, het.headcut_window_m, het.stable_object_window_m)
-    w = tmp_path / "tiles"
-    w.mkdir()
-    plan_change(epochs, w / "plan.json", CRS)
-    st = [w / f"{n}.stable.npz" for n in tiling.names()]
-    for n, f in zip(tiling.names(), st):
-        stable_tile(epochs, masks, w / "plan.json", het, tiling, n, f, CRS)
-    coregister_tiles(st[::-1], epochs, het, w / "coreg.json", CRS)
+    out, _, w = _run_tiles(tmp_path, epochs, masks, heads, secs, het, tiling)
     assert json.loads((w / "coreg.json").read_text())["error_model"] is not None
-    ct = [w / f"{n}.change.npz" for n in tiling.names()]
-    for n, s_, f in zip(tiling.names(), st, ct):
-        change_tile(epochs, masks, w / "plan.json", w / "coreg.json", s_, het, tiling, n, f, CRS)
-    out = _outs(tmp_path / "tiled")
-    merge_change(ct, w / "plan.json", w / "coreg.json", epochs, heads, het, out, site_crs=CRS, sections_path=secs)
     for k in ("dod", "sigma_dod", *(f"thresholded_{m}" for m in THRESHOLD_METHODS)):
         with rasterio.open(ref[k]) as x, rasterio.open(out[k]) as y:
             assert x.tags() == y.tags()
