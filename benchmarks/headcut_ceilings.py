@@ -39,9 +39,9 @@ from kitegully.change.params import ChangeParams  # noqa: E402
 from kitegully.change.stage import read_heads  # noqa: E402
 from kitegully.io.raster import read_raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
+from twin_ensemble import BASE, deep_merge  # noqa: E402  (benchmarks/, beside this script)
 
 log = logging.getLogger("headcut_ceilings")
-BASE = REPO / "config/sites/kamech_twin.yaml"
 MEMBER_DIRS = (REPO / "config/sites/ensemble", REPO / "config/sites/holdout")
 SURFACES = ("photogrammetric", "true DSM", "true DTM")
 
@@ -52,15 +52,8 @@ def site_config(site: str) -> dict:
     for d in MEMBER_DIRS:
         f = d / f"{site}.yaml"
         if f.exists():
-            cfg = _merge(cfg, yaml.safe_load(f.read_text()))
+            cfg = deep_merge(cfg, yaml.safe_load(f.read_text()))
     return cfg
-
-
-def _merge(a: dict, b: dict) -> dict:
-    out = dict(a)
-    for k, v in b.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
 
 
 def member_table(results: Path, site: str) -> pd.DataFrame:

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 from scipy import ndimage
 
-from kitegully.change.coregister import height_above_ground
+from kitegully.change.coregister import height_above_ground, nmad
 
 log = logging.getLogger(__name__)
 
@@ -119,10 +119,6 @@ class ErrorModel:
         return pd.DataFrame(rows)
 
 
-def _nmad(v: np.ndarray) -> float:
-    return float(1.4826 * np.median(np.abs(v - np.median(v))))
-
-
 def lattice_step(n_cells: int, max_samples: int | None = None) -> int:
     """Row and column step of the sampling lattice: at most ``max_samples`` (default :data:`MAX_SAMPLES`) of ``n_cells``."""
     return max(1, math.ceil(math.sqrt(n_cells / (MAX_SAMPLES if max_samples is None else max_samples))))
@@ -152,9 +148,9 @@ def checkpoint_cells(epochs: Any, grid: Any) -> tuple[np.ndarray, np.ndarray] | 
     return r[inside], c[inside]
 
 
-def factor_row(factor: np.ndarray, dod: np.ndarray, model: ErrorModel | None) -> dict[str, Any]:
-    """The factor's row for ``sigma.csv``: its median, 90th percentile and maximum over the DoD's cells."""
-    if model is None:
+def factor_row(model: ErrorModel | None, factor: np.ndarray | None = None, dod: np.ndarray | None = None) -> dict[str, Any]:
+    """The factor's row for ``sigma.csv``: its median, 90th percentile and maximum over the DoD's cells (no model: uniform)."""
+    if model is None or factor is None or dod is None:
         return {"epoch": "DoD factor", "source": "heteroscedastic: too few unchanged cells, uniform", "sigma_m": np.nan}
     ok = np.isfinite(dod)
     med, p90, top = (float(v) for v in np.percentile(factor[ok], [50, 90, 100])) if ok.any() else (1.0, 1.0, 1.0)
@@ -205,7 +201,7 @@ def fit_error_model(dod: np.ndarray, predictors: list[np.ndarray], unchanged: np
         log.warning("error model: %d unchanged cells, fewer than %d: uniform sigma", n, need)
         return None
     d = dod[ok].astype(np.float64)
-    ref = _nmad(d)
+    ref = nmad(d)
     if ref <= 0:
         return None
     q = np.linspace(0.0, 1.0, bins + 1)[1:-1]
@@ -223,7 +219,7 @@ def fit_error_model(dod: np.ndarray, predictors: list[np.ndarray], unchanged: np
     starts = np.concatenate([[0], np.cumsum(counts)])
     nm = np.full(counts.size, np.nan)
     for k in np.flatnonzero(counts >= min_cells):
-        nm[k] = _nmad(d[order[starts[k]:starts[k + 1]]])
+        nm[k] = nmad(d[order[starts[k]:starts[k + 1]]])
     nm = nm.reshape(shape)
     filled = np.isfinite(nm)
     if not filled.all():
@@ -280,9 +276,9 @@ def heteroscedastic_sigma(sigma: np.ndarray, z1: np.ndarray, dod: np.ndarray, un
     lattice[::k, ::k] = True
     model = fit_error_model(dod, preds, unchanged & lattice)
     if model is None:
-        return sigma, factor_row(np.ones(1), np.ones(1), None)
+        return sigma, factor_row(None)
     if reference_cells is not None and reference_cells[0].size:
         model.refer_to([v[reference_cells] for v in preds])
     f = model.factor(preds)
     del preds
-    return (sigma * f).astype(np.float32), factor_row(f, dod, model)
+    return (sigma * f).astype(np.float32), factor_row(model, f, dod)

@@ -131,10 +131,14 @@ def _z_at(r: Raster, grid: GridSpec, rows: np.ndarray, cols: np.ndarray, dx: flo
                                    cval=np.nan, prefilter=False)
 
 
+def _plane(co: Mapping[str, float], x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The co-registration plane at map coordinates (float32; the same arithmetic for a window and for points)."""
+    return (co["dz_m"] + co["tilt_x"] * (x - co["x_centre"]) + co["tilt_y"] * (y - co["y_centre"])).astype(np.float32)
+
+
 def _plane_window(co: Mapping[str, float], grid: GridSpec, rs: slice, cs: slice) -> np.ndarray:
     xs, ys = grid.cell_centres()
-    return (co["dz_m"] + co["tilt_x"] * (xs[None, cs] - co["x_centre"])
-            + co["tilt_y"] * (ys[rs, None] - co["y_centre"])).astype(np.float32)
+    return _plane(co, xs[None, cs], ys[rs, None])
 
 
 def _sigma_window(epoch: Epoch, value: float | None, grid: GridSpec, rs: slice, cs: slice) -> np.ndarray | float:
@@ -219,8 +223,7 @@ def _fit_tiled_error_model(stable_files: Sequence[str | Path], e1: Epoch, e2: Ep
     z1 = _z_at(e1.dem, grid, rr, cc)
     if co["applied"]:
         xs, ys = grid.cell_centres()
-        plane = (co["dz_m"] + co["tilt_x"] * (xs[cc] - co["x_centre"]) + co["tilt_y"] * (ys[rr] - co["y_centre"])).astype(np.float32)
-        z2 = _z_at(e2.dem, grid, rr, cc, co["dx_m"], co["dy_m"]) - plane
+        z2 = _z_at(e2.dem, grid, rr, cc, co["dx_m"], co["dy_m"]) - _plane(co, xs[cc], ys[rr])
     else:
         z2 = _z_at(e2.dem, grid, rr, cc)
     dod = dem_of_difference(z1, z2)
@@ -358,8 +361,7 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
             sums[i, j] = bg.budget_sums(d, sg, inside & g.block(det))
     order = np.array([[-1 if g.name == "site" else spec_of[g.name.split(":")[0]], g.order] for g in groups], float)
     np.savez_compressed(out_npz, r0=t.r0, c0=t.c0, z1=z1[cr, cc], z2=z2[cr, cc].astype(np.float32), dod=dod, sigma=sigma,
-                        factor=np.ones_like(sigma) if factor is None else factor[cr, cc],
-                        stable0=stable0, **{f"det_{m}": d for m, d in detected.items()}, n_void=n_void,
+                        **({} if factor is None else {"factor": factor[cr, cc]}), stable0=stable0, **{f"det_{m}": d for m, d in detected.items()}, n_void=n_void,
                         names=np.array([g.name for g in groups]), order=order, sums=sums, area=area)
     log.info("tile %s: DoD of %d valid cells, %d void cells", name, int(valid.sum()), n_void)
 
@@ -410,8 +412,10 @@ def merge_change(tile_files: Sequence[str | Path], plan_json: str | Path, coreg_
     plan = json.loads(Path(plan_json).read_text())
     co = json.loads(Path(coreg_json).read_text())
     keys = {"z1": (np.float32, np.nan), "z2": (np.float32, np.nan), "dod": (np.float32, np.nan),
-            "sigma": (np.float32, np.nan), "factor": (np.float32, 1.0), "stable0": (bool, False),
-            **{f"det_{m}": (bool, False) for m in THRESHOLD_METHODS}}
+            "sigma": (np.float32, np.nan), "stable0": (bool, False), **{f"det_{m}": (bool, False) for m in THRESHOLD_METHODS}}
+    model = em.ErrorModel.from_json(co["error_model"]) if co.get("error_model") else None
+    if model is not None:  # the factor grid only where the tiles applied one
+        keys["factor"] = (np.float32, 1.0)
     a = _assemble(tile_files, (grid.height, grid.width), keys)
     z1, z2, dod, sigma = a["z1"], a["z2"], a["dod"], a["sigma"]
     n_void = 0
@@ -420,10 +424,8 @@ def merge_change(tile_files: Sequence[str | Path], plan_json: str | Path, coreg_
             n_void += int(z["n_void"])
     stable = a["stable0"] & np.isfinite(dod)
     sigma_rows = list(plan["sigma_info"])
-    factor = a.pop("factor")
     if params.heteroscedastic:
-        sigma_rows.append(em.factor_row(factor, dod, em.ErrorModel.from_json(co["error_model"]) if co.get("error_model") else None))
-    del factor
+        sigma_rows.append(em.factor_row(model, a.pop("factor", None), dod))
     coreg = Coregistration(**{k: v for k, v in co.items() if k not in ("applied", "error_model")})
     coreg.after = residual_stats(np.where(a["stable0"], z2 - z1, np.nan)) if co["applied"] else coreg.before
     del a["stable0"]

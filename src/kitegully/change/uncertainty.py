@@ -28,6 +28,7 @@ import pandas as pd
 from scipy import ndimage, stats
 
 from kitegully import InputError
+from kitegully.change.coregister import nmad
 from kitegully.change.dod import Epoch, resample
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
 from kitegully.io.raster import GridSpec, Raster
@@ -99,7 +100,7 @@ def epoch_sigma(epoch: Epoch, grid: GridSpec, outlier_nmad: float | None = 4.0) 
     if e.size < 3:
         raise InputError(f"{acc['checkpoints']}: fewer than 3 checkpoints fall on the DEM {epoch.path}; cannot state its accuracy")
     med = float(np.median(e))
-    spread = 1.4826 * float(np.median(np.abs(e - med)))
+    spread = nmad(e)
     kept = e if outlier_nmad is None or spread == 0 else e[np.abs(e - med) <= outlier_nmad * spread]
     if kept.size < 3:
         kept = e
