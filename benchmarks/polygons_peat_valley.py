@@ -19,7 +19,7 @@ as the twin evaluation rules do.
 
 Usage::
 
-    .venv/bin/python benchmarks/polygons_peat_valley.py [--seed 2013]
+    .venv/bin/python benchmarks/polygons_peat_valley.py [--seed 2013] [--survey-edge site|on|off]
 
 Results are printed and written to ``results/benchmarks/polygons_peat_valley.md``.
 """
@@ -56,8 +56,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=2013)
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_peat_valley.md"))
+    ap.add_argument("--survey-edge", choices=["site", "on", "off"], default="site",
+                    help="polygons.transects.survey_edge: the site's setting, or forced on / off (to compare)")
     args = ap.parse_args()
     cfg = load_yaml(REPO / "config" / "sites" / "peat_valley.yaml")["polygons"]  # the site's settings (40 m transects, TCI > 9 [P])
+    if args.survey_edge != "site":
+        cfg["transects"]["survey_edge"] = args.survey_edge == "on"
     dtm, grid, gullies = build_site(args.seed)
     truth_cl = centrelines(gullies, 0.1, 10.0, CRS)
     truth_poly = polygons(gullies, 0.1, CRS)
@@ -68,7 +72,8 @@ def main() -> None:
     stats, comp, ops = regenerate_table1(res.polygons, truth_poly, truth_cl, res.grid, cfg["evaluation"]["operators"], args.seed, U_EXPONENT)
     sc = ev["scores"].set_index("kind")
     lines = [
-        f"# Polygons stage on a peat-valley DTM like the paper's (seed {args.seed})", "",
+        f"# Polygons stage on a peat-valley DTM like the paper's (seed {args.seed}; survey-edge dams "
+        f"{'on' if cfg['transects'].get('survey_edge') else 'off'})", "",
         f"{grid.height} x {grid.width} cells of {grid.cell} m; {int(np.isnan(dtm).sum())} occluded cells; true gully area "
         f"{truth_poly['area_m2'].sum():.0f} m² (paper 6 919–8 773 m²), widths {min(g.width.min() for g in gullies):.1f}–"
         f"{max(g.width.max() for g in gullies):.1f} m, depths {min(g.depth.min() for g in gullies):.1f}–{max(g.depth.max() for g in gullies):.1f} m; "

@@ -7,7 +7,7 @@ import pytest
 
 from kitegully.config import load_yaml
 from kitegully.polygons.conditioning import polygons_from_labels
-from kitegully.polygons.morphometry import measure_sections
+from kitegully.polygons.morphometry import measure_sections, open_at_edges
 from kitegully.polygons.stage import PolygonParams, measure_polygons
 
 from .polygon_synthetic import notch_dem, true_area
@@ -69,3 +69,38 @@ def test_whole_method_on_a_notch(shape, width_tol_cells, params, repo_root):
     if p.rim_search_m > 0:  # referenced to the rims, which the valley's cross slope lifts: + the valley's own section s W^2 / 4
         area += cross * WIDTH**2 / 4
     assert res.morphometry["volume_m3"].sum() == pytest.approx(area * length, rel=0.1)
+
+
+@pytest.mark.parametrize("shape", ["V", "U"])
+def test_a_gully_that_leaves_the_dem_is_measured_to_the_edge(shape):
+    """The notch runs off the south edge 75 m below its head. Without a dam on the edge the sink
+    fill drains its last reach over the edge (no pool, no polygon, about a quarter of the volume
+    lost); ``survey_edge_dams`` dams the edge between the rims, and the axis runs out through the
+    edge instead of forking into the corners of the cut."""
+    cross = 0.05
+    dem, grid, xc = notch_dem(shape, WIDTH, DEPTH, cross_slope=cross, head_m=20.0)
+    true_volume = true_area(shape, WIDTH, DEPTH) * (dem.shape[0] * grid.cell - 20.0)
+    vol, south = {}, {}
+    for on in (False, True):
+        p = PolygonParams(transect_half_length_m=15.0, bridge="transects", reference="line", prolong_axes=True, survey_edge_dams=on)
+        res = measure_polygons(dem, grid, p)
+        assert len(res.polygons[0.5]) == 1  # no false pool where the gully's head end meets no edge
+        rows = np.nonzero(res.labels[0.5].any(axis=1))[0]
+        south[on] = dem.shape[0] - 1 - rows.max()  # cells between the polygon and the south edge
+        vol[on] = res.morphometry["volume_m3"].sum()
+        if on:
+            end = min(res.axes.geometry.iloc[0].coords, key=lambda c: c[1])
+            assert end[1] == pytest.approx(grid.bounds[1], abs=grid.cell)  # the axis reaches the edge
+            assert end[0] == pytest.approx(xc, abs=2 * grid.cell)  # in the channel, not in a corner of the cut
+    assert south[False] * grid.cell > 20.0 and vol[False] < 0.85 * vol[True]
+    assert south[True] <= 2 and vol[True] == pytest.approx(true_volume, rel=0.1)  # as the whole-method test
+
+
+def test_open_at_edges_continues_only_a_polygon_that_reaches_the_edge():
+    sub = np.zeros((30, 12), bool)
+    sub[5:28, 3:9] = True  # ends 2 cells above the window's (and the DEM's) bottom
+    same, top, left = open_at_edges(sub, 40, 10, (100, 100), gap=2)
+    assert same is sub and (top, left) == (40, 10)  # 40 + 27 = row 67 of 100: far from the edge
+    ext, top, left = open_at_edges(sub, 70, 10, (100, 100), gap=2)  # bottom row 97: within 2 cells
+    assert (top, left) == (75, 13) and ext.shape[1] == 6
+    assert ext.shape[0] > 23 + 2 and ext[-1].all()  # continued past row 99 with the band's full width

@@ -30,3 +30,11 @@ def test_a_y_junction_of_diagonal_branches_is_one_node():
         sk[10 - i, 10 + i] = True  # branch up-right
     paths = skeleton_paths(sk)
     assert sorted(len(r) for r, _ in paths) == [8, 8, 9]
+
+
+def test_a_single_pixel_skeleton_has_no_path_and_is_not_an_error():
+    # A round polygon thins to one pixel; the diagonal-shortcut step used to raise on a graph
+    # without edges (sparse fancy indexing with no index returns a sparse matrix).
+    skel = np.zeros((5, 5), bool)
+    skel[2, 2] = True
+    assert skeleton_paths(skel, min_cells=1) == []

@@ -95,6 +95,65 @@ def medial_network(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_st
     return out
 
 
+def open_at_edges(sub: np.ndarray, r0: int, c0: int, shape: tuple[int, int], gap: int = 0) -> tuple[np.ndarray, int, int]:
+    """A polygon's mask continued straight on across the DEM's edge where it reaches it.
+
+    Thinning sees the DEM's edge as the polygon's end, and a polygon cut by the edge gets
+    an axis that forks into the two corners of the cut. Continued by repeating its outermost
+    rows or columns up to the edge and for twice its largest inscribed radius (plus 2 cells)
+    beyond, the mask's skeleton runs on through the edge; the axis is then cut back to the
+    DEM (:func:`clip_to_extent`).
+
+    Parameters
+    ----------
+    sub : ndarray bool (h, w)
+        The polygon's mask in its bounding window.
+    r0, c0 : int
+        The window's top-left cell in the DEM.
+    shape : tuple
+        The DEM's shape (H, W).
+    gap : int
+        A polygon within this many cells of an edge reaches it (the dam on the edge and its
+        growth stand between a pool and the edge).
+
+    Returns
+    -------
+    mask : ndarray bool
+        The continued mask (``sub`` itself where the polygon reaches no edge).
+    top, left : int
+        The returned mask's top-left cell in the DEM (may be negative).
+    """
+    H, W = shape
+    rows, cols = np.nonzero(sub.any(axis=1))[0], np.nonzero(sub.any(axis=0))[0]
+    if rows.size == 0:
+        return sub, r0, c0
+    R0, R1, C0, C1 = r0 + rows[0], r0 + rows[-1], c0 + cols[0], c0 + cols[-1]
+    sides = (R0 <= gap, H - 1 - R1 <= gap, C0 <= gap, W - 1 - C1 <= gap)
+    if not any(sides):
+        return sub, r0, c0
+    tight = sub[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1].copy()
+    e = int(2.0 * ndi.distance_transform_edt(np.pad(tight, 1)).max()) + 2
+    k = min(2 * gap + 3, *tight.shape)  # the cut's profile: what the outermost k lines hold (the closing frays the last one)
+    if sides[0]:
+        tight[:k] = tight[:k].any(axis=0)
+    if sides[1]:
+        tight[-k:] = tight[-k:].any(axis=0)
+    if sides[2]:
+        tight[:, :k] = tight[:, :k].any(axis=1)[:, None]
+    if sides[3]:
+        tight[:, -k:] = tight[:, -k:].any(axis=1)[:, None]
+    pads = ((R0 + e if sides[0] else 0, H - 1 - R1 + e if sides[1] else 0),
+            (C0 + e if sides[2] else 0, W - 1 - C1 + e if sides[3] else 0))
+    return np.pad(tight, pads, mode="edge"), R0 - pads[0][0], C0 - pads[1][0]
+
+
+def clip_to_extent(line: shapely.LineString, grid: GridSpec) -> shapely.LineString | None:
+    """The longest piece of ``line`` inside the grid's extent (None if nothing is left)."""
+    piece = line.intersection(shapely.box(*grid.bounds))
+    parts = [g for g in getattr(piece, "geoms", [piece]) if g.geom_type == "LineString" and g.length > 0]
+    return max(parts, key=lambda g: g.length) if parts else None
+
+
 def prolong_to_outline(axis: shapely.LineString, poly, start: bool, end: bool, look_m: float) -> shapely.LineString:
     """The axis prolonged at its free ends, straight on, to the polygon outline.
 
@@ -409,6 +468,8 @@ def measure_sections(
     ground_segment_m: float = 0.0,
     bank_fit_m: float = 0.0,
     no_rim: str = "outline",
+    open_edges: bool = False,
+    edge_gap_cells: int = 0,
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -453,6 +514,12 @@ def measure_sections(
         Where a section end that finds no rim within ``rim_search_m`` stays (:data:`NO_RIM`):
         ``outline`` = on the polygon outline; ``highest_ground`` = at the highest point of the
         ground profile within ``rim_search_m`` outside it (:func:`extend_to_rims`).
+    open_edges : bool
+        A polygon the DEM's edge cuts is thinned as if it went on across the edge
+        (:func:`open_at_edges`), so that its axis runs out through the edge instead of
+        forking into the corners of the cut (surveys that end inside a gully).
+    edge_gap_cells : int
+        With ``open_edges``: a polygon this close to the DEM's edge (cells) reaches it.
 
     Returns
     -------
@@ -493,11 +560,16 @@ def measure_sections(
         r0, c0 = max(sl[0].start - 1, 0), max(sl[1].start - 1, 0)
         r1, c1 = min(sl[0].stop + 1, labels.shape[0]), min(sl[1].stop + 1, labels.shape[1])
         sub = labels[r0:r1, c0:c1] == pid
+        top, left = r0, c0
+        if open_edges:
+            sub, top, left = open_at_edges(sub, r0, c0, labels.shape, edge_gap_cells)
         if branches == "all":
-            net = medial_network(sub, grid, r0, c0, smooth_step, alpha, beta, 0.5 * spacing)
+            net = medial_network(sub, grid, top, left, smooth_step, alpha, beta, 0.5 * spacing)
         else:
-            axis = medial_axis(sub, grid, r0, c0, smooth_step, alpha, beta)
+            axis = medial_axis(sub, grid, top, left, smooth_step, alpha, beta)
             net = [(axis, 0.0)] if axis is not None and axis.length > 0 else []
+        if (top, left, sub.shape) != (r0, c0, (r1 - r0, c1 - c0)):
+            net = [(a, t) for a, t in ((clip_to_extent(a, grid), t) for a, t in net) if a is not None]
         row = {"polygon_id": pid, "area_m2": poly.area, "length_m": 0.0, "n_sections": 0, "mean_width_m": np.nan,
                "max_width_m": np.nan, "mean_depth_m": np.nan, "max_depth_m": np.nan, "volume_m3": 0.0}
         half = float(np.hypot(r1 - r0, c1 - c0)) * grid.cell + 1.0

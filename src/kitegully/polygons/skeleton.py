@@ -34,6 +34,8 @@ def _graph(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix]:
 def _drop_diagonal_shortcuts(g: sp.csr_matrix) -> sp.csr_matrix:
     """Remove diagonal edges that close a triangle with two orthogonal edges (staircases)."""
     g = g.tocoo()
+    if g.nnz == 0:  # an isolated pixel: nothing to drop (and sparse fancy indexing with no index returns a sparse matrix)
+        return g.tocsr()
     diag = g.data > 1.2  # √2 steps (orthogonal ones weigh 1; 1.5 matched none, so every junction was a triangle of nodes)
     orth = sp.csr_matrix((np.ones((~diag).sum()), (g.row[~diag], g.col[~diag])), shape=g.shape)
     two = orth @ orth  # paths of two orthogonal steps

@@ -21,7 +21,8 @@ from kitegully.polygons.dem_prep import prepare_dem
 from kitegully.polygons.morphometry import BRANCHES, NO_RIM, REFERENCES, measure_sections
 from kitegully.polygons.skeleton import skeleton_paths
 from kitegully.polygons.thalweg import thalweg_lines, topographic_convergence_index
-from kitegully.polygons.transects import clip_transects, make_transects, station_floor, transect_stations
+from kitegully.polygons.transects import (clip_transects, make_transects, outlet_ends, station_floor, survey_edge_dams,
+                                          transect_stations)
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +90,9 @@ class PolygonParams:
         Closest transect spacing (m) [I].
     transect_tangent_half_window_m : float
         Half length of the thalweg piece whose direction the transect is orthogonal to [I].
+    survey_edge_dams : bool
+        [I] Dam the survey's edge where a thalweg leaves the DEM
+        (:func:`kitegully.polygons.transects.survey_edge_dams`).
     raise_m : float
         Height added to barrier cells (m) [P 10].
     grow_cells : int
@@ -163,6 +167,7 @@ class PolygonParams:
     transect_max_drop_m: float | None = None
     transect_min_spacing_m: float = 3.0
     transect_tangent_half_window_m: float = 5.0
+    survey_edge_dams: bool = False
     raise_m: float = 10.0
     grow_cells: int = 1
     thresholds_m: tuple = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
@@ -192,7 +197,8 @@ class PolygonParams:
                            optional=["ground_segment_m"])
         t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m", "mask_closing_cells",
                                                                 "smooth_step_m", "snakes_alpha", "snakes_beta"])
-        tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"])
+        tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"],
+                            optional=["survey_edge"])
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
                                                                           "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"])
         m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"],
@@ -208,6 +214,7 @@ class PolygonParams:
             snakes_beta=t["snakes_beta"],
             transect_spacing_m=tr["spacing_m"], transect_half_length_m=tr["half_length_m"], transect_max_drop_m=tr["max_drop_m"],
             transect_min_spacing_m=tr["min_spacing_m"], transect_tangent_half_window_m=tr["tangent_half_window_m"],
+            survey_edge_dams=bool(tr.get("survey_edge", False)),
             raise_m=c["raise_m"], grow_cells=c["grow_cells"], thresholds_m=tuple(c["thresholds_m"]), closing_cells=c["closing_cells"],
             bridge=c["bridge"],
             min_area_m2=c["min_area_m2"], keep_on_thalweg=c["keep_on_thalweg"],
@@ -295,7 +302,8 @@ def measure_morphometry(labels: np.ndarray, polygons: gpd.GeoDataFrame, dem: np.
     p = params
     return measure_sections(labels, polygons, dem, level, grid, p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha,
                             p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m,
-                            p.bank_fit_m, p.no_rim)
+                            p.bank_fit_m, p.no_rim, open_edges=p.survey_edge_dams,
+                            edge_gap_cells=p.grow_cells + 1)
 
 
 def morphometry_rows(axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: pd.DataFrame, params: PolygonParams) -> list[tuple]:
@@ -377,10 +385,19 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         tr_all += tr
         line_id += [i] * len(tr)
     tr_clip, clipped = clip_transects(tr_all, bl_lines)
+    edge_cells = np.zeros_like(bl_cells)
+    if p.survey_edge_dams:
+        edge_cells = survey_edge_dams(outlet_ends(th_lines, dem, grid), dem, grid, p.transect_half_length_m, p.transect_half_length_m,
+                                      barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells))
+        edge_lines = _lines_gdf(skeleton_paths(edge_cells, min_cells=2), grid)
+        log.info("survey-edge dams: %d cells, %d lines", int(edge_cells.sum()), len(edge_lines))
+        tr_clip += edge_lines
+        clipped = np.concatenate([clipped, np.zeros(len(edge_lines), bool)])
+        line_id += [-1] * len(edge_lines)
     T["transects_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    tr_cells = rasterize_lines(tr_clip, grid)
+    tr_cells = rasterize_lines(tr_clip, grid) | edge_cells
     barriers = barrier_mask(bl_cells, tr_cells, p.grow_cells)
     bl_band = barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells) & ~bl_cells
     bridgeable = None
@@ -429,6 +446,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         ("thalweg length (m)", round(float(thalweg["length_m"].sum()), 1)),
         ("transects", len(tr_clip)),
         ("transects clipped at breaklines", int(clipped.sum())),
+        ("survey-edge dams (cells)", int(edge_cells.sum())),
         ("barrier cells", int(barriers.sum())),
     ]
     rows += [(f"polygons t = {thr} m (count / m2)", f"{len(polys[thr])} / {polys[thr]['area_m2'].sum():.1f}") for thr in p.thresholds_m]

@@ -121,3 +121,84 @@ def clip_transects(transects: list[shapely.LineString], breaklines: list[shapely
             out.append(t)
             flags.append(False)
     return out, np.asarray(flags, bool)
+
+
+def outlet_ends(lines: list[shapely.LineString], dem: np.ndarray, grid: GridSpec) -> np.ndarray:
+    """The lower end of each line (map coordinates, (n, 2)): where a thalweg's flow leaves it.
+
+    Ends are compared on the 3 × 3 minimum of the DEM (:func:`station_floor`), the floor
+    the transects follow; a line whose ends stand equally high gives both.
+    """
+    if not lines:
+        return np.zeros((0, 2))
+    floor = station_floor(dem)
+    ends = np.array([[ln.coords[0][:2], ln.coords[-1][:2]] for ln in lines])  # (n, 2 ends, xy)
+    r, c = grid.rowcol(ends[..., 0].ravel(), ends[..., 1].ravel())
+    z = map_coordinates(floor, [r, c], order=1, mode="nearest").reshape(-1, 2)
+    keep = np.column_stack([z[:, 0] <= z[:, 1], z[:, 1] <= z[:, 0]])
+    return ends[keep]
+
+
+def survey_edge_dams(ends_xy: np.ndarray, dem: np.ndarray, grid: GridSpec, half_length: float, reach: float,
+                     blocked: np.ndarray) -> np.ndarray:
+    """Dams along the survey's edge where a thalweg leaves the DEM ([I] the edge as a transect).
+
+    A gully that runs off the surveyed area has no dam below its last transect: the sink fill
+    drains that reach over the DEM's edge (or into a void left empty, such as open water), so
+    it never holds a pool and the gully's lowest, often widest reach gets no polygon. Where a
+    thalweg's outlet end lies within ``reach`` of the edge, the edge cells within ``half_length``
+    of the edge cell nearest to that end become a dam, the edge's own transect; like a transect
+    it stops at the breaklines (``blocked``: their barrier band) it meets on either side. Only
+    outlets: a dam where a gully enters the survey would hold the water of the reach above the
+    first transect, which otherwise drains up and out, as a false pool.
+
+    Parameters
+    ----------
+    ends_xy : ndarray (n, 2)
+        Map coordinates of the thalweg lines' outlet ends (:func:`outlet_ends`).
+    dem : ndarray (H, W)
+        Stage DEM, NaN where nothing was surveyed (left empty).
+    grid : GridSpec
+        Its grid.
+    half_length : float
+        Dam length on each side of the exit point (m): the transects' half length.
+    reach : float
+        Largest distance (m) from a thalweg end to the edge for that end to leave the DEM.
+    blocked : ndarray bool (H, W)
+        Cells a dam does not cross (the breaklines' barrier band).
+
+    Returns
+    -------
+    ndarray bool (H, W)
+        Dam cells on the edge: valid cells with a neighbour outside the DEM or left empty.
+
+    Notes
+    -----
+    O(n_edge log n_edge) for the edge cells' KD-tree plus O(half_length² / cell²) per end.
+    """
+    from scipy.ndimage import binary_erosion, label
+    from scipy.spatial import cKDTree
+
+    valid = np.isfinite(dem)
+    edge = valid & ~binary_erosion(valid, structure=np.ones((3, 3), bool), border_value=0)
+    out = np.zeros_like(edge)
+    er, ec = np.nonzero(edge)
+    if er.size == 0 or len(ends_xy) == 0:
+        return out
+    r, c = grid.rowcol(np.asarray(ends_xy)[:, 0], np.asarray(ends_xy)[:, 1])
+    dist, idx = cKDTree(np.column_stack([er, ec])).query(np.column_stack([r, c]))
+    h = int(np.ceil(half_length / grid.cell))
+    H, W = edge.shape
+    for d, i in zip(dist, idx):
+        if d * grid.cell > reach:
+            continue
+        r0, c0 = er[i], ec[i]
+        rs, re_ = max(r0 - h, 0), min(r0 + h + 1, H)
+        cs, ce = max(c0 - h, 0), min(c0 + h + 1, W)
+        rr, cc = np.mgrid[rs:re_, cs:ce]
+        sub = edge[rs:re_, cs:ce] & ~blocked[rs:re_, cs:ce] & (np.hypot(rr - r0, cc - c0) <= h)
+        if not sub[r0 - rs, c0 - cs]:
+            continue  # the thalweg leaves across a breakline: that breakline already closes it
+        lab, _ = label(sub, structure=np.ones((3, 3), bool))
+        out[rs:re_, cs:ce] |= lab == lab[r0 - rs, c0 - cs]
+    return out
