@@ -1,0 +1,42 @@
+"""benchmarks/draw_holdout_twins.py: the held-out twins are drawn, not picked, inside the ensemble's range."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import draw_holdout_twins as dh  # noqa: E402
+
+
+def test_the_committed_files_are_the_draw_of_their_seed(tmp_path):
+    # rerunning the stated command writes the same files: nobody edited a drawn twin afterwards
+    rng = np.random.default_rng(20261206)
+    for name in ("h3", "h4", "h5", "h6"):
+        text = dh.site_file(name, 1000 + 101 * int(name[1:]), dh.draw(rng), 20261206)
+        assert text == (REPO / "config" / "sites" / "holdout" / f"{name}.yaml").read_text()
+
+
+def test_draws_stay_inside_the_ensemble_range():
+    ens = [yaml.safe_load(p.read_text()) for p in sorted((REPO / "config" / "sites" / "ensemble").glob("*.yaml"))]
+    lo = {"g": min(e["twin"]["texture"]["grass_greenness"] for e in ens),
+          "s": min(e["twin"]["texture"]["illumination"]["sun_elevation_deg"] for e in ens),
+          "tg": min(e["twin"]["landcover"]["shrubs"]["threshold_gully"] for e in ens),
+          "sh": min(e["twin"]["gullies"]["shallow_share_left"] for e in ens),
+          "d": min(e["twin"]["survey"]["heads_sigma_m"] for e in ens)}
+    hi = {"g": max(e["twin"]["texture"]["grass_greenness"] for e in ens),
+          "s": max(e["twin"]["texture"]["illumination"]["sun_elevation_deg"] for e in ens),
+          "tg": max(e["twin"]["landcover"]["shrubs"]["threshold_gully"] for e in ens),
+          "sh": max(e["twin"]["gullies"]["shallow_share_left"] for e in ens),
+          "d": max(e["twin"]["survey"]["heads_sigma_m"] for e in ens)}
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        p = dh.draw(rng)
+        for key, v in (("g", p["greenness"]), ("s", p["sun_deg"]), ("tg", p["threshold_gully"]),
+                       ("sh", p["shallow"]), ("d", p["heads_sigma_m"])):
+            assert lo[key] - 1e-9 <= v <= hi[key] + 1e-9
