@@ -271,6 +271,10 @@ def ground_profile(z: np.ndarray, step: float, segment_m: float) -> np.ndarray:
     return np.where(ok, g, z)
 
 
+#: Samples within this distance (m) of a section end count as on it (:func:`bank_reference`).
+_END_TOL = 1e-9
+
+
 def bank_reference(s: np.ndarray, z: np.ndarray, length: float, fit_m: float, model: str = "quadratic") -> np.ndarray:
     """Pre-incision surface across a gully from its two banks, on the samples ``0 <= s <= length``.
 
@@ -310,13 +314,13 @@ def bank_reference(s: np.ndarray, z: np.ndarray, length: float, fit_m: float, mo
     ndarray
         z_ref at the samples ``0 <= s <= length``. O(n).
     """
-    inner = (s >= -1e-9) & (s <= length + 1e-9)
+    inner = (s >= -_END_TOL) & (s <= length + _END_TOL)
     si, zi = s[inner], z[inner]
     L = max(float(length), 1e-9)
     t = np.clip(si / L, 0.0, 1.0)
     chord = zi[0] + (zi[-1] - zi[0]) * t if zi.size else zi
-    left = (s >= -fit_m - 1e-9) & (s <= 1e-9) & np.isfinite(z)
-    right = (s >= length - 1e-9) & (s <= length + fit_m + 1e-9) & np.isfinite(z)
+    left = (s >= -fit_m - _END_TOL) & (s <= _END_TOL) & np.isfinite(z)
+    right = (s >= length - _END_TOL) & (s <= length + fit_m + _END_TOL) & np.isfinite(z)
     if model not in ("quadratic", "lines"):
         raise ValueError(f"model must be 'quadratic' or 'lines', got {model!r}")
     if left.sum() < 2 or right.sum() < 2:
@@ -444,9 +448,12 @@ def _bank_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step:
         z_all = ground_profile(z_all, float(s_all[1] - s_all[0]) if s_all.size > 1 else step, segment_m)
     s_all = s_all - out
     z = np.interp(s, s_all, z_all)
-    keep = (s_all < 0) | (s_all > L)
-    s_b = np.concatenate([s_all[keep & (s_all < 0)], s, s_all[keep & (s_all > L)]])
-    z_b = np.concatenate([z_all[keep & (s_all < 0)], z, z_all[keep & (s_all > L)]])
+    # the banks: samples beyond the ends by more than bank_reference's own tolerance, so that exactly
+    # the n + 1 samples of s count as the section (a sample of the prolonged drape that rounding puts
+    # within 1e-9 m of an end was counted twice: a reference one sample longer than the section)
+    left, right = s_all < -_END_TOL, s_all > L + _END_TOL
+    s_b = np.concatenate([s_all[left], s, s_all[right]])
+    z_b = np.concatenate([z_all[left], z, z_all[right]])
     return s, z, bank_reference(s_b, z_b, L, fit_m, model)
 
 
