@@ -99,6 +99,7 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif") -> dic
             "width_med_abs_m": e.loc["width (m)", "median_abs_error"], "depth_med_abs_m": e.loc["depth (m)", "median_abs_error"],
             "depth_med_m": e.loc["depth (m)", "median_error"], "area_med_abs_m2": e.loc["area (m2)", "median_abs_error"],
             "volume_error_pct": e.loc["volume, all sections vs all true gullies (m3)", "error_pct"],
+            "volume_matched_error_pct": e.loc["volume, gullies with matched sections (m3)", "error_pct"],
             "volume_error_incl_unobservable_pct": e.loc["volume, all sections vs all true gullies incl. not observable (m3)", "error_pct"],
             "unobservable_volume_pct": 100 * e.loc["true volume not observable (under open water, beyond the DEM) (m3)", "true"]
             / e.loc["volume, all sections vs all true gullies incl. not observable (m3)", "true"], "run_s": run_s}

@@ -104,3 +104,22 @@ def test_open_at_edges_continues_only_a_polygon_that_reaches_the_edge():
     ext, top, left = open_at_edges(sub, 70, 10, (100, 100), gap=2)  # bottom row 97: within 2 cells
     assert (top, left) == (75, 13) and ext.shape[1] == 6
     assert ext.shape[0] > 23 + 2 and ext[-1].all()  # continued past row 99 with the band's full width
+
+
+def test_a_hole_in_a_polygon_does_not_cut_its_sections_short():
+    # A knot of dam cells the closing did not bridge (or a clump standing in the gully) leaves a hole
+    # in the pool's polygon. The axis is thinned from the filled mask, so the sections across it span
+    # the filled outline too: clipped at the hole, the sections through it lost the width beyond it.
+    dem, grid, xc = notch_dem("U", WIDTH, DEPTH, cross_slope=0.0)
+    xs, ys = grid.cell_centres()
+    lab = np.zeros(dem.shape, np.int32)
+    lab[20:220, :] = (np.abs(xs - xc) <= 0.5 * WIDTH)[None, :]
+    c = int(np.argmin(np.abs(xs - (xc + 2.0))))
+    for r in range(40, 200, 20):  # holes of 2 x 2 cells, 2 m off the axis, every 10 m along it
+        lab[r:r + 2, c:c + 2] = 0
+    polys = polygons_from_labels(lab, grid, 0.5)
+    assert len(polys.geometry.iloc[0].interiors) == 8
+    _, sec, _ = measure_sections(lab, polys, dem, dem, grid, 10.0, "lower_end", 2.0, 1.0, 1.0)
+    inner = sec[(sec["station_m"] > 10) & (sec["station_m"] < 190)]
+    assert np.abs(inner["width_m"] - WIDTH).max() <= grid.cell
+    assert inner["area_m2"].min() == pytest.approx(true_area("U", WIDTH, DEPTH), rel=0.12)

@@ -195,6 +195,19 @@ def prolong_to_outline(axis: shapely.LineString, poly, start: bool, end: bool, l
     return shapely.LineString(np.concatenate(out))
 
 
+def without_holes(poly):
+    """The polygon (or each part of a multipolygon) with its holes filled.
+
+    The medial axes are thinned from the filled mask (:func:`medial_axis`,
+    :func:`medial_network`), so the sections across them are clipped to the same filled
+    outline: a hole (a knot of dam cells the closing did not bridge, an island of
+    vegetation) would otherwise cut a section short at its edge, and the section would miss
+    the width and area beyond it.
+    """
+    parts = [shapely.Polygon(g.exterior) for g in getattr(poly, "geoms", [poly]) if g.geom_type == "Polygon"]
+    return parts[0] if len(parts) == 1 else shapely.MultiPolygon(parts)
+
+
 def _section_piece(poly, px: float, py: float, nx: float, ny: float, half: float):
     line = shapely.LineString([(px - half * nx, py - half * ny), (px + half * nx, py + half * ny)])
     inter = line.intersection(poly)
@@ -563,7 +576,7 @@ def measure_sections(
     for pid, sl in enumerate(objs, start=1):
         if sl is None or pid not in geom_of:
             continue
-        poly = geom_of[pid]
+        poly = without_holes(geom_of[pid])
         r0, c0 = max(sl[0].start - 1, 0), max(sl[1].start - 1, 0)
         r1, c1 = min(sl[0].stop + 1, labels.shape[0]), min(sl[1].stop + 1, labels.shape[1])
         sub = labels[r0:r1, c0:c1] == pid
