@@ -5,14 +5,16 @@ Where a transect crosses breaklines on both sides of the thalweg only its middle
 between the nearest crossing on each side, is kept; otherwise it keeps its full length.
 Optionally ([I]) the next transect comes earlier where the thalweg has dropped by
 ``max_drop_m`` since the last one, so that no pool's floor falls by more than that
-between its dams (the paper's advice for steep channels).
+between its dams (the paper's advice for steep channels), and ([I]) the survey's edge
+becomes a dam where a thalweg leaves the DEM (:func:`survey_edge_dams`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import shapely
-from scipy.ndimage import map_coordinates, minimum_filter
+from scipy.ndimage import binary_erosion, label, map_coordinates, minimum_filter
+from scipy.spatial import cKDTree
 
 from kitegully.io.raster import GridSpec
 
@@ -176,9 +178,6 @@ def survey_edge_dams(ends_xy: np.ndarray, dem: np.ndarray, grid: GridSpec, half_
     -----
     O(n_edge log n_edge) for the edge cells' KD-tree plus O(half_length² / cell²) per end.
     """
-    from scipy.ndimage import binary_erosion, label
-    from scipy.spatial import cKDTree
-
     valid = np.isfinite(dem)
     edge = valid & ~binary_erosion(valid, structure=np.ones((3, 3), bool), border_value=0)
     out = np.zeros_like(edge)
