@@ -55,3 +55,30 @@ def test_quality_and_widening_sections():
     bad["widening"]["margin_m"] = 0.0
     with pytest.raises(InputError, match=r"change.widening: margin_m, min_depth_m and end_m must be > 0 m"):
         ChangeParams.from_config(bad)
+
+
+def test_a_variogram_whose_longest_range_reaches_the_maximum_lag_is_reported(tmp_path, caplog):
+    # A DoD error correlated over some 50 m (white noise smoothed by a 10 m Gaussian), seen through a
+    # variogram cut at 15 m: the fitted range stops at the bound, and the volume σ it gives is too
+    # small; the stage says so. Cut at 141 m (half the diagonal) the range is found and nothing is said.
+    import logging
+
+    import numpy as np
+    from scipy.ndimage import gaussian_filter
+
+    from kitegully.change.stage import uncertainty_model
+    from kitegully.io.raster import GridSpec
+
+    grid = GridSpec(0.0, 200.0, 1.0, 200, 200, "EPSG:32632")
+    rng = np.random.default_rng(0)
+    field = gaussian_filter(rng.normal(0.0, 1.0, (200, 200)), 10.0)
+    dod = 0.05 * field / field.std() + rng.normal(0.0, 0.01, (200, 200))
+    sigma = np.full(dod.shape, 0.02)
+    stable = np.ones(dod.shape, bool)
+    out = {"variogram": str(tmp_path / "v.csv"), "variogram_png": str(tmp_path / "v.png")}
+    for max_lag, warned in ((15.0, True), (141.0, False)):
+        caplog.clear()
+        params = ChangeParams(variogram_max_lag_m=max_lag, variogram_samples=1500)
+        with caplog.at_level(logging.WARNING, logger="kitegully.change.stage"):
+            vg, _ = uncertainty_model(dod, sigma, stable, grid, params, out)
+        assert ("reached change.budget.variogram_max_lag_m" in caplog.text) is warned, vg.describe()

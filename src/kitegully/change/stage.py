@@ -135,6 +135,10 @@ def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, gr
                                      params.variogram_samples, params.seed)
         vg = bg.fit_variogram(emp, grid.cell, params.variogram_max_lag_m)
         log.info("variogram of dh/sigma: %s", vg.describe())
+        if vg.ranges_m and max(vg.ranges_m) >= 0.99 * params.variogram_max_lag_m:
+            log.warning("variogram of dh/sigma: its longest range reached change.budget.variogram_max_lag_m (%.0f m): the "
+                        "errors may be correlated farther, and the volume uncertainty may be too small; half the site's "
+                        "diagonal is the longest lag a whole-site budget needs", params.variogram_max_lag_m)
         write_table(emp.assign(model=vg.model(emp["lag_m"].to_numpy()), fitted_model=vg.describe()), out["variogram"])
     except (ValueError, RuntimeError) as exc:
         log.warning("variogram not fitted (%s): correlated uncertainty left out", exc)
