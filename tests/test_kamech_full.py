@@ -47,6 +47,8 @@ FULL_SIZE_CHANGES = {
     # the block size decides them: epoch 2 has 516 photos here, enough for its own camera; and the
     # default twin's 10 000 tie points are 175 a photo there but 13-19 here (every tie point is used)
     "georef.camera_from_first_epoch", "georef.max_tie_points",
+    # the change budget's variogram reaches half the site's diagonal (session 29): 360 m there, 1 300 m here
+    "change.budget.variogram_max_lag_m",
 }
 
 
