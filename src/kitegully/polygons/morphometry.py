@@ -579,16 +579,14 @@ def measure_sections(
         poly = without_holes(geom_of[pid])
         r0, c0 = max(sl[0].start - 1, 0), max(sl[1].start - 1, 0)
         r1, c1 = min(sl[0].stop + 1, labels.shape[0]), min(sl[1].stop + 1, labels.shape[1])
-        sub = labels[r0:r1, c0:c1] == pid
-        top, left = r0, c0
-        if open_edges:
-            sub, top, left = open_at_edges(sub, r0, c0, labels.shape, edge_gap_cells)
+        own = labels[r0:r1, c0:c1] == pid
+        sub, top, left = open_at_edges(own, r0, c0, labels.shape, edge_gap_cells) if open_edges else (own, r0, c0)
         if branches == "all":
             net = medial_network(sub, grid, top, left, smooth_step, alpha, beta, 0.5 * spacing)
         else:
             axis = medial_axis(sub, grid, top, left, smooth_step, alpha, beta)
             net = [(axis, 0.0)] if axis is not None and axis.length > 0 else []
-        if (top, left, sub.shape) != (r0, c0, (r1 - r0, c1 - c0)):
+        if sub is not own:  # continued across the edge: cut the axes back to the DEM
             net = [(a, t) for a, t in ((clip_to_extent(a, grid), t) for a, t in net) if a is not None]
         row = {"polygon_id": pid, "area_m2": poly.area, "length_m": 0.0, "n_sections": 0, "mean_width_m": np.nan,
                "max_width_m": np.nan, "mean_depth_m": np.nan, "max_depth_m": np.nan, "volume_m3": 0.0}

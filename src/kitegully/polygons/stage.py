@@ -378,7 +378,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
 
     t = time.perf_counter()
     tr_all, line_id = [], []
-    floor = station_floor(dem) if p.transect_max_drop_m is not None else None
+    floor = station_floor(dem) if p.transect_max_drop_m is not None or p.survey_edge_dams else None
     for i, ln in enumerate(th_lines):
         st = transect_stations(ln, p.transect_spacing_m, dem, grid, p.transect_max_drop_m, p.transect_min_spacing_m, floor)
         tr = make_transects(ln, st, p.transect_half_length_m, p.transect_tangent_half_window_m)
@@ -387,7 +387,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     tr_clip, clipped = clip_transects(tr_all, bl_lines)
     edge_cells = np.zeros_like(bl_cells)
     if p.survey_edge_dams:
-        edge_cells = survey_edge_dams(outlet_ends(th_lines, dem, grid), dem, grid, p.transect_half_length_m, p.transect_half_length_m,
+        edge_cells = survey_edge_dams(outlet_ends(th_lines, dem, grid, floor), dem, grid, p.transect_half_length_m, p.transect_half_length_m,
                                       barrier_mask(bl_cells, np.zeros_like(bl_cells), p.grow_cells))
         edge_lines = _lines_gdf(skeleton_paths(edge_cells, min_cells=2), grid)
         log.info("survey-edge dams: %d cells, %d lines", int(edge_cells.sum()), len(edge_lines))

@@ -125,15 +125,17 @@ def clip_transects(transects: list[shapely.LineString], breaklines: list[shapely
     return out, np.asarray(flags, bool)
 
 
-def outlet_ends(lines: list[shapely.LineString], dem: np.ndarray, grid: GridSpec) -> np.ndarray:
+def outlet_ends(lines: list[shapely.LineString], dem: np.ndarray, grid: GridSpec,
+                floor: np.ndarray | None = None) -> np.ndarray:
     """The lower end of each line (map coordinates, (n, 2)): where a thalweg's flow leaves it.
 
     Ends are compared on the 3 × 3 minimum of the DEM (:func:`station_floor`), the floor
-    the transects follow; a line whose ends stand equally high gives both.
+    the transects follow (``floor``: that raster when already computed); a line whose ends
+    stand equally high gives both.
     """
     if not lines:
         return np.zeros((0, 2))
-    floor = station_floor(dem)
+    floor = station_floor(dem) if floor is None else floor
     ends = np.array([[ln.coords[0][:2], ln.coords[-1][:2]] for ln in lines])  # (n, 2 ends, xy)
     r, c = grid.rowcol(ends[..., 0].ravel(), ends[..., 1].ravel())
     z = map_coordinates(floor, [r, c], order=1, mode="nearest").reshape(-1, 2)
