@@ -104,7 +104,8 @@ def members(names: list[str] | None, base: Path, member_dir: Path = ENSEMBLE_DIR
     """(name, override files) per member; ``default`` has none and belongs to the ensemble's folder only
     (``config/sites/holdout``: the held-out twins alone)."""
     found = {"default": []} if member_dir == ENSEMBLE_DIR else {}
-    found.update({p.stem: [p] for p in sorted(member_dir.glob("*.yaml"))})
+    by_number = lambda p: (p.stem.rstrip("0123456789"), int(p.stem[len(p.stem.rstrip("0123456789")):] or 0))  # noqa: E731
+    found.update({p.stem: [p] for p in sorted(member_dir.glob("*.yaml"), key=by_number)})  # h2 before h10
     if names:
         unknown = [n for n in names if n not in found]
         if unknown:
@@ -204,6 +205,9 @@ def score_heads_both(cfg: dict, site: Path, regully: bool = False,
                      sources: tuple[str, ...] = ("digitised", "automatic", "both")) -> dict:
     """Gully scores with the digitised heads (the rule's map) and with automatic heads (library run).
 
+    With ``gully.heads`` other than ``digitised`` in the member's config, every head source is
+    mapped by the library (:func:`regully_member`), as with ``regully``.
+
     ``regully``: map the member's dense DSM again with the current gully code and settings for
     all three head sources (``digitised``, ``automatic``, ``both``; columns ``dig_``, ``auto_``,
     ``both_``) instead of reading the rule's digitised map: existing members are rescored
@@ -225,6 +229,11 @@ def score_heads_both(cfg: dict, site: Path, regully: bool = False,
     out: dict = {}
     if regully:
         return regully_member(g, twin, dem, grid, ref, polys, true_xy, crs, sources)
+    if g["heads"] != "digitised":
+        # the rule mapped with gully.heads: both (the Kamech default) or automatic: all three sources are
+        # mapped by the library on the same DSM with the same settings (deterministic: that source's
+        # columns are the rule's map), since the rule's products hold no map of the digitised heads alone
+        return regully_member(g, twin, dem, grid, ref, polys, true_xy, crs)
     # digitised: the pipeline's own products
     gm = site / "gully/gully_map.tif"
     if gm.exists():

@@ -31,7 +31,7 @@ def test_members_are_default_plus_five():
 
 def test_held_out_twins_are_their_own_members_without_the_default():
     found = te.members(None, te.BASE, REPO / "config" / "sites" / "holdout")
-    assert [n for n, _ in found] == ["h1", "h2", "h3", "h4", "h5", "h6"]
+    assert [n for n, _ in found] == [f"h{k}" for k in range(1, 11)]
     cfgs = [te.deep_merge(te.yaml.safe_load(te.BASE.read_text()), te.yaml.safe_load(f[0].read_text())) for _, f in found]
     ens_seeds = {te.yaml.safe_load(f.read_text())["seed"] for _, files in te.members(None, te.BASE) for f in files}
     assert {c["seed"] for c in cfgs}.isdisjoint(ens_seeds | {2018})  # new draws, not an ensemble member's
@@ -139,3 +139,15 @@ def test_regully_scores_three_head_sources_on_a_member_dsm(tmp_path):
     # the automatic head of this channel lies within the snapping radius of the digitised one: not added again
     assert out["both_n_heads"] == 1
     assert out["dig_iou"] > 0.2
+    # a member whose rule mapped with gully.heads: both (the Kamech default) is scored the same way
+    # without --regully: its rule products hold no map of the digitised heads alone
+    from kitegully.io.raster import write_raster
+
+    write_raster(tmp_path / "dense/dsm.tif", z, grid)
+    write_vector(ref, twin / "observed/field_network.gpkg")
+    write_vector(polys, twin / "truth/gully_polygons.gpkg")
+    write_vector(gpd.GeoDataFrame({"head_id": [1]}, geometry=[head], crs=crs), twin / "truth/gully_heads.gpkg")
+    assert g["heads"] == "both"
+    collected = te.score_heads_both({"gully": g, "site": {"crs": crs}}, tmp_path)
+    for key in ("dig", "auto", "both"):
+        assert collected[f"{key}_good_fit_5m_pct"] == pytest.approx(out[f"{key}_good_fit_5m_pct"])

@@ -132,3 +132,31 @@ def test_sensitivity_domain_may_be_made_beside_the_depth_maps(mapped):
         assert got.equals(sensitivity_table(*args, reference=reference, domain=domain, workers=1,
                                             known_depths={5.0: res.depth}))
     assert len(calls) == 2
+
+
+def test_both_heads_also_map_the_given_heads_alone_as_digitised_heads_would():
+    # two channels in two hollows of a 10 % slope; the operator digitised the western head only.
+    # gully.heads: both traces the detector's head on the eastern channel too, and its
+    # given_extracted_lines are exactly the network that gully.heads: digitised maps on the same DEM
+    from kitegully.gully.heads import HeadDetectionParams
+
+    p = HeadDetectionParams(scale_m=2.0, relief_k=3.0, dsm_sigma_z_m=0.05, slope_window_m=1.0, area_slope_a=0.025,
+                            area_slope_b=0.4, min_channel_length_m=10.0)
+    n, cell = 400, 0.2
+    grid = GridSpec(0.0, n * cell, cell, n, n, CRS)
+    xs, ys = grid.cell_centres()
+    X, Y = np.meshgrid(xs, ys)
+    dx = np.minimum(np.abs(X - 20.0), np.abs(X - 60.0))
+    channel = 0.8 * np.clip(1 - dx, 0, None) * np.clip((60.0 - Y) / 0.4, 0, 1)
+    z = (0.1 * Y + 0.05 * dx - channel + np.random.default_rng(0).normal(0, 0.01, X.shape)).astype(np.float32)
+    params = GullyParams(sigma_m=3.0, head_snap_radius_m=6.0)
+    hx, hy = np.array([20.0]), np.array([59.0])
+    both = map_gullies(z, grid, hx, hy, params, workers=1, auto_heads=p, incision=p)
+    digitised = map_gullies(z, grid, hx, hy, params, workers=1, incision=p)
+    assert both.auto_heads.size == 1 and abs(xs[both.auto_heads[0] % n] - 60.0) < 1.0  # the head nobody digitised
+    east = both.extracted_lines.geometry.bounds["minx"] > 50.0
+    assert east.any() and both.extracted_lines[east].length.sum() > 40.0
+    alone = both.given_extracted_lines
+    assert (alone.geometry.bounds["maxx"] < 30.0).all() and alone.length.sum() > 40.0
+    assert alone.geometry.union_all().equals(digitised.extracted_lines.geometry.union_all())
+    assert digitised.given_extracted_lines is None  # nothing to separate without automatic heads

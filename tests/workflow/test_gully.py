@@ -170,6 +170,30 @@ def test_standin_is_labelled_not_photogrammetric(tmp_path):
     assert grid == info["grid"]
 
 
+def test_both_heads_score_the_digitised_heads_alone_beside_them(tmp_path):
+    """gully.heads: both (the Kamech sites' default) also writes Table 4 for the paper's procedure."""
+    fabricate_twin(tmp_path / "tiny_twin" / "twin")
+    cfg = yaml.safe_load(SITE.read_text())
+    cfg["gully"]["heads"] = "both"
+    cfg["gully"]["automatic_heads"]["dsm_sigma_z_m"] = 0.05  # the fabricated DSM's matching noise: no checkpoints read
+    site = tmp_path / "both_site.yaml"
+    site.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    out = tmp_path / "tiny_twin" / "gully"
+    run_snakemake(site, tmp_path, [str(out / "network_validation.csv")],
+                  extra=["--allowed-rules", *GULLY_RULES, "--nocolor"], cores=2)
+    summary = dict(pd.read_csv(out / "gully_summary.csv").values)
+    assert summary["head source (gully.heads)"] == "both"
+    alone = pd.read_csv(out / "network_validation_digitised.csv")
+    combined = pd.read_csv(out / "network_validation.csv")
+    assert list(alone["category"]) == list(combined["category"])
+    assert (out / "network_validation_tolerances_digitised.csv").exists()
+    # the same reference; the detector's heads only add network, so they cannot lower the good fit
+    assert alone["length_m"].iloc[0] == pytest.approx(combined["length_m"].iloc[0])
+    fit = {name: dict(zip(t["category"], t["percent"]))["good_fit"] for name, t in (("alone", alone), ("both", combined))}
+    assert 80 < fit["alone"] <= fit["both"] + 1e-6
+    assert "digitised heads alone" in (tmp_path / "tiny_twin" / "logs" / "gully" / "validate.log").read_text()
+
+
 @pytest.mark.slow
 @pytest.mark.xdist_group("tiny_sfm")  # shares the session's tiny-twin flight photos with the SfM rerun tests
 def test_gully_stage_on_the_real_tiny_twin(tiny_flight, tmp_path):

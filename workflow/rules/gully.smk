@@ -87,6 +87,11 @@ if "gully" in config:
     GULLY_CROWN_MASK = {"crowns": result("gully", "tiles/crown_mask.tif")} if GULLY_TILED and GULLY_CROWNS else {}
     GULLY_FILLED_INPUT.update(GULLY_CROWN_MASK)
 
+    # gully.heads: both also writes the network of the digitised heads alone (the paper's procedure on
+    # the same DEM), and gully_validate scores it beside the combined one (Table 4 for both)
+    GULLY_BOTH = GULLY["heads"] == "both"
+    GULLY_DIGITISED_OUT = {"mapped_network_digitised": result("gully", "gully_network_mapped_digitised.gpkg")} if GULLY_BOTH else {}
+
     rule gully_map:
         input:
             unpack(lambda wc: GULLY_HEADS_INPUT),
@@ -103,6 +108,7 @@ if "gully" in config:
             polygons=result("gully", "gully_polygons.gpkg"),
             patches=result("gully", "depth_patches.csv"),
             summary=report(result("gully", "gully_summary.csv"), caption=caption("gully_summary"), category=GULLY_CAT),
+            **GULLY_DIGITISED_OUT,
         params:
             mapping=GULLY_MAPPING,
             heads=GULLY["heads"],
@@ -143,6 +149,7 @@ if "gully" in config:
         rule gully_validate:
             input:
                 unpack(lambda wc: {"catchment": GULLY_CATCHMENT} if GULLY_CATCHMENT else {}),
+                **GULLY_DIGITISED_OUT,
                 dem=mapping_dem(),
                 gully_map=rules.gully_map.output.gully_map,
                 mapped_network=rules.gully_map.output.mapped_network,
@@ -159,6 +166,10 @@ if "gully" in config:
                 figure=report(
                     result("gully", "gully_validation_map.png"), caption=caption("gully_validation_map"), category=GULLY_CAT
                 ),
+                **({"table_digitised": report(result("gully", "network_validation_digitised.csv"),
+                                              caption=caption("gully_network_validation_digitised"), category=GULLY_CAT),
+                    "tolerances_digitised": result("gully", "network_validation_tolerances_digitised.csv")}
+                   if GULLY_BOTH else {}),
             params:
                 validation={k: v for k, v in GULLY["validation"].items() if k != "catchment_file"},
                 crs=config["site"]["crs"],

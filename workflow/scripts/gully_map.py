@@ -35,6 +35,8 @@ write_raster(out.gully_map, map_raster(res.gully, np.isfinite(dem)), grid, nodat
 write_raster(out.gully_map_whole, map_raster(res.gully_whole_patches, np.isfinite(dem)), grid, nodata=255)
 write_vector(res.lines, out.network, layer="gully_network")
 write_vector(res.extracted_lines, out.mapped_network, layer="gully_network_mapped")
+if "mapped_network_digitised" in out.keys():  # gully.heads: both: the digitised heads' network alone, for Table 4
+    write_vector(res.given_extracted_lines, out.mapped_network_digitised, layer="gully_network_mapped")
 write_vector(res.polygons, out.polygons, layer="gully_polygons")
 res.network.save(out.network_cells)
 write_table(res.patch_table, out.patches, markdown=False)

@@ -29,5 +29,11 @@ with ThreadPoolExecutor(max_workers=1) as pool:  # the figure's DEM is decoded w
     dem, _ = later.result()
 write_table(res.table, out.table, floatfmt=".1f")
 write_table(res.tolerances, out.tolerances, floatfmt=".1f")
+if "table_digitised" in out.keys():  # gully.heads: both: the digitised heads alone, the paper's procedure
+    alone = score_network(reference, read_vector(inp.mapped_network_digitised, crs=crs), gully != 255, grid, params, catchment)
+    write_table(alone.table, out.table_digitised, floatfmt=".1f")
+    write_table(alone.tolerances, out.tolerances_digitised, floatfmt=".1f")
+    log.info("digitised heads alone (the paper's procedure): good fit %.1f %% at %s m", alone.percent()["good_fit"],
+             params.tolerance_m)
 fig = validation_map(dem, gully == 1, grid, res.pieces, params.tolerance_m)
 save_figure(fig, out.figure, attribution=snakemake.params.attribution)

@@ -191,6 +191,10 @@ class GullyResult:
     #: Flat indices of the cells where a channel enters the DEM across its edge, traced after the heads
     #: (``edge_inlets``; empty when off).
     inlets: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: With given *and* automatic heads (``gully.heads: both``): the mapped network traced from the
+    #: given heads and edge inlets alone, i.e. what ``gully.heads: digitised`` maps on the same DEM
+    #: (the paper's procedure, scored beside the combined network). None otherwise.
+    given_extracted_lines: gpd.GeoDataFrame | None = None
 
 
 def map_gullies(
@@ -388,6 +392,7 @@ def map_gullies(
         params.flat_routing, n_holes, params.water_min_area_m2, n_raised, n_flat, n_left, t_flow,
     )
     auto_idx = np.zeros(0, dtype=np.int64)
+    given_idx = inside_idx
     if auto_heads is not None:
         t0 = time.perf_counter()
         auto_idx, _ = detect_heads(z_heads, filled, dirs if dirs is not None else d8_directions(filled), grid, auto_heads,
@@ -413,6 +418,11 @@ def map_gullies(
 
     t0 = time.perf_counter()
     network = trace_network(filled, inside_idx, dirs)
+    # gully.heads: both also maps the given heads' network alone (the paper's procedure): the same
+    # fill, directions and snapped heads, so it is exactly what gully.heads: digitised would trace
+    separate = auto_heads is not None and np.size(heads_x) > 0
+    given_network = (trace_network(filled, np.concatenate([given_idx, inlet_idx]), dirs)
+                     if separate and auto_idx.size else None)
     del filled, dirs
     t["trace_s"] = time.perf_counter() - t0
     log.info(
@@ -422,18 +432,17 @@ def map_gullies(
     )
 
     t0 = time.perf_counter()
-    buf = buffer_mask(network.mask(), grid.cell, params.buffer_m)
-    gully = final_map(labels, buf)
-    whole = final_map(labels, buf, whole_patches=True)
-    del buf
+    gully, whole, bridged, extracted = mapped_network(network, labels, grid, params, hidden)
     polygons = gully_polygons(gully, depth, grid, params.connectivity)
     lines = network_lines(network, grid)
-    bridged = None
     if hidden is not None:
-        bridged = hidden_reaches(network.cells, network.pos_down, gully, hidden, grid.cell, params.crowns.bridge_max_m)
         log.info("crowns: %d traced cells under crowns, %d of them bridged (hidden reaches <= %s m)",
                  int(hidden.ravel()[network.cells].sum()), int(bridged.sum()), params.crowns.bridge_max_m)
-    extracted = network_lines(network, grid, keep=gully if bridged is None else gully | bridged)
+    given_extracted = extracted if separate and given_network is None else None  # no automatic head was new
+    if given_network is not None:
+        given_extracted = mapped_network(given_network, labels, grid, params, hidden, whole=False)[3]
+        log.info("given heads alone (gully.heads: digitised on this DEM): %.0f m inside the map",
+                 given_extracted["length_m"].sum())
     t["map_s"] = time.perf_counter() - t0
     log.info(
         "gully map: %d gullies, %.0f m2, %.0f m3; network %.0f m traced, %.0f m inside the map",
@@ -442,8 +451,49 @@ def map_gullies(
     )
     return GullyResult(
         smoothed, depth, labels, table, network, gully, whole, polygons, lines, extracted, inside, n_holes, n_raised,
-        n_flat, t, auto_idx, hidden, bridged, inlet_idx,
+        n_flat, t, auto_idx, hidden, bridged, inlet_idx, given_extracted,
     )
+
+
+def mapped_network(network: GullyNetwork, labels: np.ndarray, grid: GridSpec, params: GullyParams,
+                   hidden: np.ndarray | None = None, whole: bool = True,
+                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, gpd.GeoDataFrame]:
+    """Steps l-m: the gully map (depth patches inside the network's buffer) and the mapped network.
+
+    Parameters
+    ----------
+    network : GullyNetwork
+        The traced network.
+    labels : ndarray (H, W) int
+        Depth-patch labels (0: no patch).
+    grid : GridSpec
+    params : GullyParams
+        ``buffer_m`` and ``crowns.bridge_max_m`` are read.
+    hidden : ndarray bool (H, W), optional
+        Crown mask (``gully.crowns``): traced reaches hidden under it are bridged.
+    whole : bool
+        Also make the whole-patch variant of the map.
+
+    Returns
+    -------
+    gully : ndarray bool (H, W)
+        The gully map.
+    gully_whole : ndarray bool (H, W) or None
+        Whole depth patches touched by the buffer (None unless ``whole``).
+    bridged : ndarray bool (H, W) or None
+        Traced cells bridged under crowns (None without ``hidden``).
+    lines : geopandas.GeoDataFrame
+        The network's lines where they lie in the map (or are bridged).
+    """
+    buf = buffer_mask(network.mask(), grid.cell, params.buffer_m)
+    gully = final_map(labels, buf)
+    gully_whole = final_map(labels, buf, whole_patches=True) if whole else None
+    del buf
+    bridged = None
+    if hidden is not None:
+        bridged = hidden_reaches(network.cells, network.pos_down, gully, hidden, grid.cell, params.crowns.bridge_max_m)
+    lines = network_lines(network, grid, keep=gully if bridged is None else gully | bridged)
+    return gully, gully_whole, bridged, lines
 
 
 def hole_filled(dem: np.ndarray, grid: GridSpec, params: GullyParams) -> tuple[np.ndarray, int]:
