@@ -136,3 +136,20 @@ def test_params_take_their_keys_of_the_validate_section():
         CheckpointParams.from_config(sub)
     with pytest.raises(InputError, match=r"validate.profile.reference: must be dtm or dsm"):
         TruthParams.from_config({**sub, "profile": {**v["profile"], "reference": "dem"}})
+
+
+def test_sd_without_blunders_leaves_out_gross_errors_only():
+    from kitegully.evaluate.dem import sd_without_blunders
+
+    rng = np.random.default_rng(7)
+    e = rng.normal(0.01, 0.05, 466)
+    sd, kept = sd_without_blunders(e)
+    assert kept.all() and sd == pytest.approx(e.std(ddof=1))  # no blunder: the plain SD (4 NMAD passes 0.99994)
+    with_blunders = np.concatenate([e, [5.31, -2.2], [np.nan]])
+    sd2, kept2 = sd_without_blunders(with_blunders)
+    assert kept2.size == 468 and (~kept2).sum() == 2 and not kept2[-2:].any()
+    assert sd2 == pytest.approx(sd)
+    assert sd_without_blunders(with_blunders, None)[0] > 5 * sd  # as the plain SD
+    assert np.isnan(sd_without_blunders(np.array([0.1]))[0])
+    sd3, kept3 = sd_without_blunders(np.array([0.0, 0.0, 0.0, 1.0]))  # NMAD 0: nothing can be judged
+    assert kept3.all() and sd3 == pytest.approx(0.5)

@@ -94,6 +94,10 @@ def test_dsm_noise_from_checkpoints_feeds_a_null_sigma():
     pts["z"] = rng.normal(0, 0.2, len(pts))
     sz = dsm_noise_at_checkpoints(dsm, grid, pts)
     assert sz == pytest.approx(0.2, rel=0.15)
+    # two checkpoints on gross matching errors (metres) are blunders, not the DSM's noise: left out
+    pts.loc[[0, 1], "z"] = [5.3, -2.8]
+    assert dsm_noise_at_checkpoints(dsm, grid, pts) == pytest.approx(sz, rel=0.05)
+    assert dsm_noise_at_checkpoints(dsm, grid, pts, outlier_nmad=None) > 1.5 * sz  # the plain SD would take them
     p = HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None), sz)
     assert p.dsm_sigma_z_m == pytest.approx(sz)
     with pytest.raises(InputError, match="dsm_sigma_z_m: null needs checkpoints"):

@@ -29,6 +29,7 @@ from scipy import ndimage, stats
 
 from kitegully import InputError
 from kitegully.change.coregister import nmad
+from kitegully.evaluate.dem import sd_without_blunders
 from kitegully.change.dod import Epoch, resample
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
 from kitegully.io.raster import GridSpec, Raster
@@ -101,10 +102,8 @@ def epoch_sigma(epoch: Epoch, grid: GridSpec, outlier_nmad: float | None = 4.0) 
         raise InputError(f"{acc['checkpoints']}: fewer than 3 checkpoints fall on the DEM {epoch.path}; cannot state its accuracy")
     med = float(np.median(e))
     spread = nmad(e)
-    kept = e if outlier_nmad is None or spread == 0 else e[np.abs(e - med) <= outlier_nmad * spread]
-    if kept.size < 3:
-        kept = e
-    s = float(kept.std(ddof=1))
+    s, keep = sd_without_blunders(e, outlier_nmad)
+    kept = e[keep]
     src = "checkpoints (SD)" if kept.size == e.size else f"checkpoints (SD, {e.size - kept.size} blunders > {outlier_nmad:g} NMAD left out)"
     info.update(source=src, sigma_m=s, n=int(kept.size), mean_m=float(kept.mean()), sd_m=s,
                 rmse_m=float(np.sqrt(np.mean(kept**2))), nmad_m=spread, blunders=int(e.size - kept.size),

@@ -184,6 +184,43 @@ def error_stats(e: np.ndarray) -> dict[str, float]:
     }
 
 
+def sd_without_blunders(e: np.ndarray, outlier_nmad: float | None = 4.0) -> tuple[float, np.ndarray]:
+    """SD (ddof 1) of the errors ``e`` with the blunders left out, and which were kept.
+
+    A blunder is an error farther than ``outlier_nmad`` NMADs from the median: a checkpoint on
+    a gross matching error of metres, which a plain SD would average in (robust DEM accuracy
+    after Höhle & Höhle 2009). [I] 4: a normal error passes with probability 0.99994, so on a
+    blunder-free set the SD is the plain one. Fewer than 3 kept, a zero NMAD or
+    ``outlier_nmad`` None: the SD of all. O(n log n) for n errors.
+
+    Parameters
+    ----------
+    e : ndarray
+        Errors (m), e.g. DEM minus checkpoint; non-finite values are ignored.
+    outlier_nmad : float or None
+        Blunder distance from the median in NMADs.
+
+    Returns
+    -------
+    sd : float
+        SD of the kept errors (NaN with fewer than 2 finite errors).
+    kept : ndarray bool
+        Per finite error of ``e`` (in order), True where it was kept.
+    """
+    e = np.asarray(e, float)
+    e = e[np.isfinite(e)]
+    kept = np.ones(e.size, dtype=bool)
+    if e.size < 2:
+        return float("nan"), kept
+    med = float(np.median(e))
+    spread = float(1.4826 * np.median(np.abs(e - med)))
+    if outlier_nmad is not None and spread > 0:
+        kept = np.abs(e - med) <= outlier_nmad * spread
+        if kept.sum() < 3:
+            kept[:] = True
+    return float(e[kept].std(ddof=1)), kept
+
+
 def profile_stats(v: np.ndarray) -> dict[str, float]:
     """Table 5 statistics of the finite values of ``v``: min, quartiles, median, max, mean, SD, n."""
     v = np.asarray(v, float)
