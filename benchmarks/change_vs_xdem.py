@@ -98,7 +98,8 @@ def ensure_venv() -> Path:
 
 def ours(cfg: dict, res: Path) -> dict:
     """Our co-registration on the same inputs, timed; net over our DoD's valid cells."""
-    from kitegully.change.coregister import coregister, nmad
+    from kitegully.change.coregister import coregister
+    from kitegully.evaluate.dem import nmad
     from kitegully.change.dod import load_epoch, on_common_grid
     from kitegully.change.params import ChangeParams
     from kitegully.io.raster import Raster

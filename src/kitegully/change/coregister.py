@@ -22,17 +22,10 @@ from scipy import ndimage
 
 from kitegully.change.dod import resample
 from kitegully.change.params import ChangeParams
+from kitegully.evaluate.dem import nmad
 from kitegully.io.raster import GridSpec, Raster
 
 log = logging.getLogger(__name__)
-
-
-def nmad(x: np.ndarray) -> float:
-    """Normalised median absolute deviation, 1.4826 · median(|x − median x|)."""
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return float("nan")
-    return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
 def residual_stats(dh: np.ndarray) -> dict[str, float]:

@@ -27,7 +27,8 @@ import numpy as np
 import pandas as pd
 from scipy import ndimage
 
-from kitegully.change.coregister import height_above_ground, nmad
+from kitegully.change.coregister import height_above_ground
+from kitegully.evaluate.dem import nmad
 
 log = logging.getLogger(__name__)
 

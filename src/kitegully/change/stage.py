@@ -15,7 +15,8 @@ import pandas as pd
 from kitegully import InputError
 from kitegully.change import budget as bg
 from kitegully.change import plots, uncertainty as unc
-from kitegully.change.coregister import above_ground, coregister, nmad
+from kitegully.change.coregister import above_ground, coregister
+from kitegully.evaluate.dem import nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
 from kitegully.change.error_model import SIGMA_FACTOR_TAG, checkpoint_cells, heteroscedastic_sigma
 from kitegully.change.headcuts import COLUMNS as HEADCUT_COLUMNS, measure_headcut_retreat

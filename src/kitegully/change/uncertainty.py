@@ -28,8 +28,7 @@ import pandas as pd
 from scipy import ndimage, stats
 
 from kitegully import InputError
-from kitegully.change.coregister import nmad
-from kitegully.evaluate.dem import sd_without_blunders
+from kitegully.evaluate.dem import nmad, sd_without_blunders
 from kitegully.change.dod import Epoch, resample
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
 from kitegully.io.raster import GridSpec, Raster

@@ -163,6 +163,15 @@ def sample_nearest(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, 
     return out
 
 
+def nmad(x: np.ndarray) -> float:
+    """Normalised median absolute deviation of the finite values, 1.4826 · median(|x − median x|); NaN if none."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
 def error_stats(e: np.ndarray) -> dict[str, float]:
     """Error statistics of finite values of ``e``: mean, median, SD (ddof 1), RMSE, NMAD
     (1.4826 · median |e − median|), 5th and 95th percentiles and n; NaN stats when n = 0."""
@@ -177,7 +186,7 @@ def error_stats(e: np.ndarray) -> dict[str, float]:
         "median": med,
         "sd": float(e.std(ddof=1)) if n > 1 else float("nan"),
         "rmse": float(np.sqrt(np.mean(e * e))),
-        "nmad": float(1.4826 * np.median(np.abs(e - med))),
+        "nmad": nmad(e),
         "p05": float(np.percentile(e, 5)),
         "p95": float(np.percentile(e, 95)),
         "n": int(n),
@@ -212,10 +221,9 @@ def sd_without_blunders(e: np.ndarray, outlier_nmad: float | None = 4.0) -> tupl
     kept = np.ones(e.size, dtype=bool)
     if e.size < 2:
         return float("nan"), kept
-    med = float(np.median(e))
-    spread = float(1.4826 * np.median(np.abs(e - med)))
+    spread = nmad(e)
     if outlier_nmad is not None and spread > 0:
-        kept = np.abs(e - med) <= outlier_nmad * spread
+        kept = np.abs(e - np.median(e)) <= outlier_nmad * spread
         if kept.sum() < 3:
             kept[:] = True
     return float(e[kept].std(ddof=1)), kept
