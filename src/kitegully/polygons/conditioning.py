@@ -31,6 +31,66 @@ def rasterize_lines(lines: list[shapely.LineString], grid: GridSpec) -> np.ndarr
     return out
 
 
+def bank_high_dams(lines: list[shapely.LineString], dem: np.ndarray, grid: GridSpec, grow_cells: int = 1) -> np.ndarray:
+    """The DEM with every dam raised to its crest, the lower bank it spans, and no higher.
+
+    A dam's crest is the lower of the highest ground on either side of the lowest point of
+    its profile: a check dam across a channel holds water up to its lower bank, and a dam
+    lying on open ground (no dip between two higher sides: a transect along a contour, or
+    down a slope) holds none. The dam's cells and their ``grow_cells`` neighbours are raised
+    to the crest where the ground is lower; where dams cross, the higher crest stands.
+
+    Parameters
+    ----------
+    lines
+        Dam lines (the clipped transects) in the grid's CRS.
+    dem
+        Elevations (m) on ``grid``; NaN = no data (left as is).
+    grid
+        The stage grid.
+    grow_cells
+        Dilation of each dam (cells), as the barrier raster's.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 DEM with the dams at their crests. O(Σ dam cells · (2·grow_cells + 1)²).
+    """
+    ground = np.asarray(dem, np.float64)
+    out = ground.copy()
+    h, w = out.shape
+    off = np.arange(-grow_cells, grow_cells + 1)
+    for ln in lines:
+        if ln.is_empty or ln.length == 0:
+            continue
+        s = np.arange(0.0, ln.length + 1e-9, 0.25 * grid.cell)
+        pts = shapely.line_interpolate_point(ln, s)
+        r, c = grid.rowcol(shapely.get_x(pts), shapely.get_y(pts))
+        r, c = np.round(r).astype(int), np.round(c).astype(int)
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        r, c = r[ok], c[ok]
+        z = ground[r, c] if r.size else np.zeros(0)  # each dam's own ground profile, not the crests of dams it crosses
+        if not np.isfinite(z).any():
+            continue
+        lowest = int(np.nanargmin(z))
+        crest = min(np.nanmax(z[: lowest + 1]), np.nanmax(z[lowest:]))
+        rr, cc = np.broadcast_arrays(np.clip(r[:, None, None] + off[None, :, None], 0, h - 1),
+                                     np.clip(c[:, None, None] + off[None, None, :], 0, w - 1))
+        cur = out[rr, cc]
+        out[rr, cc] = np.where(np.isfinite(cur), np.maximum(cur, crest), cur)
+    return out
+
+
+def bank_held_depth(lines: list[shapely.LineString], dem: np.ndarray, grid: GridSpec, grow_cells: int = 1) -> np.ndarray:
+    """Water depth (m) the DEM holds with every dam only as high as its lower bank (:func:`bank_high_dams`).
+
+    Returns float32, NaN on nodata. O(n log n) (one priority flood).
+    """
+    dammed = bank_high_dams(lines, dem, grid, grow_cells)
+    filled, _ = priority_flood_fill(dammed, epsilon=0.0)
+    return (filled - dammed).astype(np.float32)
+
+
 def barrier_mask(breaklines: np.ndarray, transects: np.ndarray, grow_cells: int = 1) -> np.ndarray:
     """Breakline and transect cells grown by ``grow_cells`` in all 8 directions."""
     m = breaklines | transects
@@ -55,7 +115,7 @@ def fill_depth(dem: np.ndarray, barriers: np.ndarray, raise_m: float) -> tuple[n
 def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2: float, cell: float,
                seeds: np.ndarray | None = None, bridgeable: np.ndarray | None = None,
                edge_band: np.ndarray | None = None, edge_cells: int = 0, held: np.ndarray | None = None,
-               rims: tuple | None = None, held_cells: bool = False) -> np.ndarray:
+               rims: tuple | None = None, held_cells: bool = False, bank_held: np.ndarray | None = None) -> np.ndarray:
     """Label raster of the gully polygons at one fill-depth threshold.
 
     ``FD ≥ threshold``, closed with a ``closing_cells`` square (bridges barriers narrower
@@ -70,7 +130,12 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     dams end, is not in the incision). With ``rims`` (breakline cells and their lower sides), only
     pools on the lower side of the upper edges they touch are kept
     (:func:`_pools_below_rims`): a compartment beyond the rims of the gullies around it is
-    not an incision. With ``edge_band`` (the grown breakline cells) the mask then grows by
+    not an incision. With ``bank_held`` (:func:`bank_held_depth`: the water that dams no
+    higher than their lower banks hold), only cells under such water (below the banks of a
+    dammed channel) are kept, and only polygons in which it stands at least ``threshold``
+    deep somewhere: a compartment that only the raised dams hold (crossing transects on a
+    field) impounds no channel, and a field beside a gully that such a compartment joins to
+    its pool lies above the gully's banks. With ``edge_band`` (the grown breakline cells) the mask then grows by
     ``edge_cells`` into that band: the barrier was widened only against diagonal leaks, the
     gully's outline is the breakline itself.
 
@@ -85,6 +150,8 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
         ok[np.unique(pools[(np.nan_to_num(held, nan=0.0) >= threshold) & (pools > 0)])] = True
         ok[0] = False
         m = ok[pools]
+    if bank_held is not None:
+        m &= np.nan_to_num(bank_held, nan=0.0) > 0.0
     if rims is not None:
         m = _pools_below_rims(m, rims, edge_cells + 2)
     if edge_band is not None and edge_cells > 0:
@@ -103,6 +170,10 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
         touched = np.zeros(n + 1, bool)
         touched[np.unique(lab[seeds & (lab > 0)])] = True
         keep &= touched
+    if bank_held is not None:
+        impounds = np.zeros(n + 1, bool)
+        impounds[np.unique(lab[(np.nan_to_num(bank_held, nan=0.0) >= threshold) & (lab > 0)])] = True
+        keep &= impounds
     keep[0] = False
     new = np.zeros(n + 1, np.int32)
     new[keep] = np.arange(1, keep.sum() + 1, dtype=np.int32)

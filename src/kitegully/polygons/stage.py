@@ -16,7 +16,7 @@ from kitegully import InputError
 from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.breaklines import CURVATURES, detect_breaklines, low_sides
-from kitegully.polygons.conditioning import barrier_mask, fill_depth, gully_mask, polygons_from_labels, rasterize_lines
+from kitegully.polygons.conditioning import bank_held_depth, barrier_mask, fill_depth, gully_mask, polygons_from_labels, rasterize_lines
 from kitegully.polygons.dem_prep import prepare_dem
 from kitegully.polygons.morphometry import BRANCHES, NO_RIM, REFERENCES, measure_sections
 from kitegully.polygons.skeleton import skeleton_paths
@@ -115,6 +115,9 @@ class PolygonParams:
         breakline walls hold stands beyond the rims); ``False`` = no test.
     below_rims : bool
         Keep only pools on the lower side of the upper edges (breaklines) they touch [I].
+    held_by_banks : bool
+        Keep only polygons that hold water at least t deep somewhere with every dam raised
+        only to the lower bank it spans (:func:`kitegully.polygons.conditioning.bank_held_depth`) [I].
     morph_threshold_m : float
         Fill-depth threshold of the polygons that get medial axes and sections [P 0.5].
     section_spacing_m : float
@@ -177,6 +180,7 @@ class PolygonParams:
     keep_on_thalweg: bool = True
     terrain_held: bool | str = False
     below_rims: bool = False
+    held_by_banks: bool = False
     morph_threshold_m: float = 0.5
     section_spacing_m: float = 10.0
     reference: str = "lower_end"
@@ -200,7 +204,8 @@ class PolygonParams:
         tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"],
                             optional=["survey_edge"])
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
-                                                                          "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"])
+                                                                          "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"],
+                           optional=["held_by_banks"])
         m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"],
                            optional=["ground_segment_m", "bank_fit_m", "no_rim"])
         return cls(
@@ -218,7 +223,7 @@ class PolygonParams:
             raise_m=c["raise_m"], grow_cells=c["grow_cells"], thresholds_m=tuple(c["thresholds_m"]), closing_cells=c["closing_cells"],
             bridge=c["bridge"],
             min_area_m2=c["min_area_m2"], keep_on_thalweg=c["keep_on_thalweg"],
-            terrain_held=c["terrain_held"], below_rims=c["below_rims"],
+            terrain_held=c["terrain_held"], below_rims=c["below_rims"], held_by_banks=bool(c.get("held_by_banks", False)),
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
             branches=m["branches"], rim_search_m=float(m["rim_search_m"]), prolong_axes=bool(m["prolong_axes"]),
             ground_segment_m=float(m.get("ground_segment_m", 0.0)), bank_fit_m=float(m.get("bank_fit_m", 0.0)),
@@ -407,11 +412,12 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     level = cond + fd
     rims = low_sides(dem, grid.cell, p.window_cells, bl_cells, p.edge_ground_m) if p.below_rims else None
     held = fill_depth(dem, barrier_mask(np.zeros_like(tr_cells), tr_cells, p.grow_cells), p.raise_m)[0] if p.terrain_held else None
+    bank_held = bank_held_depth(tr_clip, dem, grid, p.grow_cells) if p.held_by_banks else None
     seeds = th_cells if p.keep_on_thalweg else None
     labels, polys = {}, {}
     for thr in p.thresholds_m:
         lab = gully_mask(fd, thr, p.closing_cells, p.min_area_m2, grid.cell, seeds, bridgeable, bl_band, p.grow_cells, held,
-                         rims, held_cells=p.terrain_held == "cells")
+                         rims, held_cells=p.terrain_held == "cells", bank_held=bank_held)
         labels[thr] = lab
         polys[thr] = polygons_from_labels(lab, grid, thr, fd=fd)
         log.info("t = %.2f m: %d polygons, %.0f m2", thr, len(polys[thr]), polys[thr]["area_m2"].sum() if len(polys[thr]) else 0.0)
