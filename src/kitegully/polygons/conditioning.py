@@ -16,18 +16,24 @@ from kitegully.terrain.fill import priority_flood_fill
 log = logging.getLogger(__name__)
 
 
+def line_cells(ln: shapely.LineString, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of the grid cells along a line, in order (a point every quarter cell; off-grid points dropped)."""
+    if ln.is_empty or ln.length == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    s = np.arange(0.0, ln.length + 1e-9, 0.25 * grid.cell)
+    pts = shapely.line_interpolate_point(ln, s)
+    r, c = grid.rowcol(shapely.get_x(pts), shapely.get_y(pts))
+    r, c = np.round(r).astype(int), np.round(c).astype(int)
+    ok = (r >= 0) & (r < grid.height) & (c >= 0) & (c < grid.width)
+    return r[ok], c[ok]
+
+
 def rasterize_lines(lines: list[shapely.LineString], grid: GridSpec) -> np.ndarray:
     """Cells touched by the lines (points every quarter cell along each line)."""
     out = np.zeros((grid.height, grid.width), bool)
     for ln in lines:
-        if ln.is_empty or ln.length == 0:
-            continue
-        s = np.arange(0.0, ln.length + 1e-9, 0.25 * grid.cell)
-        pts = shapely.line_interpolate_point(ln, s)
-        r, c = grid.rowcol(shapely.get_x(pts), shapely.get_y(pts))
-        r, c = np.round(r).astype(int), np.round(c).astype(int)
-        ok = (r >= 0) & (r < grid.height) & (c >= 0) & (c < grid.width)
-        out[r[ok], c[ok]] = True
+        r, c = line_cells(ln, grid)
+        out[r, c] = True
     return out
 
 
@@ -61,15 +67,8 @@ def bank_high_dams(lines: list[shapely.LineString], dem: np.ndarray, grid: GridS
     h, w = out.shape
     off = np.arange(-grow_cells, grow_cells + 1)
     for ln in lines:
-        if ln.is_empty or ln.length == 0:
-            continue
-        s = np.arange(0.0, ln.length + 1e-9, 0.25 * grid.cell)
-        pts = shapely.line_interpolate_point(ln, s)
-        r, c = grid.rowcol(shapely.get_x(pts), shapely.get_y(pts))
-        r, c = np.round(r).astype(int), np.round(c).astype(int)
-        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        r, c = r[ok], c[ok]
-        z = ground[r, c] if r.size else np.zeros(0)  # each dam's own ground profile, not the crests of dams it crosses
+        r, c = line_cells(ln, grid)
+        z = ground[r, c]  # each dam's own ground profile, not the crests of dams it crosses
         if not np.isfinite(z).any():
             continue
         lowest = int(np.nanargmin(z))
