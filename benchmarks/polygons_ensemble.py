@@ -20,6 +20,7 @@ Usage::
 
     .venv/bin/python benchmarks/polygons_ensemble.py [--root results] [--members default,ens1,...]
     .venv/bin/python benchmarks/polygons_ensemble.py --members h1,h2 --out results/benchmarks/polygons_holdout  # held-out twins
+    .venv/bin/python benchmarks/polygons_ensemble.py --dem twin/truth/dtm.tif --water-empty  # the method on the true ground (a check only)
 
 Writes ``results/benchmarks/polygons_ensemble.csv`` and ``.md``. A member whose DSM or truth
 is missing is listed as skipped.
@@ -66,8 +67,28 @@ def member_config(member: str) -> dict:
     return cfg
 
 
-def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif") -> dict:
-    """Run the stage on one member's DSM (or another DEM under its site folder) and score it; ``status`` says why a member was skipped."""
+def water_left_empty(dem: Raster, truth: Path) -> Raster:
+    """The DEM with the twin's open water (land-cover class ``water``) set to NaN (evaluation only).
+
+    A photogrammetric DSM finds no match on calm water and the stage leaves such regions
+    empty; a twin's true DSM and DTM hold the water surface or the reservoir's bed there. With
+    the water left empty the stage applies the same open-water rule to all three surfaces.
+    """
+    lc = Raster.read(truth / "landcover.tif")
+    classes = pd.read_csv(truth / "landcover_classes.csv")
+    if lc.data.shape != dem.data.shape:
+        raise SystemExit(f"{truth / 'landcover.tif'}: grid {lc.data.shape} differs from the DEM's {dem.data.shape}")
+    water = classes.loc[classes["name"] == "water", "code"].to_numpy()
+    data = np.array(dem.data, dtype=np.float32)
+    data[np.isin(lc.data, water)] = np.nan
+    return Raster(data, dem.grid, np.nan)
+
+
+def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_empty: bool = False) -> dict:
+    """Run the stage on one member's DSM (or another DEM under its site folder) and score it; ``status`` says why a member was skipped.
+
+    ``water_empty``: the twin's open water set to NaN first (:func:`water_left_empty`; for its true surfaces).
+    """
     cfg = member_config(member)
     site = root / cfg["site"]["name"]
     dsm, truth = site / dem_rel, site / "twin" / "truth"
@@ -77,6 +98,8 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif") -> dic
         return {**row, "status": f"skipped: no {missing[0]}"}
     poly = cfg["polygons"]
     r = Raster.read(dsm)
+    if water_empty:
+        r = water_left_empty(r, truth)
     t0 = time.perf_counter()
     res = measure_polygons(r.data, r.grid, PolygonParams.from_config(poly), dem_name=str(dsm))
     run_s = time.perf_counter() - t0
@@ -132,11 +155,13 @@ def main() -> None:
     ap.add_argument("--root", default=str(REPO / "results"), help="results folder holding <site>/dense/dsm.tif and <site>/twin/truth/")
     ap.add_argument("--members", default="default," + ",".join(p.stem for p in sorted(ENSEMBLE_DIR.glob("*.yaml"))))
     ap.add_argument("--dem", default="dense/dsm.tif", help="DEM under <root>/<site>/ the stage runs on (twin/truth/dtm.tif: the true ground, a check only)")
+    ap.add_argument("--water-empty", action="store_true",
+                    help="set the twin's open water to NaN first, as a photogrammetric DSM leaves it (for --dem twin/truth/dsm.tif or dtm.tif)")
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_ensemble"))
     args = ap.parse_args()
     rows = []
     for m in args.members.split(","):
-        rows.append(score_member(m, Path(args.root), args.dem))
+        rows.append(score_member(m, Path(args.root), args.dem, args.water_empty))
         print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
     df = pd.DataFrame(rows)
     out = Path(args.out)

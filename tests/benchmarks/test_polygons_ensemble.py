@@ -42,3 +42,18 @@ def test_mean_and_worst_against_the_targets():
     assert s.loc["width_med_abs_m", "worst"] == 1.4 and not bool(s.loc["width_med_abs_m", "mean meets"])
     assert s.loc["volume_error_pct", "worst"] == 20.0 and bool(s.loc["volume_error_pct", "mean meets"])
     assert (s["members"] == 2).all()
+
+
+def test_open_water_is_left_empty_as_on_a_photogrammetric_dsm(tmp_path):
+    import numpy as np
+
+    from kitegully.io.raster import GridSpec, Raster
+
+    grid = GridSpec(500000.0, 4000100.0, 0.5, 6, 4, "EPSG:32632")
+    lc = np.array([[3, 3, 8, 8, 3, 3]] * 4, np.uint8)
+    Raster(lc, grid, 0).write(tmp_path / "landcover.tif")
+    pd.DataFrame({"code": [3, 8], "name": ["grass", "water"]}).to_csv(tmp_path / "landcover_classes.csv", index=False)
+    dem = Raster(np.arange(24, dtype=np.float32).reshape(4, 6), grid)
+    out = pe.water_left_empty(dem, tmp_path)
+    assert np.isnan(out.data[:, 2:4]).all() and np.array_equal(out.data[:, [0, 1, 4, 5]], dem.data[:, [0, 1, 4, 5]])
+    assert not np.isnan(dem.data).any()  # the input is not changed
