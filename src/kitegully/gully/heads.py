@@ -507,11 +507,10 @@ def surface_roughness(relief: np.ndarray) -> float:
     cells (× 1.4826, the SD of a normal background) is the spread of the ungullied surface;
     an incision must stand out from that as well as from the noise. O(n).
     """
-    v = np.asarray(relief, dtype=np.float64).ravel()
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return 0.0
-    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+    from kitegully.evaluate.dem import nmad
+
+    spread = nmad(np.asarray(relief, dtype=np.float64).ravel())
+    return 0.0 if np.isnan(spread) else spread
 
 
 def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points, outlier_nmad: float | None = 4.0) -> float:

@@ -145,10 +145,7 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
         m &= np.nan_to_num(held, nan=0.0) >= threshold
     elif held is not None:
         pools, npool = ndi.label(m, structure=np.ones((3, 3), bool))
-        ok = np.zeros(npool + 1, bool)
-        ok[np.unique(pools[(np.nan_to_num(held, nan=0.0) >= threshold) & (pools > 0)])] = True
-        ok[0] = False
-        m = ok[pools]
+        m = _touching(pools, npool, np.nan_to_num(held, nan=0.0) >= threshold)[pools]
     if bank_held is not None:
         m &= np.nan_to_num(bank_held, nan=0.0) > 0.0
     if rims is not None:
@@ -166,17 +163,21 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     size = np.bincount(lab.ravel(), minlength=n + 1) * cell * cell
     keep = size >= min_area_m2
     if seeds is not None:
-        touched = np.zeros(n + 1, bool)
-        touched[np.unique(lab[seeds & (lab > 0)])] = True
-        keep &= touched
+        keep &= _touching(lab, n, seeds)
     if bank_held is not None:
-        impounds = np.zeros(n + 1, bool)
-        impounds[np.unique(lab[(np.nan_to_num(bank_held, nan=0.0) >= threshold) & (lab > 0)])] = True
-        keep &= impounds
+        keep &= _touching(lab, n, np.nan_to_num(bank_held, nan=0.0) >= threshold)  # impounds a channel
     keep[0] = False
     new = np.zeros(n + 1, np.int32)
     new[keep] = np.arange(1, keep.sum() + 1, dtype=np.int32)
     return new[lab]
+
+
+def _touching(lab: np.ndarray, n: int, cells: np.ndarray) -> np.ndarray:
+    """Per label 0..n, True where the component holds at least one of ``cells`` (label 0: False)."""
+    hit = np.zeros(n + 1, bool)
+    hit[np.unique(lab[cells & (lab > 0)])] = True
+    hit[0] = False
+    return hit
 
 
 def _pools_below_rims(m: np.ndarray, rims: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], reach: int) -> np.ndarray:
