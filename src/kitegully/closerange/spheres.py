@@ -50,6 +50,7 @@ from scipy import ndimage
 
 from kitegully import InputError
 from kitegully.config import config_section
+from kitegully.evaluate.dem import nmad
 from kitegully.twin.camera import Camera
 
 
@@ -339,7 +340,7 @@ def detect_spheres(image: np.ndarray, camera: Camera, params: SphereDetection = 
             continue
         rays = camera.rays_camera(pts[use, 0], pts[use, 1])
         axis, alpha, res = fit_sphere_outline(rays, camera.f)
-        mad = 1.4826 * np.median(np.abs(res - np.median(res)))
+        mad = nmad(res)
         keep = np.abs(res) <= max(3.0 * mad, 0.1)  # a grass blade across the limb, a leftover texture edge
         if keep.sum() < 6:
             continue

@@ -38,6 +38,7 @@ from scipy import stats
 
 from kitegully import InputError
 from kitegully.config import checked_number, config_section
+from kitegully.evaluate.dem import nmad
 from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
@@ -180,7 +181,7 @@ def check_datum(dsm: np.ndarray, grid: GridSpec, gcps: pd.DataFrame, params: Dat
     ok = np.isfinite(dz)
     if ok.sum() >= 3:
         med = np.median(dz[ok])
-        sd_rob = max(1.4826 * np.median(np.abs(dz[ok] - med)), params.min_sd_m)
+        sd_rob = max(nmad(dz[ok]), params.min_sd_m)
         far = ok & (np.abs(dz - med) > params.outlier_nmad * sd_rob)
         table.loc[far, "used"] = False
         table.loc[far, "note"] = f"outlier (> {params.outlier_nmad:g} robust SD from the median)"

@@ -24,6 +24,7 @@ from scipy.interpolate import LinearNDInterpolator
 
 from kitegully import InputError
 from kitegully.config import config_section
+from kitegully.evaluate.dem import nmad
 from kitegully.io.raster import GridSpec, Raster, read_raster
 from kitegully.io.tables import write_table
 from kitegully.lowcost import spectral as sp
@@ -646,9 +647,9 @@ def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping
         dr = W[k, 2] - tdsm.data[rr[k], cc[k]]
         mr = float(np.median(dr))
         drows.append({"dsm": label, "file": name, "cells": int(ok.sum()), "share_of_cells": float(ok.sum() / max(inside.sum(), 1)),
-                      "median_error_m": m, "nmad_m": float(1.4826 * np.median(np.abs(diff - m))),
+                      "median_error_m": m, "nmad_m": nmad(diff),
                       "rmse_m": float(np.sqrt(np.mean(diff**2))), "p95_abs_error_m": float(np.percentile(np.abs(diff), 95)),
-                      "rtk_frame_median_error_m": mr, "rtk_frame_nmad_m": float(1.4826 * np.median(np.abs(dr - mr))),
+                      "rtk_frame_median_error_m": mr, "rtk_frame_nmad_m": nmad(dr),
                       "rtk_frame_p95_abs_error_m": float(np.percentile(np.abs(dr - mr), 95))})
         if name == "dsm.tif":
             grow.append({"method": f"DSM ({gj['products']}) - true surface", "targets": int(ok.sum()),

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kitegully import InputError
+from kitegully.evaluate.dem import nmad
 from kitegully.twin.camera import Camera, Pose
 
 log = logging.getLogger(__name__)
@@ -173,7 +174,7 @@ def _centroid(img: np.ndarray, c: np.ndarray, r: float, iterations: int = 3):
         rho = np.hypot(xx - c[0], yy - c[1])
         ann = patch[(rho > rw) & (rho <= ra)]
         b = float(np.median(ann))
-        noise = float(1.4826 * np.median(np.abs(ann - b)))
+        noise = nmad(ann)
         win = rho <= rw
         wgt = patch[win] - b
         s = wgt.sum()

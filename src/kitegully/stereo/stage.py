@@ -35,6 +35,7 @@ import pandas as pd
 
 from kitegully import InputError
 from kitegully.config import config_section
+from kitegully.evaluate.dem import nmad
 from kitegully.georef.similarity import umeyama
 from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.raster import GridSpec
@@ -572,7 +573,7 @@ def matching_residual_px(rect, disp, truth: StereoRig, height: Callable, grid: G
     if err.size < 10:
         return {"sigma_d_px": float("nan"), "bias_d_px": float("nan"), "y_parallax_rms_px": float("nan"), "n": int(err.size)}
     med = float(np.median(err))
-    return {"sigma_d_px": float(1.4826 * np.median(np.abs(err - med))), "bias_d_px": med,
+    return {"sigma_d_px": nmad(err), "bias_d_px": med,
             "y_parallax_rms_px": float(np.sqrt(np.mean((a[:, 1] - b[:, 1]) ** 2))), "n": int(err.size)}
 
 
