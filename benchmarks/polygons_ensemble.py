@@ -21,6 +21,8 @@ Usage::
     .venv/bin/python benchmarks/polygons_ensemble.py [--root results] [--members default,ens1,...]
     .venv/bin/python benchmarks/polygons_ensemble.py --members h1,h2 --out results/benchmarks/polygons_holdout  # held-out twins
     .venv/bin/python benchmarks/polygons_ensemble.py --dem twin/truth/dtm.tif --water-empty  # the method on the true ground (a check only)
+    .venv/bin/python benchmarks/polygons_ensemble.py --set polygons.morphometry.threshold_m=0.25 \
+        --set "polygons.conditioning.thresholds_m=[0.25, 0.5, 1.0]"   # another setting on every member (yaml values)
 
 Writes ``results/benchmarks/polygons_ensemble.csv`` and ``.md``. A member whose DSM or truth
 is missing is listed as skipped.
@@ -35,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
@@ -58,13 +61,20 @@ def _merge(base: dict, over: dict) -> dict:
     return out
 
 
-def member_config(member: str) -> dict:
-    """The member's merged site configuration (base site file + its override file)."""
+def _dotted(key: str, value) -> dict:
+    """``a.b.c`` and a value as the nested mapping ``{a: {b: {c: value}}}``."""
+    for part in reversed(key.split(".")):
+        value = {part: value}
+    return value
+
+
+def member_config(member: str, overrides: dict | None = None) -> dict:
+    """The member's merged site configuration (base site file + its override file + ``overrides``)."""
     cfg = load_yaml(BASE)
     if member != "default":
         own = ENSEMBLE_DIR / f"{member}.yaml"
         cfg = _merge(cfg, load_yaml(own if own.exists() else HOLDOUT_DIR / f"{member}.yaml"))
-    return cfg
+    return _merge(cfg, overrides or {})
 
 
 def water_left_empty(dem: Raster, truth: Path) -> Raster:
@@ -84,12 +94,14 @@ def water_left_empty(dem: Raster, truth: Path) -> Raster:
     return Raster(data, dem.grid, np.nan)
 
 
-def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_empty: bool = False) -> dict:
+def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_empty: bool = False,
+                 overrides: dict | None = None) -> dict:
     """Run the stage on one member's DSM (or another DEM under its site folder) and score it; ``status`` says why a member was skipped.
 
     ``water_empty``: the twin's open water set to NaN first (:func:`water_left_empty`; for its true surfaces).
+    ``overrides``: nested config values merged over the member's (``--set``).
     """
-    cfg = member_config(member)
+    cfg = member_config(member, overrides)
     site = root / cfg["site"]["name"]
     dsm, truth = site / dem_rel, site / "twin" / "truth"
     row: dict = {"member": member, "site": cfg["site"]["name"]}
@@ -157,11 +169,17 @@ def main() -> None:
     ap.add_argument("--dem", default="dense/dsm.tif", help="DEM under <root>/<site>/ the stage runs on (twin/truth/dtm.tif: the true ground, a check only)")
     ap.add_argument("--water-empty", action="store_true",
                     help="set the twin's open water to NaN first, as a photogrammetric DSM leaves it (for --dem twin/truth/dsm.tif or dtm.tif)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="dotted config key and yaml value merged over every member's configuration (a trial, not the site's setting)")
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_ensemble"))
     args = ap.parse_args()
+    overrides: dict = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        overrides = _merge(overrides, _dotted(key.strip(), yaml.safe_load(value)))
     rows = []
     for m in args.members.split(","):
-        rows.append(score_member(m, Path(args.root), args.dem, args.water_empty))
+        rows.append(score_member(m, Path(args.root), args.dem, args.water_empty, overrides))
         print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
     df = pd.DataFrame(rows)
     out = Path(args.out)

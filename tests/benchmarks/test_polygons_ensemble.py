@@ -57,3 +57,15 @@ def test_open_water_is_left_empty_as_on_a_photogrammetric_dsm(tmp_path):
     out = pe.water_left_empty(dem, tmp_path)
     assert np.isnan(out.data[:, 2:4]).all() and np.array_equal(out.data[:, [0, 1, 4, 5]], dem.data[:, [0, 1, 4, 5]])
     assert not np.isnan(dem.data).any()  # the input is not changed
+
+
+def test_set_overrides_merge_over_every_member():
+    over = pe._merge(pe._dotted("polygons.morphometry.threshold_m", 0.25),
+                     pe._dotted("polygons.conditioning.thresholds_m", [0.25, 0.5]))
+    for m in ("default", "ens1", "h1"):
+        c = pe.member_config(m, over)
+        assert c["polygons"]["morphometry"]["threshold_m"] == 0.25
+        assert c["polygons"]["conditioning"]["thresholds_m"] == [0.25, 0.5]
+        # the rest of the section is the member's own
+        assert c["polygons"]["morphometry"]["spacing_m"] == pe.member_config(m)["polygons"]["morphometry"]["spacing_m"]
+    assert pe.member_config("default")["polygons"]["morphometry"]["threshold_m"] == 0.5  # no override, no change
