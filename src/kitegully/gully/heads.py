@@ -39,6 +39,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from kitegully import InputError
+from kitegully.evaluate.dem import nmad
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.flow import D8_OFFSETS, END_MERGE, END_ON_NETWORK, trace_paths
 from kitegully.terrain.smoothing import gaussian_smooth_fft
@@ -507,8 +508,6 @@ def surface_roughness(relief: np.ndarray) -> float:
     cells (× 1.4826, the SD of a normal background) is the spread of the ungullied surface;
     an incision must stand out from that as well as from the noise. O(n).
     """
-    from kitegully.evaluate.dem import nmad
-
     spread = nmad(np.asarray(relief, dtype=np.float64).ravel())
     return 0.0 if np.isnan(spread) else spread
 
