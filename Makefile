@@ -16,7 +16,7 @@ endif
 # one line naming file and line for a YAML error (Snakemake's own loader names neither)
 CONFIG_CHECK = $(BIN)/python -m kitegully.config $(if $(SITE),config/sites/$(SITE).yaml,)
 
-.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble holdout ensemble-change holdout-change gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density bundle-speed dense-final-window
+.PHONY: run test report venv clean-venv dryrun benchmark slurm-test ensemble holdout ensemble-change holdout-change gully-ensemble-analysis change-vs-xdem stereo kamech-full kamech-full-estimate tiles-check lowcost lowcost-5mm lowcost-5mm-cost closerange polygons-benchmarks speed-benchmarks polygons-tiles-check dense-view-cap georef-tie-density bundle-speed dense-final-window gsd-experiment gsd-experiment-base
 
 $(STAMP): pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "kitegully needs $(PYTHON) on PATH (set PYTHON=...)"; exit 1; }
@@ -158,6 +158,26 @@ lowcost-5mm: $(STAMP)
 lowcost-5mm-cost: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/lowcost_5mm_cost.py --site config/sites/lowcost_twin.yaml \
 		--override config/sites/variants/lowcost_twin_5mm.yaml --photos 6
+
+# Survey design (issues 16, 17): the default twin photographed at ~0.07 m GSD (4000 px photos, 0.1 m DSM,
+# a 0.5 m matching window), everything else the default twin's: config/sites/variants/kamech_twin_gsd7cm.yaml,
+# results/kamech_twin_gsd7cm/. Epochs 1 and 2 to the polygons' and the change stage's scores against the truth
+# (20 jobs; ~48 min on 2 cores, session 33). GSD_MEMBER=ens1 does the same for an ensemble member
+# (results/ens1_gsd7cm/; `make gsd-experiment-base GSD_MEMBER=ens1` runs its default-GSD epoch 2 and change for
+# the comparison). Copying results/<twin>/twin there first (cp -a) reuses the same truth (regenerated otherwise,
+# identically). Then benchmarks/gsd_experiment.py puts the two runs side by side.
+GSD_MEMBER ?=
+GSD_BASE := config/sites/kamech_twin.yaml $(if $(GSD_MEMBER),config/sites/ensemble/$(GSD_MEMBER).yaml)
+GSD_SITE := $(if $(GSD_MEMBER),$(GSD_MEMBER),kamech_twin)
+GSD_TARGETS = results/$(1)/change/evaluation_summary.csv results/$(1)/polygons/morphometry_errors.csv \
+	results/$(1)/validate/checkpoint_summary.csv results/$(1)/validate/epoch2/checkpoint_summary.csv
+gsd-experiment: $(STAMP)
+	@$(BIN)/python -m kitegully.config $(GSD_BASE) config/sites/variants/kamech_twin_gsd7cm.yaml
+	$(BIN)/snakemake --cores $(CORES) --configfile $(GSD_BASE) config/sites/variants/kamech_twin_gsd7cm.yaml \
+		--config 'site={name: $(GSD_SITE)_gsd7cm}' $(SNAKE_ARGS) -- $(call GSD_TARGETS,$(GSD_SITE)_gsd7cm)
+
+gsd-experiment-base: $(STAMP)
+	$(BIN)/snakemake --cores $(CORES) --configfile $(GSD_BASE) $(SNAKE_ARGS) -- $(call GSD_TARGETS,$(GSD_SITE))
 
 # Close-range SfM of all OBIA scenes (issue 20; the default run builds closerange.scenes, one
 # scene): pole photos -> SfM -> 2 cm orthophotos -> OBIA, results/<site>/obia/closerange_sfm.csv
