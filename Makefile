@@ -170,7 +170,8 @@ GSD_MEMBER ?=
 GSD_BASE := config/sites/kamech_twin.yaml $(if $(GSD_MEMBER),config/sites/ensemble/$(GSD_MEMBER).yaml)
 GSD_SITE := $(if $(GSD_MEMBER),$(GSD_MEMBER),kamech_twin)
 GSD_TARGETS = results/$(1)/change/evaluation_summary.csv results/$(1)/polygons/morphometry_errors.csv \
-	results/$(1)/validate/checkpoint_summary.csv results/$(1)/validate/epoch2/checkpoint_summary.csv
+	results/$(1)/validate/checkpoint_summary.csv results/$(1)/validate/epoch2/checkpoint_summary.csv \
+	results/$(1)/validate/dsm_error_by_landcover.csv
 gsd-experiment: $(STAMP)
 	@$(BIN)/python -m kitegully.config $(GSD_BASE) config/sites/variants/kamech_twin_gsd7cm.yaml
 	$(BIN)/snakemake --cores $(CORES) --configfile $(GSD_BASE) config/sites/variants/kamech_twin_gsd7cm.yaml \

@@ -17,7 +17,9 @@ Nothing is computed from rasters here: every number is one the stages' own evalu
     .venv/bin/python benchmarks/gsd_experiment.py [--base results/kamech_twin]
         [--fine results/kamech_twin_gsd7cm] [--out docs/benchmarks/gsd_experiment_session33]
 
-Writes ``<out>.csv`` (quantity, base, fine) and ``<out>.md`` (the same, and the per-head table).
+Writes ``<out>.csv`` (quantity, base, fine) and ``<out>.md`` (the same, and the per-head table); with
+``--figure PNG``, the profile along each retreated head's axis on the true DSMs and on both runs' DSMs
+(epoch 2 co-registered: epoch 1 + the change stage's DoD), the true heads of both epochs marked.
 """
 
 from __future__ import annotations
@@ -26,12 +28,16 @@ import argparse
 import sys
 from pathlib import Path
 
+import geopandas as gpd
 import numpy as np
 import pandas as pd
+from scipy import ndimage
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
+from kitegully.io.figures import new_figure, save_figure  # noqa: E402
+from kitegully.io.raster import GridSpec, read_raster  # noqa: E402
 from kitegully.io.tables import write_table  # noqa: E402
 
 #: evaluation_summary rows reported, with the label they get here
@@ -133,6 +139,70 @@ def heads_table(base: Path, fine: Path) -> pd.DataFrame:
     return t.loc[t["true_retreat_m"] > 0].sort_values("true_retreat_m").reset_index(drop=True)
 
 
+def sample_line(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear samples of ``z`` at map points (NaN outside or next to NaN)."""
+    col = (x - grid.x0) / grid.cell - 0.5
+    row = (grid.y0 - y) / grid.cell - 0.5
+    return ndimage.map_coordinates(z.astype(np.float64), [row, col], order=1, mode="constant", cval=np.nan)
+
+
+def plot_head_profiles(base: Path, fine: Path, path: Path, up_m: float = 5.0, down_m: float = 4.0,
+                       step_m: float = 0.05) -> None:
+    """Profiles along the epoch-1 axis of every retreated head measured in both runs (evaluation only).
+
+    Distance 0 is the base run's epoch-1 lip, positive downstream; elevations relative to the true
+    epoch-1 DSM at the upslope end. Epoch 2 is drawn co-registered (epoch 1 + DoD) as the change
+    stage measured it.
+    """
+    heads = heads_table(base, fine)
+    heads = heads.loc[heads["retreat_m_base"].notna() & heads["retreat_m_fine"].notna()]
+    rows = pd.read_csv(base / "change/headcut_retreat_vs_truth.csv").set_index("head_id")
+    twin = base / "twin"
+    truth = {e: read_raster(twin / sub / "truth/dsm.tif") for e, sub in (("1", ""), ("2", "epoch2"))}
+    true_heads = {e: gpd.read_file(twin / sub / "truth/gully_heads.gpkg").set_index("gully_id")
+                  for e, sub in (("1", ""), ("2", "epoch2"))}
+    runs = {}
+    for name, run in (("base", base), ("fine", fine)):
+        z1, g = read_raster(run / "dense/dsm.tif")
+        dod, gd = read_raster(run / "change/dod.tif")
+        runs[name] = (z1, (z1 + dod) if gd.shape == g.shape else None, g)
+    n = len(heads)
+    ncol = min(4, max(n, 1))
+    nrow = int(np.ceil(n / ncol)) if n else 1
+    fig, axes = new_figure(nrow, ncol, figsize=(3.2 * ncol, 2.6 * nrow), squeeze=False, sharey=False)
+    s = np.arange(-up_m, down_m + 1e-9, step_m)
+    colours = {"truth": "black", "base": "tab:blue", "fine": "tab:orange"}
+    labels = {"truth": "true DSM", "base": f"base ({base.name}) DSM", "fine": f"fine ({fine.name}) DSM"}
+    for ax, h in zip(axes.ravel(), heads.itertuples()):
+        r = rows.loc[h.head_id]
+        t = np.array([r["axis_x"], r["axis_y"]])
+        x, y = r["x1"] + s * t[0], r["y1"] + s * t[1]
+        ref = sample_line(truth["1"][0], truth["1"][1], x[:1], y[:1])[0]
+        for key, surf in (("truth", (truth["1"][0], truth["2"][0], truth["1"][1])), ("base", runs["base"]), ("fine", runs["fine"])):
+            z1, z2, g = surf
+            ax.plot(s, sample_line(z1, g, x, y) - ref, color=colours[key], lw=1.0, label=f"{labels[key]}, epoch 1")
+            if z2 is not None:
+                ax.plot(s, sample_line(z2, g, x, y) - ref, color=colours[key], lw=1.0, ls="--", label=f"{labels[key]}, epoch 2")
+        for e, ls in (("1", "-"), ("2", "--")):
+            gid = int(h.true_gully_id)
+            if gid in true_heads[e].index:
+                p = true_heads[e].loc[gid].geometry
+                ax.axvline((p.x - r["x1"]) * t[0] + (p.y - r["y1"]) * t[1], color="0.5", lw=0.8, ls=ls)
+        ax.set_title(f"head {h.head_id}: true retreat {h.true_retreat_m:.2f} m\n"
+                     f"measured {h.retreat_m_base:.1f} (base), {h.retreat_m_fine:.1f} m (fine)", fontsize=8)
+        ax.set_xlabel("along the head axis, downstream (m)")
+        ax.set_ylabel("elevation (m, relative)")
+    for ax in axes.ravel()[n:]:
+        ax.set_axis_off()
+    if n:
+        handles, lab = axes.ravel()[0].get_legend_handles_labels()
+        fig.legend(handles, lab, loc="lower center", ncol=3, fontsize=7, bbox_to_anchor=(0.5, -0.06))
+    fig.suptitle("Retreated heads: profiles along the epoch-1 axis (grey lines: true heads, epoch 1 solid, epoch 2 dashed)",
+                 fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path, attribution="kitegully digital twin (synthetic); evaluation only")
+
+
 def compare(base: Path, fine: Path) -> pd.DataFrame:
     rows = []
     for fn in (dsm_rows, polygon_rows, change_rows, cost_rows):
@@ -147,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--base", type=Path, default=REPO / "results/kamech_twin")
     ap.add_argument("--fine", type=Path, default=REPO / "results/kamech_twin_gsd7cm")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks/out/gsd_experiment")
+    ap.add_argument("--figure", type=Path, default=None, help="PNG of the retreated heads' profiles")
     a = ap.parse_args(argv)
     for run in (a.base, a.fine):
         if not (run / "change/evaluation_summary.csv").exists():
@@ -162,6 +233,9 @@ def main(argv: list[str] | None = None) -> int:
           heads.to_markdown(index=False, floatfmt=".2f") if len(heads) else "(no matched heads)", ""]
     a.out.with_suffix(".md").write_text("\n".join(md))
     print(a.out.with_suffix(".md").read_text())
+    if a.figure is not None:
+        plot_head_profiles(a.base, a.fine, a.figure)
+        print(f"wrote {a.figure}")
     return 0
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -57,3 +58,17 @@ def test_main_refuses_a_run_without_change_tables(tmp_path, capsys):
     fine = _run(tmp_path / "fine", 0.09, 0.31, 450.0)
     assert gx.main(["--base", str(base), "--fine", str(fine), "--out", str(tmp_path / "o")]) == 0
     assert (tmp_path / "o.csv").exists() and "Headcut retreat per head" in (tmp_path / "o.md").read_text()
+
+
+def test_sample_line_is_bilinear_on_a_plane_and_nan_outside():
+    from kitegully.io.raster import GridSpec
+
+    grid = GridSpec(100.0, 200.0, 0.5, 20, 10, "EPSG:32632")
+    cols, rows = np.meshgrid(np.arange(20), np.arange(10))
+    x_c, y_c = grid.x0 + (cols + 0.5) * grid.cell, grid.y0 - (rows + 0.5) * grid.cell
+    z = 0.3 * x_c - 0.1 * y_c                                        # a plane: bilinear sampling is exact
+    x = np.array([101.1, 104.37, 108.9, 95.0])
+    y = np.array([198.2, 196.01, 196.4, 198.0])
+    got = gx.sample_line(z, grid, x, y)
+    assert got[:3] == pytest.approx(0.3 * x[:3] - 0.1 * y[:3], abs=1e-9)
+    assert np.isnan(got[3])                                           # west of the grid
