@@ -108,6 +108,7 @@ def polygon_rows(run: Path) -> dict[str, float]:
 
 
 def change_rows(run: Path) -> dict[str, float]:
+    """The change evaluation's rows named in :data:`CHANGE_ROWS` (net, detections, headcuts, Moritani, widening)."""
     ev = _read(run / "change/evaluation_summary.csv")
     if ev is None:
         return {}
@@ -150,9 +151,19 @@ def plot_head_profiles(base: Path, fine: Path, path: Path, up_m: float = 5.0, do
                        step_m: float = 0.05) -> None:
     """Profiles along the epoch-1 axis of every retreated head measured in both runs (evaluation only).
 
-    Distance 0 is the base run's epoch-1 lip, positive downstream; elevations relative to the true
-    epoch-1 DSM at the upslope end. Epoch 2 is drawn co-registered (epoch 1 + DoD) as the change
-    stage measured it.
+    Distance 0 is the base run's epoch-1 lip on the base run's axis (the fine run measured on its own
+    axis, usually within a few degrees), positive downstream; elevations relative to the true epoch-1
+    DSM at the upslope end. Epoch 2 is drawn co-registered (epoch 1 + DoD), so its matching voids are
+    gaps.
+
+    Parameters
+    ----------
+    base, fine : Path
+        The two runs' results folders (the twin's truth is read from ``base``).
+    path : Path
+        The PNG to write.
+    up_m, down_m, step_m : float
+        Profile extent upslope and downstream of the lip, and station spacing (m).
     """
     heads = heads_table(base, fine)
     heads = heads.loc[heads["retreat_m_base"].notna() & heads["retreat_m_fine"].notna()]
@@ -197,13 +208,26 @@ def plot_head_profiles(base: Path, fine: Path, path: Path, up_m: float = 5.0, do
     if n:
         handles, lab = axes.ravel()[0].get_legend_handles_labels()
         fig.legend(handles, lab, loc="lower center", ncol=3, fontsize=7, bbox_to_anchor=(0.5, -0.06))
-    fig.suptitle("Retreated heads: profiles along the epoch-1 axis (grey lines: true heads, epoch 1 solid, epoch 2 dashed)",
+    fig.suptitle("Retreated heads: profiles along the base run's epoch-1 axis (grey lines: true heads, epoch 1 solid, "
+                 "epoch 2 dashed)",
                  fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, attribution="kitegully digital twin (synthetic); evaluation only")
 
 
 def compare(base: Path, fine: Path) -> pd.DataFrame:
+    """One row per quantity (DSM, polygons, change, cost) with the two runs' values.
+
+    Parameters
+    ----------
+    base, fine : Path
+        Results folders of the same twin at two survey designs.
+
+    Returns
+    -------
+    DataFrame
+        ``quantity, base, fine``; NaN where a run has no such table.
+    """
     rows = []
     for fn in (dsm_rows, polygon_rows, change_rows, cost_rows):
         a, b = fn(base), fn(fine)
