@@ -162,7 +162,7 @@ lowcost-5mm-cost: $(STAMP)
 # Survey design (issues 16, 17): the default twin photographed at ~0.07 m GSD (4000 px photos, 0.1 m DSM,
 # a 0.5 m matching window), everything else the default twin's: config/sites/variants/kamech_twin_gsd7cm.yaml,
 # results/kamech_twin_gsd7cm/. Epochs 1 and 2 to the polygons' and the change stage's scores against the truth
-# (20 jobs; ~48 min on 2 cores, session 33). GSD_MEMBER=ens1 does the same for an ensemble member
+# (18 jobs, 25 min 52 s on 2 cores beside other work, peak 5.1 GB, session 33; ens1 32 min). GSD_MEMBER=ens1 does the same for an ensemble member
 # (results/ens1_gsd7cm/; `make gsd-experiment-base GSD_MEMBER=ens1` runs its default-GSD epoch 2 and change for
 # the comparison). Copying results/<twin>/twin there first (cp -a) reuses the same truth (regenerated otherwise,
 # identically). Then benchmarks/gsd_experiment.py puts the two runs side by side.

@@ -31,13 +31,13 @@ from pathlib import Path
 import geopandas as gpd
 import numpy as np
 import pandas as pd
-from scipy import ndimage
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
+from kitegully.evaluate.dem import sample_bilinear  # noqa: E402
 from kitegully.io.figures import new_figure, save_figure  # noqa: E402
-from kitegully.io.raster import GridSpec, read_raster  # noqa: E402
+from kitegully.io.raster import read_raster  # noqa: E402
 from kitegully.io.tables import write_table  # noqa: E402
 
 #: evaluation_summary rows reported, with the label they get here
@@ -140,13 +140,6 @@ def heads_table(base: Path, fine: Path) -> pd.DataFrame:
     return t.loc[t["true_retreat_m"] > 0].sort_values("true_retreat_m").reset_index(drop=True)
 
 
-def sample_line(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Bilinear samples of ``z`` at map points (NaN outside or next to NaN)."""
-    col = (x - grid.x0) / grid.cell - 0.5
-    row = (grid.y0 - y) / grid.cell - 0.5
-    return ndimage.map_coordinates(z.astype(np.float64), [row, col], order=1, mode="constant", cval=np.nan)
-
-
 def plot_head_profiles(base: Path, fine: Path, path: Path, up_m: float = 5.0, down_m: float = 4.0,
                        step_m: float = 0.05) -> None:
     """Profiles along the epoch-1 axis of every retreated head measured in both runs (evaluation only).
@@ -188,12 +181,12 @@ def plot_head_profiles(base: Path, fine: Path, path: Path, up_m: float = 5.0, do
         r = rows.loc[h.head_id]
         t = np.array([r["axis_x"], r["axis_y"]])
         x, y = r["x1"] + s * t[0], r["y1"] + s * t[1]
-        ref = sample_line(truth["1"][0], truth["1"][1], x[:1], y[:1])[0]
+        ref = sample_bilinear(truth["1"][0], truth["1"][1], x[:1], y[:1])[0]
         for key, surf in (("truth", (truth["1"][0], truth["2"][0], truth["1"][1])), ("base", runs["base"]), ("fine", runs["fine"])):
             z1, z2, g = surf
-            ax.plot(s, sample_line(z1, g, x, y) - ref, color=colours[key], lw=1.0, label=f"{labels[key]}, epoch 1")
+            ax.plot(s, sample_bilinear(z1, g, x, y) - ref, color=colours[key], lw=1.0, label=f"{labels[key]}, epoch 1")
             if z2 is not None:
-                ax.plot(s, sample_line(z2, g, x, y) - ref, color=colours[key], lw=1.0, ls="--", label=f"{labels[key]}, epoch 2")
+                ax.plot(s, sample_bilinear(z2, g, x, y) - ref, color=colours[key], lw=1.0, ls="--", label=f"{labels[key]}, epoch 2")
         for e, ls in (("1", "-"), ("2", "--")):
             gid = int(h.true_gully_id)
             if gid in true_heads[e].index:

@@ -60,7 +60,7 @@ def test_main_refuses_a_run_without_change_tables(tmp_path, capsys):
     assert (tmp_path / "o.csv").exists() and "Headcut retreat per head" in (tmp_path / "o.md").read_text()
 
 
-def test_sample_line_is_bilinear_on_a_plane_and_nan_outside():
+def test_profile_sampling_is_bilinear_on_a_plane_and_nan_outside():
     from kitegully.io.raster import GridSpec
 
     grid = GridSpec(100.0, 200.0, 0.5, 20, 10, "EPSG:32632")
@@ -69,6 +69,6 @@ def test_sample_line_is_bilinear_on_a_plane_and_nan_outside():
     z = 0.3 * x_c - 0.1 * y_c                                        # a plane: bilinear sampling is exact
     x = np.array([101.1, 104.37, 108.9, 95.0])
     y = np.array([198.2, 196.01, 196.4, 198.0])
-    got = gx.sample_line(z, grid, x, y)
+    got = gx.sample_bilinear(z, grid, x, y)                          # the library's sampler the figure uses
     assert got[:3] == pytest.approx(0.3 * x[:3] - 0.1 * y[:3], abs=1e-9)
     assert np.isnan(got[3])                                           # west of the grid
