@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kitegully.polygons.thalweg import mfd_catchment_area, snakes_smooth, thalweg_lines, topographic_convergence_index
+from kitegully.polygons.thalweg import follow_flow, mfd_catchment_area, snakes_smooth, thalweg_lines, topographic_convergence_index
 from .polygon_synthetic import notch_dem
 
 
@@ -39,3 +39,43 @@ def test_snakes_keep_ends_and_smooth_noise():
     sm = snakes_smooth(xy, 1.0, 1.0)
     assert np.allclose(sm[[0, -1]], xy[[0, -1]])
     assert np.abs(sm[5:-5, 1]).std() < 0.5 * np.abs(xy[5:-5, 1]).std()
+
+
+def _channel_down_a_slope(h=60, w=21):
+    r, c = np.mgrid[0:h, 0:w].astype(float)
+    z = 100.0 - 0.1 * r + 0.05 * np.abs(c - 10)  # falls to the south, a V along column 10
+    incised = np.abs(c - 10) < 1
+    seeds = np.zeros((h, w), bool)
+    seeds[0:5, 10] = True
+    return z, incised, seeds
+
+
+def test_follow_flow_bridges_a_short_gap_and_stops_at_a_long_one():
+    z, incised, seeds = _channel_down_a_slope()
+    incised[30:33] = False  # 3 cells: bridged with gap 4
+    incised[45:52] = False  # 7 cells: ends the path
+    m = follow_flow(seeds, incised, z, 4)
+    rows = np.flatnonzero(m[:, 10])
+    assert rows.min() == 0 and rows.max() == 44
+    assert m[30:33, 10].all()  # the bridged stretch joins the mask
+    assert m.sum() == 45 and not m[:, :10].any() and not m[:, 11:].any()
+    # with no bridging the path ends at the first gap
+    assert np.flatnonzero(follow_flow(seeds, incised, z, 0)[:, 10]).max() == 29
+
+
+def test_follow_flow_never_runs_upslope_and_keeps_the_seeds():
+    z, incised, _ = _channel_down_a_slope()
+    seeds = np.zeros_like(incised)
+    seeds[40, 10] = True
+    seeds[5, 3] = True  # a seed on non-incised ground stays, and adds nothing: its path leaves at once
+    m = follow_flow(seeds, incised, z, 2)
+    assert not m[:40, 10].any()  # nothing upslope of the seed
+    assert m[40:, 10].all()
+    assert m[5, 3] and m[:, 3].sum() == 1 and m[:, :3].sum() == 0
+
+
+def test_follow_flow_stops_at_nodata():
+    z, incised, seeds = _channel_down_a_slope()
+    z[20, :] = np.nan  # a void row across the channel
+    m = follow_flow(seeds, incised, z, 4)
+    assert np.flatnonzero(m[:, 10]).max() == 19

@@ -76,6 +76,10 @@ class PolygonParams:
         length [I]; None = no check.
     thalweg_closing_cells : int
         Closing of the TCI mask before the skeleton (cells) [I]; 1 = none.
+    thalweg_follow_flow : bool
+        Extend the thalweg mask down the D8 flow paths through incised cells, bridging up to
+        ``thalweg_closing_cells`` (:func:`kitegully.polygons.thalweg.follow_flow`) [I]; needs
+        ``min_incision_m``.
     smooth_step_m : float
         Vertex spacing of the snakes smoothing of thalweg and medial axes (m) [I].
     snakes_alpha, snakes_beta : float
@@ -162,6 +166,7 @@ class PolygonParams:
     thalweg_min_length_m: float = 10.0
     min_incision_m: float | None = None
     thalweg_closing_cells: int = 1
+    thalweg_follow_flow: bool = False
     smooth_step_m: float = 2.0
     snakes_alpha: float = 1.0
     snakes_beta: float = 1.0
@@ -200,7 +205,7 @@ class PolygonParams:
         b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"],
                            optional=["ground_segment_m"])
         t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m", "mask_closing_cells",
-                                                                "smooth_step_m", "snakes_alpha", "snakes_beta"])
+                                                                "smooth_step_m", "snakes_alpha", "snakes_beta"], optional=["follow_flow"])
         tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"],
                             optional=["survey_edge"])
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
@@ -215,7 +220,7 @@ class PolygonParams:
             edge_ground_m=float(b.get("ground_segment_m", 0.0)),
             tci_threshold=t["tci_threshold"], mfd_exponent=t["mfd_exponent"], min_tan_slope=t["min_tan_slope"],
             thalweg_min_length_m=t["min_length_m"], min_incision_m=t["min_incision_m"],
-            thalweg_closing_cells=t["mask_closing_cells"], smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
+            thalweg_closing_cells=t["mask_closing_cells"], thalweg_follow_flow=bool(t.get("follow_flow", False)), smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
             snakes_beta=t["snakes_beta"],
             transect_spacing_m=tr["spacing_m"], transect_half_length_m=tr["half_length_m"], transect_max_drop_m=tr["max_drop_m"],
             transect_min_spacing_m=tr["min_spacing_m"], transect_tangent_half_window_m=tr["tangent_half_window_m"],
@@ -378,7 +383,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     tci, _ = topographic_convergence_index(dem, grid.cell, p.mfd_exponent, p.min_tan_slope)
     th_lines, th_cells = thalweg_lines(tci, grid, p.tci_threshold, p.thalweg_min_length_m, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
                                        dem, p.min_incision_m, 2.0 * p.transect_half_length_m,
-                                       p.thalweg_closing_cells)
+                                       p.thalweg_closing_cells, p.thalweg_follow_flow)
     T["thalweg_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -21,6 +21,7 @@ from kitegully import InputError
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.skeleton import remove_short_components, skeleton_paths
 from kitegully.terrain.fill import priority_flood_fill
+from kitegully.terrain.flow import D8_OFFSETS, NO_FLOW, d8_directions
 
 log = logging.getLogger(__name__)
 
@@ -152,6 +153,72 @@ def resample_line(xy: np.ndarray, step: float) -> np.ndarray:
     return np.column_stack([np.interp(t, s, xy[:, 0]), np.interp(t, s, xy[:, 1])])
 
 
+@njit(cache=True)
+def _follow_flow(dirs, incised, seeds, gap, offs):
+    h, w = dirs.shape
+    d = dirs.ravel()
+    inc = incised.ravel()
+    out = seeds.ravel().copy()
+    pend = np.empty(gap + 1, dtype=np.int64)
+    for i in np.flatnonzero(seeds.ravel()):
+        j = i
+        npend = 0
+        while True:
+            k = d[j]
+            if k == NO_FLOW:
+                break
+            r = j // w
+            j = (r + offs[k, 0]) * w + (j - r * w) + offs[k, 1]
+            if out[j] or inc[j]:
+                for q in range(npend):
+                    out[pend[q]] = True
+                npend = 0
+                if out[j]:
+                    break  # joined cells whose own path goes on downstream
+                out[j] = True
+            else:
+                if npend == gap:
+                    break
+                pend[npend] = j
+                npend += 1
+    return out.reshape(h, w)
+
+
+def follow_flow(seeds: np.ndarray, incised: np.ndarray, dem: np.ndarray, gap_cells: int) -> np.ndarray:
+    """Extend a channel mask down the D8 steepest-descent paths while they run through incised ground.
+
+    From every ``seeds`` cell the flow path of the priority-flood-filled ``dem`` is followed
+    downstream; its cells join the mask while they are ``incised``. A stretch of at most
+    ``gap_cells`` non-incised cells is bridged when incised ground (or the mask) follows; a
+    longer one ends the path, as do nodata and the grid edge. Flow is never followed upslope.
+
+    Parameters
+    ----------
+    seeds : ndarray of bool (H, W)
+        The channel cells to start from (e.g. high TCI and incised).
+    incised : ndarray of bool (H, W)
+        Cells a channel may run through.
+    dem : ndarray (H, W)
+        Elevations (m), NaN = nodata.
+    gap_cells : int
+        Longest non-incised stretch bridged (cells, ≥ 0).
+
+    Returns
+    -------
+    ndarray of bool (H, W)
+        ``seeds`` and the path cells added.
+
+    Notes
+    -----
+    O(n log n) for the fill, then O(seeds · gap_cells + added cells): a path stops at the
+    first cell already in the mask, whose own path goes on from there.
+    """
+    filled, _ = priority_flood_fill(np.asarray(dem, dtype=np.float64))
+    dirs = d8_directions(filled)
+    return _follow_flow(dirs, np.ascontiguousarray(incised, dtype=np.bool_), np.ascontiguousarray(seeds, dtype=np.bool_),
+                        int(max(gap_cells, 0)), D8_OFFSETS)
+
+
 def thalweg_lines(
     tci: np.ndarray,
     grid: GridSpec,
@@ -164,6 +231,7 @@ def thalweg_lines(
     min_incision_m: float | None = None,
     incision_window_m: float = 30.0,
     closing_cells: int = 1,
+    follow_flow_downstream: bool = False,
 ) -> tuple[list[shapely.LineString], np.ndarray]:
     """Mask TCI > threshold, skeletonise, vectorise, drop short pieces, smooth with snakes.
 
@@ -171,7 +239,10 @@ def thalweg_lines(
     square of side ``incision_window_m`` around them stay in the mask: a channel is incised,
     a flat valley floor (high TCI because tan β is small) is not. A closing with a
     ``closing_cells`` square then joins the fragments that flow braiding across a wide,
-    rough channel floor leaves.
+    rough channel floor leaves. With ``follow_flow_downstream`` (and ``min_incision_m``), the
+    mask is first extended down the flow paths through incised cells (:func:`follow_flow`,
+    stretches up to ``closing_cells`` bridged): the floor of a deep reach, whose walls raise its
+    local slope and lower its TCI, joins the high-TCI fragments above it.
 
     Returns the smoothed lines (map coordinates) and the raster of their skeleton cells.
     Raises :class:`InputError` when no line is left.
@@ -182,9 +253,14 @@ def thalweg_lines(
         size = max(3, int(round(incision_window_m / grid.cell)) | 1)
         relief = zf - ndi.uniform_filter(zf, size=size, mode="nearest")
         n_before = int(mask.sum())
-        mask &= relief <= -min_incision_m
+        incised = relief <= -min_incision_m
+        mask &= incised
         log.info("thalweg: %d of %d cells with TCI > %.3g are incised >= %.2f m below the %.0f m mean", int(mask.sum()), n_before,
                  threshold, min_incision_m, incision_window_m)
+        if follow_flow_downstream:
+            n_seed = int(mask.sum())
+            mask = follow_flow(mask, incised & np.isfinite(dem), dem, closing_cells)
+            log.info("thalweg: flow followed downstream through incised ground: %d cells added to %d", int(mask.sum()) - n_seed, n_seed)
     if closing_cells > 1:
         pad = closing_cells
         mask = ndi.binary_closing(np.pad(mask, pad), structure=np.ones((closing_cells, closing_cells), bool))[pad:-pad, pad:-pad]
