@@ -18,7 +18,8 @@ def test_params_from_the_site_config(repo_root):
     p = PolygonParams.from_config(cfg)
     assert p.cell_m == 0.5 and p.window_cells == 9 and p.thresholds_m == (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
     assert p.thalweg_follow_flow is False  # session 34: tried on the six members' DSMs, not adopted
-    assert PolygonParams.from_config({**cfg, "thalweg": {**cfg["thalweg"], "follow_flow": True}}).thalweg_follow_flow is True
+    q = PolygonParams.from_config({**cfg, "thalweg": {**cfg["thalweg"], "follow_flow": True, "incision_ground_m": 6.5}})
+    assert q.thalweg_follow_flow is True and q.thalweg_incision_ground_m == 6.5
     with pytest.raises(InputError, match="^polygons.breaklines.curvature: must be one of"):
         PolygonParams.from_config({**cfg, "breaklines": {**cfg["breaklines"], "curvature": "gaussian"}})
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kitegully.polygons.thalweg import follow_flow, mfd_catchment_area, snakes_smooth, thalweg_lines, topographic_convergence_index
+from kitegully.polygons.thalweg import follow_flow, incised_cells, mfd_catchment_area, snakes_smooth, thalweg_lines, topographic_convergence_index
 from .polygon_synthetic import notch_dem
 
 
@@ -79,3 +79,28 @@ def test_follow_flow_stops_at_nodata():
     z[20, :] = np.nan  # a void row across the channel
     m = follow_flow(seeds, incised, z, 4)
     assert np.flatnonzero(m[:, 10]).max() == 19
+
+
+def test_incision_on_the_ground_ignores_a_tree_row_but_keeps_a_channel():
+    cell = 0.5
+    r, c = np.mgrid[0:120, 0:120].astype(float)
+    z = 50.0 - 0.05 * r * cell  # a field sloping south
+    trees = (c >= 40) & (c < 48)  # a 4 m wide row of 6 m crowns
+    dsm = z + np.where(trees, 6.0, 0.0)
+    channel = (c >= 90) & (c < 94)  # a 2 m wide channel, 1 m deep
+    dsm = dsm - np.where(channel, 1.0, 0.0)
+    beside = (c >= 30) & (c < 40) | (c >= 48) & (c < 58)  # the field within 5 m of the row
+    on_dsm = incised_cells(dsm, cell, 0.25, 30.0)
+    on_ground = incised_cells(dsm, cell, 0.25, 30.0, ground_window_cells=13)
+    assert on_dsm[beside].mean() > 0.9  # the crowns raise the 30 m mean: open field "incised"
+    assert not on_ground[beside].any()
+    assert on_ground[channel].all() and on_dsm[channel].all()
+    assert not on_ground[trees].any()
+
+
+def test_incision_nodata_is_never_incised():
+    z = np.zeros((40, 40))
+    z[10:20, 10:20] = np.nan
+    z[25:30, :] = -1.0
+    m = incised_cells(z, 0.5, 0.25, 10.0)
+    assert not m[10:20, 10:20].any() and m[25:30, 5:35].all()

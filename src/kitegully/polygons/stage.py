@@ -80,6 +80,9 @@ class PolygonParams:
         Extend the thalweg mask down the D8 flow paths through incised cells, bridging up to
         ``thalweg_closing_cells`` (:func:`kitegully.polygons.thalweg.follow_flow`) [I]; needs
         ``min_incision_m``.
+    thalweg_incision_ground_m : float or None
+        Measure the incision on the ground surface, a grey opening of the DEM over a square
+        of this side (m; the widest plant crown), against its own mean [I]; None = on the DEM.
     smooth_step_m : float
         Vertex spacing of the snakes smoothing of thalweg and medial axes (m) [I].
     snakes_alpha, snakes_beta : float
@@ -167,6 +170,7 @@ class PolygonParams:
     min_incision_m: float | None = None
     thalweg_closing_cells: int = 1
     thalweg_follow_flow: bool = False
+    thalweg_incision_ground_m: float | None = None
     smooth_step_m: float = 2.0
     snakes_alpha: float = 1.0
     snakes_beta: float = 1.0
@@ -205,7 +209,7 @@ class PolygonParams:
         b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"],
                            optional=["ground_segment_m"])
         t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m", "mask_closing_cells",
-                                                                "smooth_step_m", "snakes_alpha", "snakes_beta"], optional=["follow_flow"])
+                                                                "smooth_step_m", "snakes_alpha", "snakes_beta"], optional=["follow_flow", "incision_ground_m"])
         tr = config_section(cfg["transects"], "polygons.transects", ["spacing_m", "half_length_m", "max_drop_m", "min_spacing_m", "tangent_half_window_m"],
                             optional=["survey_edge"])
         c = config_section(cfg["conditioning"], "polygons.conditioning", ["raise_m", "grow_cells", "thresholds_m", "closing_cells", "bridge",
@@ -220,7 +224,8 @@ class PolygonParams:
             edge_ground_m=float(b.get("ground_segment_m", 0.0)),
             tci_threshold=t["tci_threshold"], mfd_exponent=t["mfd_exponent"], min_tan_slope=t["min_tan_slope"],
             thalweg_min_length_m=t["min_length_m"], min_incision_m=t["min_incision_m"],
-            thalweg_closing_cells=t["mask_closing_cells"], thalweg_follow_flow=bool(t.get("follow_flow", False)), smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
+            thalweg_closing_cells=t["mask_closing_cells"], thalweg_follow_flow=bool(t.get("follow_flow", False)),
+            thalweg_incision_ground_m=t.get("incision_ground_m"), smooth_step_m=t["smooth_step_m"], snakes_alpha=t["snakes_alpha"],
             snakes_beta=t["snakes_beta"],
             transect_spacing_m=tr["spacing_m"], transect_half_length_m=tr["half_length_m"], transect_max_drop_m=tr["max_drop_m"],
             transect_min_spacing_m=tr["min_spacing_m"], transect_tangent_half_window_m=tr["tangent_half_window_m"],
@@ -383,7 +388,8 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     tci, _ = topographic_convergence_index(dem, grid.cell, p.mfd_exponent, p.min_tan_slope)
     th_lines, th_cells = thalweg_lines(tci, grid, p.tci_threshold, p.thalweg_min_length_m, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
                                        dem, p.min_incision_m, 2.0 * p.transect_half_length_m,
-                                       p.thalweg_closing_cells, p.thalweg_follow_flow)
+                                       p.thalweg_closing_cells, p.thalweg_follow_flow,
+                                       None if p.thalweg_incision_ground_m is None else max(3, int(round(p.thalweg_incision_ground_m / grid.cell)) | 1))
     T["thalweg_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
