@@ -17,9 +17,10 @@ def test_params_from_the_site_config(repo_root):
     cfg = load_yaml(repo_root / "config" / "sites" / "kamech_twin.yaml")["polygons"]
     p = PolygonParams.from_config(cfg)
     assert p.cell_m == 0.5 and p.window_cells == 9 and p.thresholds_m == (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
-    assert p.thalweg_follow_flow is False  # session 34: tried on the six members' DSMs, not adopted
-    q = PolygonParams.from_config({**cfg, "thalweg": {**cfg["thalweg"], "follow_flow": True, "incision_ground_m": 6.5}})
-    assert q.thalweg_follow_flow is True and q.thalweg_incision_ground_m == 6.5
+    assert p.thalweg_follow_flow is True and p.thalweg_incision_ground_m == 6.5  # session 34, pre-registered, adopted
+    assert PolygonParams().thalweg_follow_flow is False and PolygonParams().thalweg_incision_ground_m is None
+    q = PolygonParams.from_config({**cfg, "thalweg": {k: v for k, v in cfg["thalweg"].items() if k not in ("follow_flow", "incision_ground_m")}})
+    assert q.thalweg_follow_flow is False and q.thalweg_incision_ground_m is None  # keys left out: the stage as before
     with pytest.raises(InputError, match="^polygons.breaklines.curvature: must be one of"):
         PolygonParams.from_config({**cfg, "breaklines": {**cfg["breaklines"], "curvature": "gaussian"}})
 
