@@ -91,7 +91,7 @@ def test_incision_on_the_ground_ignores_a_tree_row_but_keeps_a_channel():
     dsm = dsm - np.where(channel, 1.0, 0.0)
     beside = (c >= 30) & (c < 40) | (c >= 48) & (c < 58)  # the field within 5 m of the row
     on_dsm = incised_cells(dsm, cell, 0.25, 30.0)
-    on_ground = incised_cells(dsm, cell, 0.25, 30.0, ground_window_cells=13)
+    on_ground = incised_cells(dsm, cell, 0.25, 30.0, ground_window_m=6.5)
     assert on_dsm[beside].mean() > 0.9  # the crowns raise the 30 m mean: open field "incised"
     assert not on_ground[beside].any()
     assert on_ground[channel].all() and on_dsm[channel].all()

@@ -388,8 +388,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     tci, _ = topographic_convergence_index(dem, grid.cell, p.mfd_exponent, p.min_tan_slope)
     th_lines, th_cells = thalweg_lines(tci, grid, p.tci_threshold, p.thalweg_min_length_m, p.smooth_step_m, p.snakes_alpha, p.snakes_beta,
                                        dem, p.min_incision_m, 2.0 * p.transect_half_length_m,
-                                       p.thalweg_closing_cells, p.thalweg_follow_flow,
-                                       None if p.thalweg_incision_ground_m is None else max(3, int(round(p.thalweg_incision_ground_m / grid.cell)) | 1))
+                                       p.thalweg_closing_cells, p.thalweg_follow_flow, p.thalweg_incision_ground_m)
     T["thalweg_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -154,7 +154,7 @@ def resample_line(xy: np.ndarray, step: float) -> np.ndarray:
 
 
 def incised_cells(dem: np.ndarray, cell: float, min_incision_m: float, window_m: float,
-                  ground_window_cells: int | None = None) -> np.ndarray:
+                  ground_window_m: float | None = None) -> np.ndarray:
     """Cells lying at least ``min_incision_m`` below the mean surface within a square of side ``window_m``.
 
     Parameters
@@ -165,9 +165,9 @@ def incised_cells(dem: np.ndarray, cell: float, min_incision_m: float, window_m:
         Cell size (m).
     min_incision_m, window_m : float
         Depth below the window's mean (m) and the window's side (m).
-    ground_window_cells : int, optional
+    ground_window_m : float, optional
         Compare the ground surface instead of the DEM: a grey opening over a square of this
-        side (cells), which removes crowns and hedges narrower than it and keeps channels
+        side (m, rounded to an odd number of cells), which removes crowns and hedges narrower than it and keeps channels
         (pits). On a DSM the crowns in the window raise its mean, and open ground beside a
         tree row would pass as incised.
 
@@ -181,8 +181,9 @@ def incised_cells(dem: np.ndarray, cell: float, min_incision_m: float, window_m:
     """
     ok = np.isfinite(dem)
     zf = np.where(ok, dem, np.nanmean(dem)).astype(np.float64)
-    if ground_window_cells is not None and ground_window_cells > 1:
-        zf = ndi.grey_opening(zf, size=(ground_window_cells, ground_window_cells), mode="nearest")
+    if ground_window_m is not None:
+        k = max(3, int(round(ground_window_m / cell)) | 1)
+        zf = ndi.grey_opening(zf, size=(k, k), mode="nearest")
     size = max(3, int(round(window_m / cell)) | 1)
     return ok & (zf - ndi.uniform_filter(zf, size=size, mode="nearest") <= -min_incision_m)
 
@@ -266,16 +267,17 @@ def thalweg_lines(
     incision_window_m: float = 30.0,
     closing_cells: int = 1,
     follow_flow_downstream: bool = False,
-    ground_window_cells: int | None = None,
+    ground_window_m: float | None = None,
 ) -> tuple[list[shapely.LineString], np.ndarray]:
     """Mask TCI > threshold, skeletonise, vectorise, drop short pieces, smooth with snakes.
 
     With ``min_incision_m``, only cells at least that far below the mean of the DEM in a
     square of side ``incision_window_m`` around them stay in the mask: a channel is incised,
-    a flat valley floor (high TCI because tan β is small) is not. With ``ground_window_cells``
+    a flat valley floor (high TCI because tan β is small) is not. With ``ground_window_m``
     the rule compares the ground surface, a grey opening of the DEM over a square of that
-    side (crowns and hedges narrower than it removed, channels kept), with its own mean: on a
-    DSM the crowns in the window would raise the mean and make fields beside them "incised". A closing with a
+    side (m; crowns and hedges narrower than it removed, channels kept), with its own mean:
+    on a DSM the crowns in the window would raise the mean and make fields beside them
+    "incised" (:func:`incised_cells`). A closing with a
     ``closing_cells`` square then joins the fragments that flow braiding across a wide,
     rough channel floor leaves. With ``follow_flow_downstream`` (and ``min_incision_m``), the
     mask is first extended down the flow paths through incised cells (:func:`follow_flow`,
@@ -288,7 +290,7 @@ def thalweg_lines(
     mask = np.nan_to_num(tci, nan=-np.inf) > threshold
     if min_incision_m is not None and dem is not None:
         n_before = int(mask.sum())
-        incised = incised_cells(dem, grid.cell, min_incision_m, incision_window_m, ground_window_cells)
+        incised = incised_cells(dem, grid.cell, min_incision_m, incision_window_m, ground_window_m)
         mask &= incised
         log.info("thalweg: %d of %d cells with TCI > %.3g are incised >= %.2f m below the %.0f m mean", int(mask.sum()), n_before,
                  threshold, min_incision_m, incision_window_m)
