@@ -45,7 +45,6 @@ sys.path.insert(0, str(REPO / "src"))
 from kitegully.config import load_yaml  # noqa: E402
 from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
-from kitegully.gully.pipeline import GullyParams, site_crown_mask  # noqa: E402
 from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
 from kitegully.polygons.evaluation import observable_region_from_files, regenerate_table1  # noqa: E402
 
@@ -113,17 +112,8 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_
     r = Raster.read(dsm)
     if water_empty:
         r = water_left_empty(r, truth)
-    params = PolygonParams.from_config(poly)
     t0 = time.perf_counter()
-    crowns = None
-    if params.crowns:  # polygons.gap_fill.crowns: the site's crown mask, as the polygons_crowns rule makes it
-        if dem_rel != "dense/dsm.tif":
-            return {**row, "status": "skipped: gap_fill.crowns needs the dense DSM and its orthophoto"}
-        g = cfg["gully"]
-        mapping = {k: g[k] for k in GullyParams.__dataclass_fields__ if k in g}
-        crowns = site_crown_mask(r.data, r.grid, mapping, g["heads"], g["automatic_heads"], str(site / "dense" / "orthophoto.tif"),
-                                 str(site / "twin" / "observed" / "checkpoints.csv"))
-    res = measure_polygons(r.data, r.grid, params, dem_name=str(dsm), not_ground=crowns)
+    res = measure_polygons(r.data, r.grid, PolygonParams.from_config(poly), dem_name=str(dsm))
     run_s = time.perf_counter() - t0
     # the truth a survey can see: the grid's extent less the reservoir (as the polygons_evaluate rule)
     region = observable_region_from_files(res.grid, truth / "landcover.tif", truth / "landcover_classes.csv")

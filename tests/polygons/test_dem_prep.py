@@ -73,28 +73,3 @@ def test_prepare_dem_leaves_open_water_empty_and_fills_gaps():
     assert np.isfinite(out[320:324, 40:240]).all()
     off, _, info_off = prepare_dem(z, grid, 0.5, 10, 10.0)
     assert info_off["water_cells"] == 0 and np.isfinite(off[45:155, 45:155]).all()  # off: the water surface is filled
-
-
-def test_prepare_dem_fills_crowns_from_the_ground_around_them():
-    """A 3 x 3 m shrub 1 m tall on a tilted plane: emptied by the not-ground mask and refilled on the plane."""
-    grid = GridSpec(0.0, 40.0, 0.2, 200, 200, CRS)
-    r, c = np.mgrid[0:200, 0:200]
-    ground = (50.0 + 0.05 * c * 0.2 - 0.02 * r * 0.2).astype(np.float32)
-    z = ground.copy()
-    shrub = (r >= 90) & (r < 105) & (c >= 90) & (c < 105)
-    z[shrub] += 1.0
-    mask = np.zeros_like(shrub)
-    mask[85:110, 85:110] = True  # widened by the matching window, as the crown mask is
-    z[150:160, 150:160] = np.nan  # an ordinary matching gap beside it
-    # the minimum water area (10 m2) is smaller than the mask (25 m2) and larger than the gap (4 m2)
-    out, tg, info = prepare_dem(z, grid, 0.5, 10, 10.0, water_min_area_m2=10.0, water_window_m=4.5, not_ground=mask)
-    plain, _, info_plain = prepare_dem(z, grid, 0.5, 10, 10.0, water_min_area_m2=2500.0, water_window_m=4.5)
-    at = (slice(37, 41), slice(37, 41))  # stage cells inside the shrub (input rows 92-103)
-    zr, _ = min_z_resample(ground, grid, 0.5)
-    assert np.nanmax(plain[at] - zr[at]) > 0.9  # without the mask the shrub stands
-    assert np.allclose(out[at], zr[at], atol=0.02)  # with it: the plane under the shrub
-    assert info["not_ground_cells"] == int(mask.sum()) and info_plain["not_ground_cells"] == 0
-    assert info["water_cells"] == 0  # a crown is not unmatched ground: the water test sees the DSM as given
-    assert np.isfinite(out).all()
-    with pytest.raises(ValueError, match="not-ground mask has shape"):
-        prepare_dem(z, grid, 0.5, 10, 10.0, not_ground=mask[:-1])

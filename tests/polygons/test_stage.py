@@ -45,16 +45,3 @@ def test_dem_too_small_for_the_window_is_one_clear_sentence():
     z = np.zeros((12, 12), np.float32)
     with pytest.raises(InputError, match=r"too small for the 9 x 9 curvature window \(4.5 m\); it needs at least 18 cells a side$"):
         measure_polygons(z, grid, PolygonParams(), dem_name="dsm.tif")
-
-
-def test_crowns_key_is_read_and_needs_the_crown_mask(repo_root):
-    cfg = load_yaml(repo_root / "config" / "sites" / "kamech_twin.yaml")["polygons"]
-    assert PolygonParams().crowns is False
-    p = PolygonParams.from_config({**cfg, "gap_fill": {**cfg["gap_fill"], "crowns": True}})
-    assert p.crowns is True
-    q = PolygonParams.from_config({**cfg, "gap_fill": {k: v for k, v in cfg["gap_fill"].items() if k != "crowns"}})
-    assert q.crowns is False  # key left out: the DEM as given
-    grid = GridSpec(0.0, 100.0, 0.5, 100, 100, CRS)
-    z = np.zeros((100, 100), np.float32)
-    with pytest.raises(InputError, match=r"^dsm.tif: polygons.gap_fill.crowns needs the crown mask of the DSM"):
-        measure_polygons(z, grid, p, dem_name="dsm.tif")

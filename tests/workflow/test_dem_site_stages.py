@@ -98,15 +98,3 @@ def test_dem_file_without_dem_file_key_is_one_line(tmp_path):
     proc = run_snakemake(site, tmp_path / "results", ["-n"], check=False)
     assert proc.returncode != 0
     assert "Invalid configuration: gully.dem: file needs gully.dem_file (a DEM GeoTIFF in the site CRS)" in proc.stdout + proc.stderr
-
-
-def test_crowns_on_a_dem_file_is_one_line(tmp_path):
-    """polygons.gap_fill.crowns needs the dense DSM's orthophoto: a DEM file has none."""
-    site, _ = _site(tmp_path)
-    cfg = yaml.safe_load(site.read_text())
-    cfg["polygons"]["gap_fill"]["crowns"] = True
-    site.write_text(yaml.safe_dump(cfg, sort_keys=False))
-    proc = run_snakemake(site, tmp_path / "results", ["-n"], check=False)
-    assert proc.returncode != 0
-    assert ("Invalid configuration: polygons.gap_fill.crowns needs the dense DSM and its orthophoto (no polygons.dem_file, "
-            "not a DEM twin) and the gully section that defines the crowns") in proc.stdout + proc.stderr

@@ -11,19 +11,6 @@ if "polygons" in config:
     POLY_DEM = checked_dem("polygons") if POLY["dem_file"] else (
         result("twin", "observed/dtm.tif") if "dem_twin" in config else result("dense", "dsm.tif"))
     POLY_T = [float(t) for t in POLY["conditioning"]["thresholds_m"]]
-    # polygons.gap_fill.crowns: the DSM's crowns (the gully stage's crown mask) are emptied and filled from the ground
-    POLY_CROWNS = bool(POLY["gap_fill"].get("crowns", False))
-    if POLY_CROWNS and (POLY["dem_file"] or "dem_twin" in config or "gully" not in config):
-        raise WorkflowError("Invalid configuration: polygons.gap_fill.crowns needs the dense DSM and its orthophoto "
-                            "(no polygons.dem_file, not a DEM twin) and the gully section that defines the crowns")
-    POLY_CROWN_INPUT = {"crowns": result("polygons", "crown_mask.tif")} if POLY_CROWNS else {}
-    POLY_CROWN_CPS = {}  # the crowns' height threshold measures the DSM noise at the checkpoints (dsm_sigma_z_m: null)
-    if POLY_CROWNS and config["gully"]["automatic_heads"]["dsm_sigma_z_m"] is None:
-        _poly_cps = result("twin", "observed/checkpoints.csv") if IS_TWIN else config.get("inputs", {}).get("checkpoints")
-        if not _poly_cps:
-            raise WorkflowError("Invalid configuration: polygons.gap_fill.crowns with gully.automatic_heads.dsm_sigma_z_m: null "
-                                "needs checkpoints (inputs.checkpoints)")
-        POLY_CROWN_CPS = {"checkpoints": _poly_cps}
     POLY_METHOD = {k: v for k, v in POLY.items() if k not in ("dem_file", "dem_nodata", "evaluation", "figure_max_px")}
 
     def poly_set(t):
@@ -46,31 +33,9 @@ if "polygons" in config:
     POLY_MAP_OUT = {**POLY_WINDOWS, "summary": result("polygons", "tiles/summary_map.csv")} if POLY_TILED else POLY_MORPH_OUT
     POLY_MORPH_RULE = "polygons_morph_merge" if POLY_TILED else "polygons_map"  # the rule that writes POLY_MORPH_OUT
 
-    if POLY_CROWNS:
-
-        rule polygons_crowns:
-            input:
-                dem=result("dense", "dsm.tif"),
-                ortho=result("dense", "orthophoto.tif"),
-                **POLY_CROWN_CPS,
-            output:
-                crowns=result("polygons", "crown_mask.tif"),
-            params:
-                mapping=GULLY_MAPPING,
-                heads=GULLY["heads"],
-                automatic_heads=GULLY["automatic_heads"],
-                crs=config["site"]["crs"],
-            log:
-                logfile("polygons", "crowns"),
-            benchmark:
-                benchfile("polygons", "crowns")
-            script:
-                "../scripts/polygons_crowns.py"
-
     rule polygons_map:
         input:
             dem=POLY_DEM,
-            **POLY_CROWN_INPUT,
         output:
             polygons=[poly_set(t) for t in POLY_T],
             dem=result("polygons", "dem.tif"),

@@ -1,7 +1,7 @@
 """Rule polygons_map: DEM prep, breaklines, thalweg, dams, fill depth, polygons, medial axes, cross-sections."""
 
 from kitegully import InputError
-from kitegully.io.raster import Raster, read_raster
+from kitegully.io.raster import Raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
 from kitegully.logs import setup_script_logging
@@ -13,9 +13,7 @@ dem = Raster.read(snakemake.input.dem)
 if dem.crs != snakemake.params.crs:
     raise InputError(f"{snakemake.input.dem}: CRS {dem.crs} does not match the site CRS {snakemake.params.crs}")
 params = PolygonParams.from_config(snakemake.params.cfg)
-crowns = read_raster(snakemake.input.crowns)[0] == 1 if "crowns" in snakemake.input.keys() else None
-res = measure_polygons(dem.data, dem.grid, params, dem_name=snakemake.input.dem, morphometry=snakemake.params.morphometry,
-                       not_ground=crowns)
+res = measure_polygons(dem.data, dem.grid, params, dem_name=snakemake.input.dem, morphometry=snakemake.params.morphometry)
 
 for path, (t, gdf) in zip(out.polygons, sorted(res.polygons.items())):
     write_vector(gdf, path, layer="gully_polygons")

@@ -15,10 +15,9 @@ from scipy.spatial import cKDTree
 
 from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden_reaches, interpolate_under
 from kitegully.gully.depth import depth_map
-from kitegully.gully.heads import (HeadDetectionParams, automatic_head_params, channel_entries, detect_heads, ground_surface,
+from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
                                    head_scale_relief, incision_map, surface_roughness, visible_incisions)
 from kitegully.gully.inlets import edge_inlets, route_courses
-from kitegully.gully.inputs import read_orthophoto_on_grid
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully import InputError
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
@@ -533,46 +532,6 @@ def crowns_on(dem: np.ndarray, grid: GridSpec, params: GullyParams, incision: He
     thr = incision.relief_k * max(incision.dsm_sigma_z_m, rough)
     mask, _info = crown_mask(zi, excess_green(ortho), ground, thr, grid.cell, params.crowns)
     return mask
-
-
-def site_crown_mask(dem: np.ndarray, grid: GridSpec, mapping: Mapping[str, Any], heads: str,
-                    automatic_heads: Mapping[str, Any], ortho_path: str, checkpoints_csv: str | None = None,
-                    workers: int = 1) -> np.ndarray:
-    """The site's crown mask from its ``gully`` config, the DSM and the DSM's orthophoto.
-
-    One definition of "plants standing on the ground" per site, whichever stage asks for it
-    (the gully stage traces under it, the polygons stage fills it from the ground):
-    :func:`crowns_on` with :class:`GullyParams` of ``mapping`` (``gully.crowns``) and the
-    incision-map parameters of ``gully.automatic_heads`` (DSM noise measured at
-    ``checkpoints_csv`` when ``dsm_sigma_z_m`` is null).
-
-    Parameters
-    ----------
-    dem : ndarray (H, W)
-        The dense DSM (m), NaN nodata.
-    grid : GridSpec
-        Its grid.
-    mapping : mapping
-        The ``gully`` section's mapping keys (:meth:`GullyParams.from_config`).
-    heads : str
-        ``gully.heads``.
-    automatic_heads : mapping
-        ``gully.automatic_heads``.
-    ortho_path : str
-        The DSM's orthophoto (R, G, B), averaged onto ``grid``.
-    checkpoints_csv : str, optional
-        Observed checkpoints (for ``dsm_sigma_z_m: null``).
-    workers : int
-        FFT threads.
-
-    Returns
-    -------
-    ndarray bool (H, W)
-        Crown cells widened by the matching window. O(n log n).
-    """
-    params = GullyParams.from_config(mapping)
-    incision = automatic_head_params(heads, automatic_heads, dem, grid, checkpoints_csv, params.head_snap, needed=True)
-    return crowns_on(dem, grid, params, incision, read_orthophoto_on_grid(ortho_path, grid), workers)
 
 
 def tracing_surface(

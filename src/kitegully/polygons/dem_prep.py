@@ -185,17 +185,12 @@ def open_water(valid: np.ndarray, cell: float, window_m: float, min_area_m2: flo
 
 
 def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, radius_m: float,
-                water_min_area_m2: float | None = None, water_window_m: float = 4.5,
-                not_ground: np.ndarray | None = None) -> tuple[np.ndarray, GridSpec, dict]:
+                water_min_area_m2: float | None = None, water_window_m: float = 4.5) -> tuple[np.ndarray, GridSpec, dict]:
     """Minimum-z resampling to ``cell`` then moving-plane filling of the empty cells.
 
     With ``water_min_area_m2`` the open water of the input (:func:`open_water`, in a
     ``water_window_m`` window) is taken out first and stays empty: no surface, so no
     breaklines or pools there, and the fill drains into it as into the DEM's edge.
-    With ``not_ground`` (e.g. the crowns an orthophoto shows, :func:`kitegully.gully.crowns.crown_mask`)
-    those input cells are emptied after the water test (a crown is not unmatched ground) and
-    before the resampling, so the moving planes fill them from the ground around them, as
-    a ground filter leaves a TLS DTM (Höfle et al. 2013 build theirs from ground points).
 
     Parameters
     ----------
@@ -211,8 +206,6 @@ def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, rad
         Smallest open water (m²); None = no water test (a TLS or LiDAR DTM).
     water_window_m : float
         Window of the water test (m); the stage passes its curvature window.
-    not_ground : ndarray bool (H, W), optional
-        Input cells whose elevation is not the ground's (plants); emptied and filled.
 
     Returns
     -------
@@ -221,8 +214,7 @@ def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, rad
     grid : GridSpec
         The stage grid.
     counts : dict
-        ``empty_cells``, ``filled_cells``, ``water_cells`` (stage cells of open water) and
-        ``not_ground_cells`` (input cells emptied as not ground).
+        ``empty_cells``, ``filled_cells`` and ``water_cells`` (stage cells of open water).
 
     Notes
     -----
@@ -234,15 +226,6 @@ def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, rad
     if water_min_area_m2:
         water = open_water(np.isfinite(z), grid.cell, water_window_m, water_min_area_m2)
         z = np.where(water, np.nan, z)
-    n_not_ground = 0
-    if not_ground is not None:
-        if np.shape(not_ground) != np.shape(z):
-            raise ValueError(f"not-ground mask has shape {np.shape(not_ground)}, the DEM {np.shape(z)}")
-        drop = np.asarray(not_ground, dtype=bool) & np.isfinite(z)
-        n_not_ground = int(drop.sum())
-        z = np.where(drop, np.nan, z)
-        log.info("not ground (crowns): %d input cells (%.1f %% of the valid ones) emptied for the moving planes",
-                 n_not_ground, 100.0 * n_not_ground / max(1, int(np.isfinite(z).sum()) + n_not_ground))
     zr, tgrid = min_z_resample(z, grid, cell)
     n_empty = int((~np.isfinite(zr)).sum())
     filled, n_filled = fill_moving_planes(zr, cell, neighbours, radius_m)
@@ -256,5 +239,4 @@ def prepare_dem(z: np.ndarray, grid: GridSpec, cell: float, neighbours: int, rad
         filled[wt] = np.nan
         n_water = int(wt.sum())
         log.info("open water: %d stage cells (%.0f m2) left empty", n_water, n_water * cell * cell)
-    return filled, tgrid, {"empty_cells": n_empty, "filled_cells": n_filled, "water_cells": n_water,
-                           "not_ground_cells": n_not_ground}
+    return filled, tgrid, {"empty_cells": n_empty, "filled_cells": n_filled, "water_cells": n_water}

@@ -43,11 +43,6 @@ class PolygonParams:
         Open water of the input DSM (:func:`kitegully.polygons.dem_prep.open_water`, in the
         curvature window): regions at least this large where most cells found no match stay
         empty [I]; None = off (a TLS or LiDAR DTM).
-    crowns : bool
-        Empty the DSM cells under the site's crown mask (the plants the orthophoto shows
-        standing above the ground, :func:`kitegully.gully.crowns.crown_mask`) before the
-        resampling, so the moving planes fill them from the ground around them [I]; the
-        mask is passed to :func:`measure_polygons` as ``not_ground``. False = the DEM as given.
     window_cells : int
         Side of Wood's quadratic window (cells, odd) [P 9].
     curvature : str
@@ -162,7 +157,6 @@ class PolygonParams:
     gap_neighbours: int = 10
     gap_radius_m: float = 10.0
     water_min_area_m2: float | None = None
-    crowns: bool = False
     window_cells: int = 9
     curvature: str = "maximum"
     curvature_threshold_per_m: float = 0.2
@@ -211,7 +205,7 @@ class PolygonParams:
         """Build from the ``polygons:`` section (nested keys as in ``polygons.schema.yaml``)."""
         cfg = config_section(cfg, "polygons", ["cell_m", "gap_fill", "breaklines", "thalweg", "transects", "conditioning", "morphometry"],
                              optional=["dem_file", "dem_nodata", "evaluation", "figure_max_px"])
-        g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"], optional=["water_min_area_m2", "crowns"])
+        g = config_section(cfg["gap_fill"], "polygons.gap_fill", ["neighbours", "radius_m"], optional=["water_min_area_m2"])
         b = config_section(cfg["breaklines"], "polygons.breaklines", ["window_cells", "curvature", "threshold_per_m", "min_length_m", "upper_edges_only"],
                            optional=["ground_segment_m"])
         t = config_section(cfg["thalweg"], "polygons.thalweg", ["tci_threshold", "mfd_exponent", "min_tan_slope", "min_length_m", "min_incision_m", "mask_closing_cells",
@@ -225,7 +219,6 @@ class PolygonParams:
                            optional=["ground_segment_m", "bank_fit_m", "no_rim"])
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"], water_min_area_m2=g.get("water_min_area_m2"),
-            crowns=bool(g.get("crowns", False)),
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
             breakline_min_length_m=b["min_length_m"], upper_edges_only=b["upper_edges_only"],
             edge_ground_m=float(b.get("ground_segment_m", 0.0)),
@@ -343,7 +336,7 @@ def _lines_gdf(paths, grid: GridSpec) -> list[shapely.LineString]:
 
 
 def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParams, dem_name: str = "DEM",
-                     morphometry: bool = True, not_ground: np.ndarray | None = None) -> PolygonResult:
+                     morphometry: bool = True) -> PolygonResult:
     """Run the method: DEM prep, breaklines, thalweg, transects, conditioning, polygons, morphometry.
 
     Parameters
@@ -360,9 +353,6 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         Measure the polygons (step 6). False on tiled sites, whose tile jobs measure the
         polygons they own (:mod:`kitegully.polygons.tiles`): ``axes``, ``sections`` and
         ``morphometry`` are then empty and the summary has no morphometry rows.
-    not_ground : ndarray bool (H, W), optional
-        Input cells that are not ground (the crown mask of ``params.crowns``), emptied and
-        filled by the moving planes (:func:`kitegully.polygons.dem_prep.prepare_dem`).
 
     Returns
     -------
@@ -382,10 +372,7 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
     if grid_in.cell > p.cell_m * (1 + 1e-9):
         raise InputError(f"{dem_name}: cell {grid_in.cell} m is coarser than polygons.cell_m {p.cell_m} m")
     window_m = p.window_cells * p.cell_m
-    if p.crowns and not_ground is None:
-        raise InputError(f"{dem_name}: polygons.gap_fill.crowns needs the crown mask of the DSM (its orthophoto's plants)")
-    dem, grid, prep = prepare_dem(dem_in, grid_in, p.cell_m, p.gap_neighbours, p.gap_radius_m, p.water_min_area_m2, window_m,
-                                  not_ground if p.crowns else None)
+    dem, grid, prep = prepare_dem(dem_in, grid_in, p.cell_m, p.gap_neighbours, p.gap_radius_m, p.water_min_area_m2, window_m)
     if min(grid.width, grid.height) < 2 * p.window_cells:
         raise InputError(f"{dem_name}: the DEM at {grid.cell} m ({grid.height} x {grid.width} cells) is too small for the "
                          f"{p.window_cells} x {p.window_cells} curvature window ({window_m:.1f} m); it needs at least {2 * p.window_cells} cells a side")
@@ -467,7 +454,6 @@ def measure_polygons(dem_in: np.ndarray, grid_in: GridSpec, params: PolygonParam
         ("stage cells", grid.width * grid.height),
         ("empty cells after minimum-z resampling", prep["empty_cells"]),
         ("cells filled by moving planes", prep["filled_cells"]),
-        ("input cells emptied under crowns", prep["not_ground_cells"]),
         ("curvature", f"{p.curvature}, {p.window_cells} x {p.window_cells} cells ({window_m:.1f} m), > {p.curvature_threshold_per_m} 1/m"),
         ("upper edges tested on", f"ground under plants < {p.edge_ground_m:g} m" if p.edge_ground_m > 0 else "the DEM"),
         ("breakline cells", int(bl_cells.sum())),
