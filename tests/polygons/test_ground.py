@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import shapely
 
 from kitegully import InputError
 from kitegully.polygons.conditioning import gully_mask, polygons_from_labels
-from kitegully.polygons.morphometry import ground_profile, measure_sections, section_profile
+from kitegully.polygons.morphometry import (axis_gradient, drape, drape_opened_along, ground_profile, measure_sections,
+                                            section_profile)
 from kitegully.polygons.stage import PolygonParams
 
 from .polygon_synthetic import notch_dem, true_area
@@ -88,3 +90,63 @@ def test_bad_ground_and_held_settings_are_one_sentence():
         PolygonParams(ground_segment_m=-4.0)
     with pytest.raises(InputError, match=r"^polygons.conditioning.terrain_held: must be false, true, 'pools' or 'cells', got 'cell'$"):
         PolygonParams(terrain_held="cell")
+
+
+def _wide_clumps_on_rims(dem, grid, xc, half_width, height=1.0, across_m=6.0, along_m=2.0, period_m=4.0):
+    """Clumps ``across_m`` wide across the gully (wider than the 4 m segment: the opening across cannot see past
+    them) and ``along_m`` long, every ``period_m`` along it, on the ground beside each rim."""
+    xs, ys = grid.cell_centres()
+    x, y = np.meshgrid(xs, ys)
+    d = np.abs(x - xc)
+    clump = (d > half_width) & (d < half_width + across_m) & (np.mod(y, period_m) < along_m)
+    return (dem + np.where(clump, height, 0.0)).astype(np.float32)
+
+
+def test_opening_along_the_axis_sees_past_clumps_the_section_cannot_and_keeps_the_gradient():
+    dem0, grid, xc = notch_dem("U", 8.0, 2.0, long_slope=0.15, cross_slope=0.02)  # a steep reach: 0.15 along the gully
+    dsm = _wide_clumps_on_rims(dem0, grid, xc, 4.0)
+    xs, ys = grid.cell_centres()
+    y0 = float(ys[np.flatnonzero(np.mod(ys, 4.0) < 2.0)[60]])  # a station where the clumps stand on both rims
+    line = shapely.LineString([(xc - 12.0, y0), (xc + 12.0, y0)])
+    axis = shapely.LineString([(xc, ys.max()), (xc, ys.min())])  # downhill, as a medial axis may run
+    s0 = ys.max() - y0
+    step = 0.25
+    g = axis_gradient(axis, s0, np.asarray(dsm, np.float64), grid, step, 4.0)
+    assert g == pytest.approx(-0.15, abs=0.01)  # downhill along the axis' direction
+    along = np.array([0.0, -1.0])
+    _, _, _, z_dsm = drape(line, np.asarray(dsm, np.float64), grid, step)
+    s, _, _, z_true = drape(line, np.asarray(dem0, np.float64), grid, step)
+    _, _, _, z_al = drape_opened_along(line, np.asarray(dsm, np.float64), grid, step, along, g, 4.0)
+    _, _, _, z_flat = drape_opened_along(line, np.asarray(dsm, np.float64), grid, step, along, 0.0, 4.0)
+    rim = (np.abs(s - 12.0) > 4.5) & (np.abs(s - 12.0) < 9.5)
+    assert (z_dsm - z_true)[rim].min() > 0.9  # the clumps stand on the rims at this station
+    assert (ground_profile(z_dsm, step, 4.0) - z_true)[rim].max() > 0.9  # the opening across cannot see past them
+    assert np.abs(z_al - z_true)[rim].max() < 0.03  # along the gully it can: the ground between clumps
+    assert np.abs(z_al - z_true)[np.abs(s - 12.0) < 3.5].max() < 0.03  # the floor stays where it is
+    # without the gradient the opening reads a clumped stretch of a steep reach from the nearest gap's samples
+    # standing higher up the fall (a straight slope alone it would keep exactly)
+    assert (z_flat - z_true)[rim].max() > 0.05
+    assert np.all(z_al <= z_dsm + 1e-9)  # never above the DSM
+    _, _, _, z_off = drape_opened_along(line, np.asarray(dsm, np.float64), grid, step, along, g, 0.0)
+    assert np.array_equal(z_off, z_dsm)  # no segment: the plain drape
+
+
+def test_sections_opened_along_the_axis_recover_a_notch_under_wide_rim_clumps():
+    dem0, grid, xc = notch_dem("U", 8.0, 2.0, long_slope=0.1, cross_slope=0.02)
+    dsm = _wide_clumps_on_rims(dem0, grid, xc, 4.0)
+    xs, _ = grid.cell_centres()
+    lab = np.zeros(dsm.shape, np.int32)
+    lab[20:220, :] = (np.abs(xs - xc) <= 4.0)[None, :]
+    polys = polygons_from_labels(lab, grid, 0.5)
+    rims = np.zeros(dsm.shape, bool)
+    rims[:, np.abs(np.abs(xs - xc) - 4.25) < 0.3] = True
+    args = (lab, polys, dsm, dsm, grid, 10.0, "banks", 2.0, 1.0, 1.0, "all", rims, 4.5)
+    kw = dict(ground_segment_m=4.0, bank_fit_m=4.5)
+    _, s_across, _ = measure_sections(*args, **kw)
+    _, s_along, _ = measure_sections(*args, **kw, ground_along_axis=True)
+    _, s_dtm, _ = measure_sections(lab, polys, dem0, dem0, grid, 10.0, "banks", 2.0, 1.0, 1.0, "all", rims, 4.5, bank_fit_m=4.5)
+    err_across = np.abs(s_across["depth_m"].to_numpy() - s_dtm["depth_m"].to_numpy())
+    err_along = np.abs(s_along["depth_m"].to_numpy() - s_dtm["depth_m"].to_numpy())
+    assert np.median(err_across) > 0.3  # the clumps lift the banks the reference is fitted to
+    assert np.median(err_along) < 0.05 and err_along.max() < 0.15
+    assert np.allclose(s_along["width_m"], s_across["width_m"])  # positions and widths untouched

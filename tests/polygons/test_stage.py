@@ -21,6 +21,9 @@ def test_params_from_the_site_config(repo_root):
     assert PolygonParams().thalweg_follow_flow is False and PolygonParams().thalweg_incision_ground_m is None
     q = PolygonParams.from_config({**cfg, "thalweg": {k: v for k, v in cfg["thalweg"].items() if k not in ("follow_flow", "incision_ground_m")}})
     assert q.thalweg_follow_flow is False and q.thalweg_incision_ground_m is None  # keys left out: the stage as before
+    assert p.ground_along_axis is True and PolygonParams().ground_along_axis is False  # session 35, pre-registered, adopted
+    r = PolygonParams.from_config({**cfg, "morphometry": {k: v for k, v in cfg["morphometry"].items() if k != "ground_along_axis"}})
+    assert r.ground_along_axis is False  # left out: sections opened across the gully only, as before
     with pytest.raises(InputError, match="^polygons.breaklines.curvature: must be one of"):
         PolygonParams.from_config({**cfg, "breaklines": {**cfg["breaklines"], "curvature": "gaussian"}})
 

@@ -49,7 +49,7 @@ def test_every_polygon_has_one_owner_and_polygons_cross_the_borders(site_run):
     assert any(g.intersects(shapely.LineString([(xb - 500, yb), (xb + 500, yb)])) for g in polys.geometry)
     win = polygons_window(polys.iloc[:1], res.grid, margin_cells(p, res.grid.cell))
     assert win[0] % 2 == 0 and win[1] % 2 == 0  # numpy rounds halves to even: odd offsets would move rim samples
-    assert win[0] >= 0 and win[0] + win[2] <= res.grid.height and margin_cells(p, 0.5) == 29  # (4.5 rim + 4.5 banks + 4.0 ground + 0.5) / 0.5 + 2
+    assert win[0] >= 0 and win[0] + win[2] <= res.grid.height and margin_cells(p, 0.5) == 37  # (4.5 rim + 4.5 banks + 2 x 4.0 ground, across and along + 0.5) / 0.5 + 2
 
 
 def test_tile_jobs_merge_to_the_whole_grid_morphometry(site_run):

@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 import scipy.ndimage as ndi
 import shapely
+import shapely.ops
 from scipy.ndimage import map_coordinates
 from skimage.morphology import thin
 
@@ -227,6 +228,61 @@ def drape(line: shapely.LineString, surface: np.ndarray, grid: GridSpec, step: f
     r, c = grid.rowcol(x, y)
     z = map_coordinates(surface, [r, c], order=1, mode="nearest")
     return s, x, y, z
+
+
+def axis_gradient(axis: shapely.LineString, s0: float, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float) -> float:
+    """The floor's gradient along a medial axis at ``s0`` (m/m, positive uphill in the axis' direction).
+
+    The slope of a straight line fitted (least squares) to the axis' ground profile (the DEM
+    draped along the axis from ``s0 − 2·segment_m`` to ``s0 + 2·segment_m``, opened with
+    ``segment_m`` as :func:`ground_profile`, so that a clump in the channel does not tilt it)
+    over ``s0 ± segment_m``. 0 where the axis is too short for two samples. O(segment / step).
+    """
+    a, b = max(s0 - 2.0 * segment_m, 0.0), min(s0 + 2.0 * segment_m, axis.length)
+    if b - a < 2.0 * step:
+        return 0.0
+    piece = shapely.ops.substring(axis, a, b)
+    s, _, _, z = drape(piece, dem, grid, step)
+    g = ground_profile(z, float(s[1] - s[0]) if s.size > 1 else step, segment_m)
+    tau = s + a - s0
+    sel = (np.abs(tau) <= segment_m + 1e-9) & np.isfinite(g)
+    if sel.sum() < 2:
+        return 0.0
+    return float(np.polyfit(tau[sel], g[sel], 1)[0])
+
+
+def drape_opened_along(line: shapely.LineString, surface: np.ndarray, grid: GridSpec, step: float, along: np.ndarray,
+                       gradient: float, segment_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`drape`, with each sample's elevation opened along the gully (the ground between plants along the strip).
+
+    The line is draped again shifted by τ in [−``segment_m``, +``segment_m``] (every ``step``)
+    along the unit vector ``along`` (the gully axis), each copy detrended by ``gradient`` · τ
+    (the floor's gradient along the axis, :func:`axis_gradient`, so that a rim is not bevelled
+    by the gully's fall), and at each position the samples along τ are opened with a
+    ``segment_m`` segment (:func:`ground_profile`'s 1-D grey opening); the value at τ = 0 is
+    returned. A plant clump narrower than the segment along the strip is removed where ground
+    shows beside it along the gully; a clump the opening across the section cannot see past
+    (its gap to the next clump across is filled by the matching window) is seen past along it.
+    Never above :func:`drape`'s z (the opening is anti-extensive and τ = 0 is not detrended).
+
+    Returns
+    -------
+    s, x, y, z : ndarray
+        As :func:`drape`. O(n · segment / step) for n samples.
+    """
+    s, x, y, z0 = drape(line, surface, grid, step)
+    k = int(round(segment_m / step))
+    if segment_m <= 0 or k < 1:
+        return s, x, y, z0
+    tau = np.arange(-k, k + 1) * step
+    xs = x[None, :] + tau[:, None] * along[0]
+    ys = y[None, :] + tau[:, None] * along[1]
+    r, c = grid.rowcol(xs.ravel(), ys.ravel())
+    zz = map_coordinates(surface, [r, c], order=1, mode="nearest", cval=np.nan).reshape(xs.shape) - gradient * tau[:, None]
+    ok = np.isfinite(zz)
+    zz = np.where(ok, zz, np.nanmax(zz) if ok.any() else 0.0)
+    opened = ndi.grey_opening(zz, size=(k + 1, 1), mode="nearest")[k]
+    return s, x, y, np.where(np.isfinite(z0), np.minimum(opened, z0), z0)
 
 
 def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndarray | None = None) -> tuple[float, float]:
@@ -422,8 +478,20 @@ def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, 
     return shapely.LineString([a - oa * u, b + ob * u]), oa
 
 
-def _ground_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """(s, ground z) along ``line``: drape the line prolonged by ``segment_m`` at both ends, open it, cut back."""
+def _drape_fn(along: tuple[np.ndarray, float] | None, segment_m: float):
+    """:func:`drape`, or with ``along`` = (axis direction, gradient) :func:`drape_opened_along`."""
+    if along is None:
+        return drape
+    return lambda line, dem, grid, step: drape_opened_along(line, dem, grid, step, along[0], along[1], segment_m)
+
+
+def _ground_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float,
+                  along: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(s, ground z) along ``line``: drape the line prolonged by ``segment_m`` at both ends, open it, cut back.
+
+    ``along`` = (unit axis direction, floor gradient): the drape is opened along the axis first
+    (:func:`drape_opened_along`).
+    """
     a, b = np.asarray(line.coords[0])[:2], np.asarray(line.coords[-1])[:2]
     L = float(np.hypot(*(b - a)))
     if L == 0:
@@ -432,19 +500,22 @@ def _ground_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, ste
     u = (b - a) / L
     n_out = int(np.ceil(segment_m / step))
     ext = shapely.LineString([a - n_out * step * u, b + n_out * step * u])
-    s_all, _, _, z_all = drape(ext, dem, grid, step)
+    s_all, _, _, z_all = _drape_fn(along, segment_m)(ext, dem, grid, step)
     g = ground_profile(z_all, float(s_all[1] - s_all[0]) if s_all.size > 1 else step, segment_m)
     s = np.linspace(0.0, L, max(int(np.ceil(L / step)), 1) + 1)
     return s, np.interp(s + n_out * step, s_all, g)
 
 
 def _bank_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float,
-                fit_m: float, model: str = "quadratic") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                fit_m: float, model: str = "quadratic", along: tuple[np.ndarray, float] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(s, z, z_ref) along ``line`` with the :func:`bank_reference` of its ends.
 
     The line is draped prolonged by ``fit_m`` (+ ``segment_m`` for the ground opening, which is
     unreliable within one segment of the prolonged ends) at both ends, opened
-    (:func:`ground_profile`), and the banks fitted on the prolonged parts.
+    (:func:`ground_profile`), and the banks fitted on the prolonged parts. ``along`` = (unit
+    axis direction, floor gradient): the drape is opened along the axis first
+    (:func:`drape_opened_along`).
     """
     a, b = np.asarray(line.coords[0])[:2], np.asarray(line.coords[-1])[:2]
     L = float(np.hypot(*(b - a)))
@@ -456,7 +527,7 @@ def _bank_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step:
     u = (b - a) / L
     out = int(np.ceil((fit_m + segment_m) / step)) * step
     ext = shapely.LineString([a - out * u, b + out * u])
-    s_all, _, _, z_all = drape(ext, dem, grid, step)
+    s_all, _, _, z_all = _drape_fn(along, segment_m)(ext, dem, grid, step)
     if segment_m > 0:
         z_all = ground_profile(z_all, float(s_all[1] - s_all[0]) if s_all.size > 1 else step, segment_m)
     s_all = s_all - out
@@ -490,6 +561,7 @@ def measure_sections(
     no_rim: str = "outline",
     open_edges: bool = False,
     edge_gap_cells: int = 0,
+    ground_along_axis: bool = False,
 ) -> tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, pd.DataFrame]:
     """Medial axes, cross-sections and per-polygon morphometry.
 
@@ -540,6 +612,10 @@ def measure_sections(
         forking into the corners of the cut (surveys that end inside a gully).
     edge_gap_cells : int
         With ``open_edges``: a polygon this close to the DEM's edge (cells) reaches it.
+    ground_along_axis : bool
+        With ``ground_segment_m`` > 0: each section's drape is opened along the gully axis too
+        (:func:`drape_opened_along`, detrended by :func:`axis_gradient`) before the opening
+        across it: the ground between plant clumps along the strip.
 
     Returns
     -------
@@ -621,11 +697,14 @@ def measure_sections(
                     line, _ = extend_to_rims(piece, rims, grid, rim_search_m, dem64 if no_rim == "highest_ground" else None,
                                              ground_segment_m)
                 lev = None
+                along = None
+                if ground_along_axis and ground_segment_m > 0:
+                    along = (np.array([tx, ty]) / tn, axis_gradient(axis, s0, dem64, grid, step, ground_segment_m))
                 if reference in ("banks", "bank_lines"):
                     s, z, lev = _bank_drape(line, dem64, grid, step, ground_segment_m, bank_fit_m,
-                                            "quadratic" if reference == "banks" else "lines")
+                                            "quadratic" if reference == "banks" else "lines", along)
                 elif ground_segment_m > 0:
-                    s, z = _ground_drape(line, dem64, grid, step, ground_segment_m)
+                    s, z = _ground_drape(line, dem64, grid, step, ground_segment_m, along)
                 else:
                     s, x, y, z = drape(line, dem64, grid, step)
                 if reference == "spill":

@@ -141,6 +141,14 @@ class PolygonParams:
     prolong_axes : bool
         Prolong the medial axes' free ends straight on to the polygon outline [I]: thinning
         stops an axis about a half width short of each end, so its slabs miss the ends.
+    ground_segment_m : float
+        Sections measured on their ground profile, a 1-D opening across the gully with this
+        segment (m; the widest plant clump) [I]; 0 = on the DEM.
+    ground_along_axis : bool
+        With ``ground_segment_m``: each section's drape opened along the gully axis too, with
+        the same segment, detrended by the floor's gradient
+        (:func:`kitegully.polygons.morphometry.drape_opened_along`) [I]: plants and the
+        matching window only raise a DSM, and the clumps repeat along the strip as across it.
     bank_fit_m : float
         For ``reference`` ``banks`` / ``bank_lines``: length of ground beyond each reference end
         (m) that the pre-incision surface across the gully is fitted to
@@ -197,6 +205,7 @@ class PolygonParams:
     rim_search_m: float = 0.0
     prolong_axes: bool = False
     ground_segment_m: float = 0.0
+    ground_along_axis: bool = False
     bank_fit_m: float = 0.0
     no_rim: str = "outline"
 
@@ -216,7 +225,7 @@ class PolygonParams:
                                                                           "min_area_m2", "keep_on_thalweg", "terrain_held", "below_rims"],
                            optional=["held_by_banks"])
         m = config_section(cfg["morphometry"], "polygons.morphometry", ["threshold_m", "spacing_m", "reference", "branches", "rim_search_m", "prolong_axes"],
-                           optional=["ground_segment_m", "bank_fit_m", "no_rim"])
+                           optional=["ground_segment_m", "ground_along_axis", "bank_fit_m", "no_rim"])
         return cls(
             cell_m=cfg["cell_m"], gap_neighbours=g["neighbours"], gap_radius_m=g["radius_m"], water_min_area_m2=g.get("water_min_area_m2"),
             window_cells=b["window_cells"], curvature=b["curvature"], curvature_threshold_per_m=b["threshold_per_m"],
@@ -236,7 +245,8 @@ class PolygonParams:
             terrain_held=c["terrain_held"], below_rims=c["below_rims"], held_by_banks=bool(c.get("held_by_banks", False)),
             morph_threshold_m=m["threshold_m"], section_spacing_m=m["spacing_m"], reference=m["reference"],
             branches=m["branches"], rim_search_m=float(m["rim_search_m"]), prolong_axes=bool(m["prolong_axes"]),
-            ground_segment_m=float(m.get("ground_segment_m", 0.0)), bank_fit_m=float(m.get("bank_fit_m", 0.0)),
+            ground_segment_m=float(m.get("ground_segment_m", 0.0)), ground_along_axis=bool(m.get("ground_along_axis", False)),
+            bank_fit_m=float(m.get("bank_fit_m", 0.0)),
             no_rim=m.get("no_rim", "outline"),
         )
 
@@ -318,7 +328,7 @@ def measure_morphometry(labels: np.ndarray, polygons: gpd.GeoDataFrame, dem: np.
     return measure_sections(labels, polygons, dem, level, grid, p.section_spacing_m, p.reference, p.smooth_step_m, p.snakes_alpha,
                             p.snakes_beta, p.branches, rims, p.rim_search_m, p.prolong_axes, p.ground_segment_m,
                             p.bank_fit_m, p.no_rim, open_edges=p.survey_edge_dams,
-                            edge_gap_cells=p.grow_cells + 1)
+                            edge_gap_cells=p.grow_cells + 1, ground_along_axis=p.ground_along_axis)
 
 
 def morphometry_rows(axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: pd.DataFrame, params: PolygonParams) -> list[tuple]:
@@ -327,7 +337,8 @@ def morphometry_rows(axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: 
     return [("medial axes", len(axes)), ("cross-sections", len(sections)), ("volume (m3)", round(float(morph["volume_m3"].sum()), 1)),
             ("depth reference", p.reference), ("section branches", p.branches),
             ("rim search beyond the polygon (m)", p.rim_search_m), ("axes prolonged to the outline", p.prolong_axes),
-            ("ground segment across sections (m)", p.ground_segment_m)]
+            ("ground segment across sections (m)", p.ground_segment_m),
+            ("ground opened along the gully too", p.ground_along_axis and p.ground_segment_m > 0)]
 
 
 def _lines_gdf(paths, grid: GridSpec) -> list[shapely.LineString]:

@@ -117,11 +117,13 @@ def margin_cells(params: PolygonParams, cell: float) -> int:
     ``rim_search_m`` (section ends prolonged to the rim or, with ``no_rim: highest_ground``, to
     the highest ground within it) + ``bank_fit_m`` (the banks fitted beyond the ends, for the
     ``banks`` / ``bank_lines`` references) + ``ground_segment_m`` (ground profile drape
-    prolonged at both ends) + one cell (bilinear drape), rounded up, plus 2 cells (the bounding
-    box is taken one cell wide around the label).
+    prolonged at both ends; once more with ``ground_along_axis``, whose drapes are shifted that far
+    along the axis) + one cell (bilinear drape), rounded up, plus 2 cells (the bounding box is
+    taken one cell wide around the label).
     """
     bank = params.bank_fit_m if params.reference in ("banks", "bank_lines") else 0.0
-    return int(ceil((params.rim_search_m + bank + params.ground_segment_m + cell) / cell - 1e-9)) + 2
+    ground = params.ground_segment_m * (2 if params.ground_along_axis else 1)
+    return int(ceil((params.rim_search_m + bank + ground + cell) / cell - 1e-9)) + 2
 
 
 def polygons_window(polygons: gpd.GeoDataFrame, grid: GridSpec, margin: int) -> tuple[int, int, int, int] | None:
