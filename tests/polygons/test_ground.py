@@ -25,6 +25,16 @@ def _shrubs_on_rims(dem, grid, xc, half_width, height=1.0, clump_m=2.0, period_m
     return (dem + np.where(strip & clump, height, 0.0)).astype(np.float32)
 
 
+def _straight_gully(shape, grid, xc, half_width):
+    """Labels, polygon and rim band of the notch along y (rows 20-219 of the notch DEM, ``half_width`` each side)."""
+    xs, _ = grid.cell_centres()
+    lab = np.zeros(shape, np.int32)
+    lab[20:220, :] = (np.abs(xs - xc) <= half_width)[None, :]
+    rims = np.zeros(shape, bool)
+    rims[:, np.abs(np.abs(xs - xc) - (half_width + 0.25)) < 0.3] = True
+    return lab, polygons_from_labels(lab, grid, 0.5), rims
+
+
 def test_ground_profile_removes_a_clump_on_the_rim_and_keeps_the_floor_and_slopes():
     s = np.arange(0.0, 24.0 + 1e-9, 0.25)
     d = np.abs(s - 12.0)
@@ -52,12 +62,7 @@ def test_ground_profile_removes_a_clump_on_the_rim_and_keeps_the_floor_and_slope
 def test_sections_on_the_ground_profile_recover_a_notch_under_rim_shrubs(shape):
     dem0, grid, xc = notch_dem(shape, 8.0, 2.0, cross_slope=0.02)
     dsm = _shrubs_on_rims(dem0, grid, xc, 4.0)
-    xs, _ = grid.cell_centres()
-    lab = np.zeros(dsm.shape, np.int32)
-    lab[20:220, :] = (np.abs(xs - xc) <= 4.0)[None, :]
-    polys = polygons_from_labels(lab, grid, 0.5)
-    rims = np.zeros(dsm.shape, bool)
-    rims[:, np.abs(np.abs(xs - xc) - 4.25) < 0.3] = True
+    lab, polys, rims = _straight_gully(dsm.shape, grid, xc, 4.0)
     args = (lab, polys, dsm, dsm, grid, 10.0, "line", 2.0, 1.0, 1.0, "all", rims, 4.5)
     _, s_dsm, _ = measure_sections(*args)
     _, s_g, _ = measure_sections(*args, ground_segment_m=4.0)
@@ -134,12 +139,7 @@ def test_opening_along_the_axis_sees_past_clumps_the_section_cannot_and_keeps_th
 def test_sections_opened_along_the_axis_recover_a_notch_under_wide_rim_clumps():
     dem0, grid, xc = notch_dem("U", 8.0, 2.0, long_slope=0.1, cross_slope=0.02)
     dsm = _wide_clumps_on_rims(dem0, grid, xc, 4.0)
-    xs, _ = grid.cell_centres()
-    lab = np.zeros(dsm.shape, np.int32)
-    lab[20:220, :] = (np.abs(xs - xc) <= 4.0)[None, :]
-    polys = polygons_from_labels(lab, grid, 0.5)
-    rims = np.zeros(dsm.shape, bool)
-    rims[:, np.abs(np.abs(xs - xc) - 4.25) < 0.3] = True
+    lab, polys, rims = _straight_gully(dsm.shape, grid, xc, 4.0)
     args = (lab, polys, dsm, dsm, grid, 10.0, "banks", 2.0, 1.0, 1.0, "all", rims, 4.5)
     kw = dict(ground_segment_m=4.0, bank_fit_m=4.5)
     _, s_across, _ = measure_sections(*args, **kw)
