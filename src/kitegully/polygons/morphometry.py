@@ -278,7 +278,7 @@ def drape_opened_along(line: shapely.LineString, surface: np.ndarray, grid: Grid
     xs = x[None, :] + tau[:, None] * along[0]
     ys = y[None, :] + tau[:, None] * along[1]
     r, c = grid.rowcol(xs.ravel(), ys.ravel())
-    zz = map_coordinates(surface, [r, c], order=1, mode="nearest", cval=np.nan).reshape(xs.shape) - gradient * tau[:, None]
+    zz = map_coordinates(surface, [r, c], order=1, mode="nearest").reshape(xs.shape) - gradient * tau[:, None]
     ok = np.isfinite(zz)
     zz = np.where(ok, zz, np.nanmax(zz) if ok.any() else 0.0)
     opened = ndi.grey_opening(zz, size=(k + 1, 1), mode="nearest")[k]
