@@ -275,10 +275,13 @@ def drape_opened_along(line: shapely.LineString, surface: np.ndarray, grid: Grid
     if segment_m <= 0 or k < 1:
         return s, x, y, z0
     tau = np.arange(-k, k + 1) * step
-    xs = x[None, :] + tau[:, None] * along[0]
-    ys = y[None, :] + tau[:, None] * along[1]
+    shifted = tau != 0  # the τ = 0 row is drape's own z0, not sampled twice
+    xs = x[None, :] + tau[shifted, None] * along[0]
+    ys = y[None, :] + tau[shifted, None] * along[1]
     r, c = grid.rowcol(xs.ravel(), ys.ravel())
-    zz = map_coordinates(surface, [r, c], order=1, mode="nearest").reshape(xs.shape) - gradient * tau[:, None]
+    zz = np.empty((tau.size, s.size))
+    zz[shifted] = map_coordinates(surface, [r, c], order=1, mode="nearest").reshape(xs.shape) - gradient * tau[shifted, None]
+    zz[k] = z0
     ok = np.isfinite(zz)
     zz = np.where(ok, zz, np.nanmax(zz) if ok.any() else 0.0)
     opened = ndi.grey_opening(zz, size=(k + 1, 1), mode="nearest")[k]
@@ -478,11 +481,12 @@ def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, 
     return shapely.LineString([a - oa * u, b + ob * u]), oa
 
 
-def _drape_fn(along: tuple[np.ndarray, float] | None, segment_m: float):
+def _drape_section(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float,
+                   along: tuple[np.ndarray, float] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`drape`, or with ``along`` = (axis direction, gradient) :func:`drape_opened_along`."""
     if along is None:
-        return drape
-    return lambda line, dem, grid, step: drape_opened_along(line, dem, grid, step, along[0], along[1], segment_m)
+        return drape(line, dem, grid, step)
+    return drape_opened_along(line, dem, grid, step, along[0], along[1], segment_m)
 
 
 def _ground_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step: float, segment_m: float,
@@ -500,7 +504,7 @@ def _ground_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, ste
     u = (b - a) / L
     n_out = int(np.ceil(segment_m / step))
     ext = shapely.LineString([a - n_out * step * u, b + n_out * step * u])
-    s_all, _, _, z_all = _drape_fn(along, segment_m)(ext, dem, grid, step)
+    s_all, _, _, z_all = _drape_section(ext, dem, grid, step, segment_m, along)
     g = ground_profile(z_all, float(s_all[1] - s_all[0]) if s_all.size > 1 else step, segment_m)
     s = np.linspace(0.0, L, max(int(np.ceil(L / step)), 1) + 1)
     return s, np.interp(s + n_out * step, s_all, g)
@@ -527,7 +531,7 @@ def _bank_drape(line: shapely.LineString, dem: np.ndarray, grid: GridSpec, step:
     u = (b - a) / L
     out = int(np.ceil((fit_m + segment_m) / step)) * step
     ext = shapely.LineString([a - out * u, b + out * u])
-    s_all, _, _, z_all = _drape_fn(along, segment_m)(ext, dem, grid, step)
+    s_all, _, _, z_all = _drape_section(ext, dem, grid, step, segment_m, along)
     if segment_m > 0:
         z_all = ground_profile(z_all, float(s_all[1] - s_all[0]) if s_all.size > 1 else step, segment_m)
     s_all = s_all - out
