@@ -195,10 +195,12 @@ closerange: $(STAMP)
 
 # Gully polygons (issue 16): the paper's settings against ours on the peat valley (~4 min), and the
 # stage on every ensemble member's DSM that `make ensemble` has written (~1 min per member):
-# results/benchmarks/polygons_paper_settings.md, polygons_ensemble.md.
+# results/benchmarks/polygons_paper_settings.md, polygons_ensemble.md, and the depth error by section
+# kind with the bounds of a bias correction (polygons_depth_bounds.md; evaluation only).
 polygons-benchmarks: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_paper_settings.py
-	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_ensemble.py $(POLYGONS_ENSEMBLE_ARGS)
+	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_ensemble.py --sections $(POLYGONS_ENSEMBLE_ARGS)
+	$(BIN)/python benchmarks/polygons_depth_bounds.py results/benchmarks/polygons_ensemble_sections.csv --out results/benchmarks/polygons_depth_bounds
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_dsm_diagnosis.py $(POLYGONS_ENSEMBLE_ARGS)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/polygons_rules_off.py $(POLYGONS_ENSEMBLE_ARGS)
 

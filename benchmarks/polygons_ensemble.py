@@ -24,7 +24,8 @@ Usage::
     .venv/bin/python benchmarks/polygons_ensemble.py --set polygons.morphometry.threshold_m=0.25 \
         --set "polygons.conditioning.thresholds_m=[0.25, 0.5, 1.0]"   # another setting on every member (yaml values)
 
-Writes ``results/benchmarks/polygons_ensemble.csv`` and ``.md``. A member whose DSM or truth
+Writes ``results/benchmarks/polygons_ensemble.csv`` and ``.md`` (with ``--sections`` also
+``polygons_ensemble_sections.csv``, every matched section's errors). A member whose DSM or truth
 is missing is listed as skipped.
 """
 
@@ -95,11 +96,13 @@ def water_left_empty(dem: Raster, truth: Path) -> Raster:
 
 
 def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_empty: bool = False,
-                 overrides: dict | None = None) -> dict:
+                 overrides: dict | None = None, sections: list | None = None) -> dict:
     """Run the stage on one member's DSM (or another DEM under its site folder) and score it; ``status`` says why a member was skipped.
 
     ``water_empty``: the twin's open water set to NaN first (:func:`water_left_empty`; for its true surfaces).
     ``overrides``: nested config values merged over the member's (``--set``).
+    ``sections``: when a list, the member's matched sections with their errors (``morphometry_errors``'
+    per-section table and a ``member`` column) are appended to it (``--sections``).
     """
     cfg = member_config(member, overrides)
     site = root / cfg["site"]["name"]
@@ -121,6 +124,8 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_
                                 read_vector(truth / "gully_centrelines.gpkg"), res.grid,
                                 {k: v for k, v in poly["evaluation"].items() if k != "operators"}, cfg["twin"]["gullies"]["u_shape_exponent"],
                                 region=region)
+    if sections is not None:
+        sections.append(ev["sections"].assign(member=member))
     sc = ev["scores"].set_index("kind")
     e = ev["errors"].set_index("quantity")
     thr = poly["morphometry"]["threshold_m"]
@@ -172,19 +177,24 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="dotted config key and yaml value merged over every member's configuration (a trial, not the site's setting)")
     ap.add_argument("--out", default=str(REPO / "results" / "benchmarks" / "polygons_ensemble"))
+    ap.add_argument("--sections", action="store_true",
+                    help="also write every member's matched sections with their errors to <out>_sections.csv (benchmarks/polygons_depth_bounds.py reads it)")
     args = ap.parse_args()
     overrides: dict = {}
     for item in args.set:
         key, _, value = item.partition("=")
         overrides = _merge(overrides, _dotted(key.strip(), yaml.safe_load(value)))
-    rows = []
+    rows: list[dict] = []
+    sections: list | None = [] if args.sections else None
     for m in args.members.split(","):
-        rows.append(score_member(m, Path(args.root), args.dem, args.water_empty, overrides))
+        rows.append(score_member(m, Path(args.root), args.dem, args.water_empty, overrides, sections))
         print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
     df = pd.DataFrame(rows)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     df.to_csv(out.with_suffix(".csv"), index=False)
+    if sections:
+        pd.concat(sections, ignore_index=True).to_csv(out.with_name(out.name + "_sections.csv"), index=False)
     text = "# Polygons stage on the ensemble members' photogrammetric DSMs\n\n" + df.to_markdown(index=False, floatfmt=".3g") + "\n"
     if (df["status"] == "ok").any():
         text += "\n## Mean and worst against the issue-16 targets\n\n" + summarise(df).to_markdown(index=False, floatfmt=".3g") + "\n"
