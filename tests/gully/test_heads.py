@@ -73,6 +73,7 @@ def test_flow_accumulation_counts_upstream_cells():
     area, recv = flow_accumulation(dirs, 2.0)
     assert area.ravel().tolist() == [4.0, 8.0, 12.0, 16.0, 20.0]
     assert recv.tolist() == [1, 2, 3, 4, -1]
+    assert recv.dtype == np.int32  # 4 bytes a cell below 2**31 cells (80 M-cell grids: 0.3 GB, not 0.6)
 
 
 def test_from_config_names_the_missing_key():
