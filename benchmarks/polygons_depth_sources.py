@@ -40,11 +40,10 @@ sys.path.insert(0, str(REPO / "src"))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
 from polygons_depth_bounds import section_kinds  # noqa: E402
-from polygons_ensemble import member_config, water_left_empty  # noqa: E402
+from polygons_ensemble import evaluate_member, member_config, water_left_empty  # noqa: E402
 
 from kitegully.io.raster import Raster  # noqa: E402
-from kitegully.io.vectors import read_vector  # noqa: E402
-from kitegully.polygons import PolygonParams, evaluate_against_truth, measure_polygons  # noqa: E402
+from kitegully.polygons import PolygonParams, measure_polygons  # noqa: E402
 from kitegully.polygons.dem_prep import prepare_dem  # noqa: E402
 from kitegully.polygons.evaluation import observable_region_from_files  # noqa: E402
 from kitegully.polygons.stage import measure_morphometry  # noqa: E402
@@ -70,12 +69,8 @@ def member_sections(member: str, root: Path) -> pd.DataFrame:
             raise SystemExit(f"{truth / (name + '.tif')}: its stage grid differs from the DSM's")
         sections[name] = measure_morphometry(res.labels[t], res.polygons[t], dem, res.level, res.rims, res.grid, p)[1]
     region = observable_region_from_files(res.grid, truth / "landcover.tif", truth / "landcover_classes.csv")
-    scored = {}
-    for k, s in sections.items():
-        ev = evaluate_against_truth(res.polygons[t], s, read_vector(truth / "gully_polygons.gpkg"), read_vector(truth / "gully_centrelines.gpkg"),
-                                    res.grid, {kk: v for kk, v in poly["evaluation"].items() if kk != "operators"},
-                                    cfg["twin"]["gullies"]["u_shape_exponent"], region=region)
-        scored[k] = ev["sections"].set_index(["polygon_id", "station_m"])
+    scored = {k: evaluate_member(cfg, truth, res.polygons[t], s, res.grid, region)["sections"].set_index(["polygon_id", "station_m"])
+              for k, s in sections.items()}
     d = scored["kite"][["shape", "width_true_m", "depth_true_m", "depth_m"]].copy()
     d["depth_true_dsm_m"] = scored["dsm"]["depth_m"].reindex(d.index)
     d["depth_true_dtm_m"] = scored["dtm"]["depth_m"].reindex(d.index)

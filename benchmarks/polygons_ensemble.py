@@ -95,6 +95,13 @@ def water_left_empty(dem: Raster, truth: Path) -> Raster:
     return Raster(data, dem.grid, np.nan)
 
 
+def evaluate_member(cfg: dict, truth: Path, polygons, sections, grid, region) -> dict:
+    """:func:`kitegully.polygons.evaluate_against_truth` with the member's truth files and evaluation settings (as the ``polygons_evaluate`` rule)."""
+    return evaluate_against_truth(polygons, sections, read_vector(truth / "gully_polygons.gpkg"), read_vector(truth / "gully_centrelines.gpkg"), grid,
+                                  {k: v for k, v in cfg["polygons"]["evaluation"].items() if k != "operators"},
+                                  cfg["twin"]["gullies"]["u_shape_exponent"], region=region)
+
+
 def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_empty: bool = False,
                  overrides: dict | None = None, sections: list | None = None) -> dict:
     """Run the stage on one member's DSM (or another DEM under its site folder) and score it; ``status`` says why a member was skipped.
@@ -120,10 +127,7 @@ def score_member(member: str, root: Path, dem_rel: str = "dense/dsm.tif", water_
     run_s = time.perf_counter() - t0
     # the truth a survey can see: the grid's extent less the reservoir (as the polygons_evaluate rule)
     region = observable_region_from_files(res.grid, truth / "landcover.tif", truth / "landcover_classes.csv")
-    ev = evaluate_against_truth(res.polygons[poly["morphometry"]["threshold_m"]], res.sections, read_vector(truth / "gully_polygons.gpkg"),
-                                read_vector(truth / "gully_centrelines.gpkg"), res.grid,
-                                {k: v for k, v in poly["evaluation"].items() if k != "operators"}, cfg["twin"]["gullies"]["u_shape_exponent"],
-                                region=region)
+    ev = evaluate_member(cfg, truth, res.polygons[poly["morphometry"]["threshold_m"]], res.sections, res.grid, region)
     if sections is not None:
         sections.append(ev["sections"].assign(member=member))
     sc = ev["scores"].set_index("kind")
