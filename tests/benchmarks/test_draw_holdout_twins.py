@@ -17,7 +17,8 @@ import draw_holdout_twins as dh  # noqa: E402
 def test_the_committed_files_are_the_draw_of_their_seed(tmp_path):
     # rerunning the stated command writes the same files: nobody edited a drawn twin afterwards
     for seed, names in ((20261206, ("h3", "h4", "h5", "h6")), (20261207, ("h7", "h8", "h9", "h10")),
-                        (20261208, ("h11", "h12", "h13", "h14")), (20261209, ("h15", "h16", "h17", "h18"))):
+                        (20261208, ("h11", "h12", "h13", "h14")), (20261209, ("h15", "h16", "h17", "h18")),
+                        (20261210, ("h19", "h20", "h21", "h22"))):
         rng = np.random.default_rng(seed)
         for name in names:
             text = dh.site_file(name, 1000 + 101 * int(name[1:]), dh.draw(rng), seed)
