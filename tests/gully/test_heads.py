@@ -216,3 +216,65 @@ def test_what_the_dsm_did_not_observe_does_not_change_the_incision_map():
     # taken as observed, the interpolated values do move the map
     seen = detect_heads(np.where(gap, z - 0.8, z).astype(np.float32), filled, dirs, grid, P)[1]
     assert seen["incised_cells"] != s0["incised_cells"]
+
+
+def _crown_row(z, X, Y, radius=3.0, height=6.0, y=30.0):
+    """A row of tree crowns (7 m apart) across the slope at ``y``; the DSM and each cell's distance to a crown."""
+    crowns = np.zeros(X.shape, bool)
+    dist = np.full(X.shape, np.inf)
+    for cx in np.arange(10.0, 55.0, 7.0):
+        d = np.hypot(X - cx, Y - y)
+        crowns |= d < radius
+        dist = np.minimum(dist, d - radius)
+    cap = height * np.sqrt(np.clip(1 - ((dist + radius) / radius) ** 2, 0, 1))
+    return np.where(crowns, z + cap, z).astype(np.float32), dist
+
+
+@pytest.mark.parametrize("size", [(10.0, 8.0, 4.0), (16.0, 10.0, 4.0)])
+def test_no_ring_of_incision_around_a_building_with_tall_objects_left_out(size):
+    from kitegully.gully.heads import head_scale_relief, incision_map
+
+    length, width, height = size
+    grid = _grid(300)
+    X, Y = np.meshgrid(*grid.cell_centres())
+    z = 0.1 * Y + np.random.default_rng(5).normal(0, 0.01, X.shape)
+    inside = (np.abs(X - 30) < length / 2) & (np.abs(Y - 30) < width / 2)
+    dsm = np.where(inside, 0.1 * (30 + width / 2) + height, z).astype(np.float32)
+    beside = np.maximum(np.abs(X - 30) - length / 2, np.abs(Y - 30) - width / 2)
+    ring = (beside > 0) & (beside < 4)
+    # the noise smoothing's skirt around the walls lifts the reference: incised cells on a ring
+    incised, threshold, _ = incision_map(dsm, CELL, P)
+    assert incised[ring].sum() > 0
+    assert not incision_map(dsm, CELL, P, tall_objects_out=True)[0][ring].any()
+    assert np.nanmax(head_scale_relief(dsm, CELL, P, tall_objects_out=True)[0][ring]) < 0.5 * threshold
+
+
+def test_tall_objects_out_clear_a_crown_row_and_leave_a_channel_beside_a_shrub_alone():
+    from kitegully.gully.heads import head_scale_relief
+
+    grid = _grid(300)
+    X, Y = np.meshgrid(*grid.cell_centres())
+    z = 0.1 * Y + np.random.default_rng(5).normal(0, 0.01, X.shape)
+    dsm, dist = _crown_row(z, X, Y)
+    ring = (dist > 0) & (dist < 4) & (X > 12) & (X < 50)
+    plain = np.nanmax(head_scale_relief(dsm, CELL, P)[0][ring])
+    out = np.nanmax(head_scale_relief(dsm, CELL, P, tall_objects_out=True)[0][ring])
+    assert plain > 0.1 and out < 0.05
+    # a 0.6 m channel with a 1 m shrub on its bank: the shrub is below tall_object_m, nothing changes
+    chan = 0.6 * np.clip(1 - np.abs(X - 30.0) / 1.0, 0, None) * (Y < 40)
+    shrub = 1.0 * (np.hypot(X - 31.5, Y - 35.0) < 1.2)
+    zc = (z - chan + shrub).astype(np.float32)
+    a = head_scale_relief(zc, CELL, P)[0]
+    b = head_scale_relief(zc, CELL, P, tall_objects_out=True)[0]
+    np.testing.assert_array_equal(a, b)
+
+
+def test_the_detector_finds_the_channel_and_no_head_at_a_building_upslope_of_it():
+    # the valley test's channel with a 14 x 9 m, 5 m high building 15 m beside it on the slope
+    z, grid = _valley()
+    X, Y = np.meshgrid(*grid.cell_centres())
+    house = (np.abs(X - 60.0) < 7.0) & (np.abs(Y - 40.0) < 4.5)
+    dsm = np.where(house, 0.1 * 44.5 + 0.05 * 20.0 + 5.0, z).astype(np.float32)
+    heads, _ = _detect(dsm, grid)
+    assert len(heads) >= 1 and np.hypot(heads[:, 0] - 40.0, heads[:, 1] - 60.0).min() < 2.0
+    assert np.all(np.abs(heads[:, 0] - 40.0) < 3.0)  # none at the building
