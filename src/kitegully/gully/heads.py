@@ -424,7 +424,11 @@ def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
         height = max(params.tall_object_m, params.relief_k * max(params.dsm_sigma_z_m, rough))
         tall = _standing_above(z, ground, height)
         del ground
-        ground = ground_surface(np.where(tall, np.nan, z), cell_m, params.scale_m, params.slope_window_m, workers)
+        # float32: what the ground surface's FFT smoothings work in anyway (half a float64 copy at 80 M cells)
+        without = z.astype(np.float32)
+        without[tall] = np.nan
+        ground = ground_surface(without, cell_m, params.scale_m, params.slope_window_m, workers)
+        del without
         tall |= _standing_above(z, ground, height)
         ground[tall] = np.nan
         log.info("head-scale reference: %d cells stand more than %.3g m above the ground (tall objects), left out",
