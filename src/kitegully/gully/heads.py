@@ -412,8 +412,9 @@ def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
     building and tree row: constructed, a ring of up to 0.17–0.28 m around 10–16 m buildings
     4–5 m high on a 10 % slope (threshold 0.15 m), 0.03 m with them left out. On four twins'
     DSMs, 10 of the 14 false automatic heads with the longest false paths sat on such rings
-    (session 37, docs/stages/06_gully.md). Shrubs (below ``tall_object_m``) stay: leaving them out as well
-    lowered the relief of true heads in shrub strips (good fit −2.8 points over 24 twins).
+    (session 37, docs/stages/06_gully.md). Shrubs (below ``tall_object_m``) stay: leaving
+    them out as well lowered the relief of true heads in shrub strips (good fit −2.8 points
+    over 24 twins).
     O(n log n): a second :func:`ground_surface`.
     """
     valid = np.isfinite(z)
