@@ -380,7 +380,8 @@ def incision_map(z: np.ndarray, cell_m: float, params: HeadDetectionParams, work
 
     Notes
     -----
-    O(n log n): three FFT smoothings and the opening of :func:`ground_surface`.
+    O(n log n): three FFT smoothings and the opening of :func:`ground_surface` (five and two
+    with ``tall_objects_out``).
     """
     valid = np.isfinite(z)
     relief, rough = head_scale_relief(z, cell_m, params, workers, tall_objects_out=tall_objects_out)
@@ -423,14 +424,14 @@ def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
     ground = ground_surface(z, cell_m, params.scale_m, params.slope_window_m, workers)
     if tall_objects_out:
         height = max(params.tall_object_m, params.relief_k * max(params.dsm_sigma_z_m, rough))
-        tall = _standing_above(z, ground, height)
+        tall = standing_above(z, ground, height)
         del ground
         # float32: what the ground surface's FFT smoothings work in anyway (half a float64 copy at 80 M cells)
         without = z.astype(np.float32)
         without[tall] = np.nan
         ground = ground_surface(without, cell_m, params.scale_m, params.slope_window_m, workers)
         del without
-        tall |= _standing_above(z, ground, height)
+        tall |= standing_above(z, ground, height)
         ground[tall] = np.nan
         log.info("head-scale reference: %d cells stand more than %.3g m above the ground (tall objects), left out",
                  int(tall.sum()), height)
@@ -441,11 +442,24 @@ def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
     return relief, rough
 
 
-def _standing_above(z: np.ndarray, ground: np.ndarray, height_m: float, rows: int = 1024) -> np.ndarray:
-    """Cells where ``z`` stands more than ``height_m`` above ``ground`` (NaN: no).
+def standing_above(z: np.ndarray, ground: np.ndarray, height_m: float, rows: int = 1024) -> np.ndarray:
+    """Cells where ``z`` stands more than ``height_m`` above ``ground`` (objects; NaN in either: no).
 
     Row blocks keep the difference's temporaries to ``rows`` rows (a whole-grid float64
     difference is 0.64 GB at 80 M cells). O(n).
+
+    Parameters
+    ----------
+    z, ground : ndarray (H, W)
+        A surface and the ground surface beneath it (m).
+    height_m : float
+        Height above the ground (m).
+    rows : int
+        Rows per block.
+
+    Returns
+    -------
+    ndarray bool (H, W)
     """
     out = np.zeros(z.shape, dtype=bool)
     with np.errstate(invalid="ignore"):

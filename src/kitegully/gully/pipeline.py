@@ -16,7 +16,8 @@ from scipy.spatial import cKDTree
 from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden_reaches, interpolate_under
 from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
-                                   head_scale_relief, incision_map, surface_roughness, visible_incisions)
+                                   head_scale_relief, incision_map, standing_above, surface_roughness,
+                                   visible_incisions)
 from kitegully.gully.inlets import edge_inlets, route_courses
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully import InputError
@@ -616,7 +617,7 @@ def remove_objects(z: np.ndarray, z_trace: np.ndarray, cell_m: float, params: He
     rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell_m, workers=workers) - z)[valid])
     ground = ground_surface(z, cell_m, params.scale_m, params.slope_window_m, workers)
     thr = params.relief_k * max(params.dsm_sigma_z_m, rough)
-    obj = valid & np.isfinite(ground) & (z_trace - ground > thr)
+    obj = valid & standing_above(z_trace, ground, thr)
     out = np.array(z_trace, dtype=np.float64, copy=True)
     out[obj] = ground[obj]
     log.info("object removal: threshold %.3f m (σ_z %.3f m, ρ %.3f m)", thr, params.dsm_sigma_z_m, rough)
