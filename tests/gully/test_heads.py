@@ -278,3 +278,28 @@ def test_the_detector_finds_the_channel_and_no_head_at_a_building_upslope_of_it(
     heads, _ = _detect(dsm, grid)
     assert len(heads) >= 1 and np.hypot(heads[:, 0] - 40.0, heads[:, 1] - 60.0).min() < 2.0
     assert np.all(np.abs(heads[:, 0] - 40.0) < 3.0)  # none at the building
+
+
+def test_a_shared_ground_surface_gives_the_same_reliefs_and_heads_bit_for_bit():
+    # the gully map makes the ground surface once for the snapping's plain relief and hands it to the detector
+    from kitegully.gully.heads import head_scale_ground, head_scale_relief
+
+    z, grid = _valley()
+    X, Y = np.meshgrid(*grid.cell_centres())
+    house = (np.abs(X - 60.0) < 7.0) & (np.abs(Y - 40.0) < 4.5)
+    gap = np.hypot(X - 46.0, Y - 55.0) < 1.5  # a void the matcher left
+    dsm = np.where(house, 0.1 * 44.5 + 0.05 * 20.0 + 5.0, z).astype(np.float32)
+    dem = np.where(gap, np.nan, dsm).astype(np.float32)
+    ref = head_scale_ground(dem, CELL, P)
+    plain, rough = head_scale_relief(dem, CELL, P, reference=ref)
+    expected = head_scale_relief(dem, CELL, P)
+    np.testing.assert_array_equal(plain, expected[0])
+    assert rough == expected[1] and ref.ground is not None  # the plain relief leaves it for the next use
+    filled, _ = priority_flood_fill(np.where(gap, dsm, dem), 0.0)
+    dirs, _, _ = flow_directions(filled)
+    alone = detect_heads(np.where(gap, dsm, dem), filled, dirs, grid, P, observed=~gap)
+    shared = detect_heads(np.where(gap, dsm, dem), filled, dirs, grid, P, observed=~gap, reference=ref)
+    assert shared[0].tolist() == alone[0].tolist() and shared[1] == alone[1] and len(alone[0]) >= 1
+    assert ref.ground is None  # the tall-object relief took it: freed before its second ground surface
+    with pytest.raises(ValueError, match="already taken"):
+        head_scale_relief(dem, CELL, P, tall_objects_out=True, reference=ref)

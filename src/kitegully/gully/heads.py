@@ -217,6 +217,7 @@ def detect_heads(
     params: HeadDetectionParams,
     workers: int = 1,
     observed: np.ndarray | None = None,
+    reference: HeadScaleGround | None = None,
 ) -> tuple[np.ndarray, dict[str, float]]:
     """Gully-head cells from the DEM alone (see the module docstring).
 
@@ -238,6 +239,10 @@ def detect_heads(
         cells of ``z``. The incision map is made from these cells alone (normalised
         convolution), and no head is detected within one matching window of an unmatched
         cell (:func:`matched_cells`).
+    reference : HeadScaleGround, optional
+        :func:`head_scale_ground` of ``z`` on the ``observed`` cells (NaN elsewhere) with
+        these ``params``, when the caller has it (the gully map's head snapping made it);
+        its ground surface is taken (:func:`head_scale_relief`).
 
     Returns
     -------
@@ -259,7 +264,7 @@ def detect_heads(
     # smoothings' normalised convolution leaves the unmatched cells out (the gap rule below keeps heads
     # off their rims as well)
     incised, threshold, rough = incision_map(np.where(observed, z, np.nan) if not observed.all() else z, cell,
-                                             params, workers, tall_objects_out=True)
+                                             params, workers, tall_objects_out=True, reference=reference)
     # no head where the DSM was not matched: within one matching window of a gap, open water or the edge
     matched = matched_cells(observed, cell, params.slope_window_m)
     incised &= matched
@@ -344,7 +349,8 @@ def one_head_per_incision(heads: np.ndarray, grid: GridSpec, radius_m: float) ->
 
 
 def incision_map(z: np.ndarray, cell_m: float, params: HeadDetectionParams, workers: int = 1,
-                 roughness: bool = True, tall_objects_out: bool = False) -> tuple[np.ndarray, float, float]:
+                 roughness: bool = True, tall_objects_out: bool = False,
+                 reference: HeadScaleGround | None = None) -> tuple[np.ndarray, float, float]:
     """Incised cells: head-scale depth below the ground surface ≥ ``relief_k``·max(σ_z, ρ) (step 1 above).
 
     With ``roughness=False`` the threshold is ``relief_k``·σ_z alone: the operator's
@@ -369,6 +375,8 @@ def incision_map(z: np.ndarray, cell_m: float, params: HeadDetectionParams, work
         Threshold on max(σ_z, ρ) (the detector) or on σ_z alone (the operator's visibility rule).
     tall_objects_out : bool
         Tall objects left out of the reference surface (:func:`head_scale_relief`; the detector).
+    reference : HeadScaleGround, optional
+        :func:`head_scale_ground` of this ``z`` and ``params``, when the caller has it.
 
     Returns
     -------
@@ -384,7 +392,7 @@ def incision_map(z: np.ndarray, cell_m: float, params: HeadDetectionParams, work
     with ``tall_objects_out``).
     """
     valid = np.isfinite(z)
-    relief, rough = head_scale_relief(z, cell_m, params, workers, tall_objects_out=tall_objects_out)
+    relief, rough = head_scale_relief(z, cell_m, params, workers, tall_objects_out=tall_objects_out, reference=reference)
     threshold = params.relief_k * (max(params.dsm_sigma_z_m, rough) if roughness else params.dsm_sigma_z_m)
     incised = np.zeros(z.shape, bool)
     incised[valid] = relief[valid] >= threshold
@@ -394,8 +402,64 @@ def incision_map(z: np.ndarray, cell_m: float, params: HeadDetectionParams, work
     return incised, float(threshold), float(rough)
 
 
+@dataclass
+class HeadScaleGround:
+    """:func:`head_scale_ground` of one DEM, handed from one head-scale relief to the next.
+
+    Attributes
+    ----------
+    ground : ndarray (H, W) float32 or None
+        :func:`ground_surface` of the DEM; None once a tall-object relief has taken it.
+    rough : float
+        ρ, :func:`surface_roughness` of the plain head-scale depth map (m).
+    """
+
+    ground: np.ndarray | None
+    rough: float
+
+    def take(self) -> np.ndarray:
+        """The ground surface, released from this holder (its last use frees it)."""
+        if self.ground is None:
+            raise ValueError("the ground surface was already taken by a tall-object relief")
+        ground, self.ground = self.ground, None
+        return ground
+
+
+def head_scale_ground(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
+                      workers: int = 1) -> HeadScaleGround:
+    """The ground surface ``Z₀`` and the roughness ρ of :func:`head_scale_relief`, for reuse.
+
+    The gully map needs the head-scale relief twice on the same DEM: plain, to snap the
+    digitised heads and find edge inlets, and without tall objects, for the detector. Both
+    start from this ground surface and this ρ (three of the detector's six FFT smoothings;
+    about 20 s of the gully map's 123 s at 80 M cells, session 38), so the map computes them
+    once and hands them to both (``reference``). O(n log n).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata: the same array the relief will be made from.
+    cell_m : float
+        Cell size (m).
+    params : HeadDetectionParams
+        ``scale_m`` and ``slope_window_m`` are used.
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    HeadScaleGround
+        :func:`ground_surface` of ``z`` (NaN where ``z`` is) and ρ.
+    """
+    valid = np.isfinite(z)
+    # roughness: the DSM's own head-scale micro-relief (furrows, crop rows), as the operator sees it
+    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell_m, workers=workers) - z)[valid])
+    return HeadScaleGround(ground_surface(z, cell_m, params.scale_m, params.slope_window_m, workers), rough)
+
+
 def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
-                      workers: int = 1, tall_objects_out: bool = False) -> tuple[np.ndarray, float]:
+                      workers: int = 1, tall_objects_out: bool = False,
+                      reference: HeadScaleGround | None = None) -> tuple[np.ndarray, float]:
     """Head-scale depth below the ground surface, ``G_σh ∗ Z₀ − Z`` (m, NaN nodata), and the roughness ρ.
 
     ``Z₀`` is :func:`ground_surface` (objects standing on the ground removed), σh =
@@ -416,12 +480,20 @@ def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
     (session 37, docs/stages/06_gully.md). Shrubs (below ``tall_object_m``) stay: leaving
     them out as well lowered the relief of true heads in shrub strips (good fit −2.8 points
     over 24 twins).
+
+    ``reference`` is :func:`head_scale_ground` of this same ``z`` and ``params``, computed
+    here when None; the result is the same bit for bit. The tall-object relief is its last
+    use: it takes the ground surface out of ``reference`` (:meth:`HeadScaleGround.take`), so
+    that the first surface is freed before the second is made (0.32 GB at 80 M cells, where
+    the gully map's memory peaks).
     O(n log n): a second :func:`ground_surface`.
     """
     valid = np.isfinite(z)
-    # roughness: the DSM's own head-scale micro-relief (furrows, crop rows), as the operator sees it
-    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell_m, workers=workers) - z)[valid])
-    ground = ground_surface(z, cell_m, params.scale_m, params.slope_window_m, workers)
+    if reference is None:
+        reference = head_scale_ground(z, cell_m, params, workers)
+    ground = reference.take() if tall_objects_out else reference.ground
+    rough = reference.rough
+    del reference
     if tall_objects_out:
         height = max(params.tall_object_m, params.relief_k * max(params.dsm_sigma_z_m, rough))
         tall = standing_above(z, ground, height)

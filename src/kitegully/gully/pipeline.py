@@ -15,9 +15,8 @@ from scipy.spatial import cKDTree
 
 from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden_reaches, interpolate_under
 from kitegully.gully.depth import depth_map
-from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, ground_surface,
-                                   head_scale_relief, incision_map, standing_above, surface_roughness,
-                                   visible_incisions)
+from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, head_scale_ground,
+                                   head_scale_relief, incision_map, standing_above, visible_incisions)
 from kitegully.gully.inlets import edge_inlets, route_courses
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully import InputError
@@ -361,10 +360,17 @@ def map_gullies(
     incised = relief = None
     relief_noise = None
     snap_on_relief = params.head_snap in ("relief", "posterior") and np.size(heads_x)
+    # the detector's incision map starts from the same ground surface and roughness on the same cells (the DEM's
+    # observed cells) when its scales are the snapping's: made once, handed to both (the same values bit for bit)
+    shared_ground = None
     if snap_on_relief or params.edge_inlets:
         # on the observed cells only, as the detector's incision map: a head never snaps into an interpolated gap
-        relief, rough = head_scale_relief(dem, grid.cell, ip, workers)
+        reference = head_scale_ground(dem, grid.cell, ip, workers)
+        relief, rough = head_scale_relief(dem, grid.cell, ip, workers, reference=reference)
         relief_noise = max(float(ip.dsm_sigma_z_m), rough)
+        if auto_heads is not None and (auto_heads.scale_m, auto_heads.slope_window_m) == (ip.scale_m, ip.slope_window_m):
+            shared_ground = reference
+        del reference
     incised_at_head_scale = None
     if params.edge_inlets:
         with np.errstate(invalid="ignore"):
@@ -397,11 +403,11 @@ def map_gullies(
     if auto_heads is not None:
         t0 = time.perf_counter()
         auto_idx, _ = detect_heads(z_heads, filled, dirs if dirs is not None else d8_directions(filled), grid, auto_heads,
-                                   workers, observed=np.isfinite(dem))
+                                   workers, observed=np.isfinite(dem), reference=shared_ground)
         auto_idx = new_heads(auto_idx, grid, heads_x, heads_y, params.head_snap_radius_m)
         inside_idx = np.concatenate([inside_idx, auto_idx])
         t["auto_heads_s"] = time.perf_counter() - t0
-    del z_heads
+    del z_heads, shared_ground
     inlet_idx = np.zeros(0, dtype=np.int64)
     if params.edge_inlets:
         t0 = time.perf_counter()
@@ -527,9 +533,8 @@ def crowns_on(dem: np.ndarray, grid: GridSpec, params: GullyParams, incision: He
     :func:`remove_objects`: the incision threshold mirrored above the ground). O(n log n).
     """
     zi, _ = hole_filled(dem, grid, params)
-    valid = np.isfinite(zi)
-    rough = surface_roughness((gaussian_smooth_fft(zi, incision.scale_m / grid.cell, workers=workers) - zi)[valid])
-    ground = ground_surface(zi, grid.cell, incision.scale_m, incision.slope_window_m, workers)
+    ref = head_scale_ground(zi, grid.cell, incision, workers)
+    ground, rough = ref.ground, ref.rough
     thr = incision.relief_k * max(incision.dsm_sigma_z_m, rough)
     mask, _info = crown_mask(zi, excess_green(ortho), ground, thr, grid.cell, params.crowns)
     return mask
@@ -614,8 +619,8 @@ def remove_objects(z: np.ndarray, z_trace: np.ndarray, cell_m: float, params: He
         Cells replaced.
     """
     valid = np.isfinite(z)
-    rough = surface_roughness((gaussian_smooth_fft(z, params.scale_m / cell_m, workers=workers) - z)[valid])
-    ground = ground_surface(z, cell_m, params.scale_m, params.slope_window_m, workers)
+    ref = head_scale_ground(z, cell_m, params, workers)
+    ground, rough = ref.ground, ref.rough
     thr = params.relief_k * max(params.dsm_sigma_z_m, rough)
     obj = valid & standing_above(z_trace, ground, thr)
     out = np.array(z_trace, dtype=np.float64, copy=True)
