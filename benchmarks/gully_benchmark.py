@@ -176,6 +176,8 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
         from kitegully.gully.heads import HeadDetectionParams
 
         kw["incision"] = HeadDetectionParams.from_config(g["automatic_heads"])
+        if "auto_heads" in sig and g.get("heads") in ("automatic", "both"):  # the rule's head detector (session 38)
+            kw["auto_heads"] = kw["incision"]
     res = map_gullies(dem, grid, heads[0], heads[1], params, workers=threads, **kw)
     t1 = time.perf_counter()
     if not early:  # a former revision: after the mapping, as its rule did
