@@ -102,6 +102,15 @@ def test_map_gullies_with_the_tiled_fill_equals_the_untiled_chain(tmp_path):
     assert np.array_equal(got.gully, ref.gully)
     given = map_gullies(z, grid, hx, hy, params, filled=filled, trace_surface=z_trace)  # the tiled rules' path
     assert given.n_raised == ref.n_raised and np.array_equal(given.gully, ref.gully)
+    # the gully_map rule passes the tracing surface as its GeoTIFF, read in the fill branch and dropped after it
+    from kitegully.io.raster import write_raster
+
+    write_raster(tmp_path / "trace_surface.tif", z_trace.astype(np.float32), grid)
+    from_file = map_gullies(z, grid, hx, hy, params, filled=filled, trace_surface=tmp_path / "trace_surface.tif")
+    assert from_file.n_raised == ref.n_raised and np.array_equal(from_file.network.cells, ref.network.cells)
+    write_raster(tmp_path / "small.tif", z_trace[:-1].astype(np.float32), grid.window(0, 0, z.shape[0] - 1, z.shape[1]))
+    with pytest.raises(ValueError, match="tracing surface has shape"):
+        map_gullies(z, grid, hx, hy, params, filled=filled, trace_surface=str(tmp_path / "small.tif"))
     with pytest.raises(ValueError, match="only used with the filled DEM"):
         map_gullies(z, grid, hx, hy, params, trace_surface=z_trace)
     with pytest.raises(ValueError, match="flat_routing: resolve"):

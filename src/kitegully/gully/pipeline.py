@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -22,7 +23,7 @@ from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully import InputError
 from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
 from kitegully.gully.patches import depth_patches
-from kitegully.io.raster import GridSpec
+from kitegully.io.raster import GridSpec, read_grid, read_raster
 from kitegully.terrain.fill import priority_flood_fill
 from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.flow import d8_directions
@@ -212,7 +213,7 @@ def map_gullies(
     ortho: np.ndarray | None = None,
     on_depth: Callable[[np.ndarray, np.ndarray], None] | None = None,
     crown_mask: np.ndarray | None = None,
-    trace_surface: np.ndarray | None = None,
+    trace_surface: np.ndarray | str | os.PathLike | None = None,
 ) -> GullyResult:
     """Run steps a-m: depth map, patches, filled DEM, network from the heads, buffer ∩ patches.
 
@@ -257,7 +258,9 @@ def map_gullies(
         The tracing surface ``filled`` was made from (:func:`tracing_surface`, the
         trace-surface job of a large site); only with ``filled``. It is then not made
         again here (its smoothing, object removal and interpolation under crowns are
-        whole-grid solves): only the hole-filled DEM the heads snap to is.
+        whole-grid solves): only the hole-filled DEM the heads snap to is. A GeoTIFF path
+        is read in the fill branch and dropped after it (at 80 M cells 0.32 GB that the
+        rest of the map does not need; an array passed in stays alive with its caller).
 
     Returns
     -------
@@ -291,8 +294,9 @@ def map_gullies(
     if trace_surface is not None:
         if filled is None:
             raise ValueError("a tracing surface made elsewhere is only used with the filled DEM made from it")
-        if np.shape(trace_surface) != dem.shape:
-            raise ValueError(f"tracing surface has shape {np.shape(trace_surface)}, the DEM {dem.shape}")
+        ts_shape = read_grid(trace_surface).shape if isinstance(trace_surface, (str, os.PathLike)) else np.shape(trace_surface)
+        if ts_shape != dem.shape:
+            raise ValueError(f"tracing surface has shape {ts_shape}, the DEM {dem.shape}")
     hidden = None
     if params.crowns.enabled and crown_mask is not None:
         if np.shape(crown_mask) != dem.shape:
@@ -316,7 +320,8 @@ def map_gullies(
         if trace_surface is None:
             z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip, hidden=hidden)
         else:
-            (z_heads, n_holes), zi = hole_filled(dem, grid, params), trace_surface
+            (z_heads, n_holes), zi = hole_filled(dem, grid, params), (
+                read_raster(trace_surface)[0] if isinstance(trace_surface, (str, os.PathLike)) else trace_surface)
         if filled is None:
             fz, n_raised = priority_flood_fill(zi, params.fill_epsilon_m if params.flat_routing == "epsilon" else 0.0)
         else:

@@ -354,6 +354,19 @@ def read_raster(path: str | Path, band: int | None = 1) -> tuple[np.ndarray, Gri
     return data, grid
 
 
+def read_grid(path: str | Path) -> GridSpec:
+    """The grid of a raster file without reading its cells (the checks of :func:`read_raster`).
+
+    Raises :class:`InputError` naming the file when it cannot be opened or its grid is not usable.
+    """
+    try:
+        src = rasterio.open(Path(path))
+    except rasterio.errors.RasterioIOError as exc:
+        raise InputError(f"{path}: cannot open raster ({exc})") from None
+    with src:
+        return grid_of(src, path)
+
+
 def grid_of(src, path: str | Path) -> GridSpec:
     """The grid of an open rasterio dataset ``src`` read from ``path``.
 
