@@ -174,6 +174,7 @@ if "gully" in config:
                 validation={k: v for k, v in GULLY["validation"].items() if k != "catchment_file"},
                 crs=config["site"]["crs"],
                 attribution=GULLY_ATTRIBUTION,
+            threads: GULLY["threads"] if GULLY_BOTH else 1  # gully.heads: both scores the two networks side by side
             log:
                 logfile("gully", "validate"),
             benchmark:

@@ -156,16 +156,16 @@ def tolerance_table(
     return pd.concat(rows, ignore_index=True)
 
 
-def _log_scores(table: pd.DataFrame, tolerances: pd.DataFrame, tolerance_m: float) -> None:
+def _log_scores(table: pd.DataFrame, tolerances: pd.DataFrame, tolerance_m: float, prefix: str = "") -> None:
     pivot = tolerances.pivot_table(index=["tolerance_m", "reference_lines"], columns="category", values="percent")
     for _, r in pivot.iterrows():
-        log.info("tolerance %.3g m, reference %s: good fit %.1f %%, false positive %.1f %%, false negative %.1f %%",
-                 r.name[0], r.name[1], r["good_fit"], r["false_positive"], r["false_negative"])
+        log.info("%stolerance %.3g m, reference %s: good fit %.1f %%, false positive %.1f %%, false negative %.1f %%",
+                 prefix, r.name[0], r.name[1], r["good_fit"], r["false_positive"], r["false_negative"])
     pct = dict(zip(table["category"], table["percent"]))
     log.info(
-        "network validation (tolerance %.3g m, paper protocol): reference %.0f m, good fit %.1f %%, "
+        "%snetwork validation (tolerance %.3g m, paper protocol): reference %.0f m, good fit %.1f %%, "
         "false positive %.1f %%, false negative %.1f %%",
-        tolerance_m, table["length_m"].iloc[0], pct["good_fit"], pct["false_positive"], pct["false_negative"],
+        prefix, tolerance_m, table["length_m"].iloc[0], pct["good_fit"], pct["false_positive"], pct["false_negative"],
     )
 
 
@@ -177,6 +177,7 @@ def score_network(
     params: ValidationParams,
     catchment: BaseGeometry | None = None,
     geometries: bool = True,
+    label: str | None = None,
 ) -> NetworkValidation:
     """Score an extracted gully network against the reference network (paper protocol).
 
@@ -196,6 +197,9 @@ def score_network(
         Catchment outline: the scored reference and the extracted network are clipped to it.
     geometries : bool
         Also make the map pieces (:attr:`NetworkValidation.pieces`).
+    label : str, optional
+        Names the extracted network in the log lines (two networks scored side by side in
+        threads, as the gully_validate rule does for ``gully.heads: both``).
 
     Returns
     -------
@@ -210,10 +214,11 @@ def score_network(
     """
     domain = footprint(valid, grid, near=[*reference.geometry, *extracted.geometry])
     scored, not_scored, counts = scored_reference(reference, domain, params.reference_join_m, catchment)
+    prefix = f"{label}: " if label else ""
     log.info(
-        "reference: %.0f m scored, %.0f m not scored (outside the catchment or fed only by heads off the DEM); "
+        "%sreference: %.0f m scored, %.0f m not scored (outside the catchment or fed only by heads off the DEM); "
         "%d of %d reference heads on the DEM",
-        scored.length, not_scored.length, counts["heads_on_dem"], counts["heads"],
+        prefix, scored.length, not_scored.length, counts["heads_on_dem"], counts["heads"],
     )
     if scored.is_empty:
         log.warning("no reference line is scored: every reference head lies off the DEM or outside the catchment")
@@ -223,7 +228,7 @@ def score_network(
     clipped = scorers[UNFILTERED].clip(extracted)
     table = scorers[SCORED].score(extracted, params.tolerance_m, clipped)
     tolerances = tolerance_table(scorers, extracted, params.tolerances_m, clipped)
-    _log_scores(table, tolerances, params.tolerance_m)
+    _log_scores(table, tolerances, params.tolerance_m, prefix)
     pieces = (
         validation_geometries([scored], extracted, params.tolerance_m, domain, reference_all=reference) if geometries else {}
     )
