@@ -14,18 +14,19 @@ from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
 from kitegully.logs import setup_script_logging
-from kitegully.memory import keep_freed_memory
 
 log = setup_script_logging(snakemake.log[0])
-keep_freed_memory()  # whole-DEM temporaries reuse freed heap memory (no page zeroing per array)
+# No kitegully.memory.keep_freed_memory here: its single malloc arena serialises the two scoring threads' many small
+# GEOS allocations (full size, session 38: 110 s with it, 73 s without; one network alone 136 vs 142 s).
 inp, out, crs = snakemake.input, snakemake.output, snakemake.params.crs
 params = ValidationParams.from_config(snakemake.params.validation)
 reference = check_reference(read_vector(inp.reference, crs=crs), inp.reference)
 catchment = catchment_outline(read_vector(inp.catchment, crs=crs), inp.catchment) if getattr(inp, "catchment", None) else None
 gully, grid = read_raster(inp.gully_map)
 both = "table_digitised" in out.keys()  # gully.heads: both: the digitised heads alone too, the paper's procedure
-# The figure's DEM is decoded and, with gully.heads: both, the digitised heads' network scored (GEOS releases the
-# GIL: 126 -> 65 s at full size, session 38) while the mapped network is scored; the same numbers as one after the other.
+# The figure's DEM is decoded and, with gully.heads: both, the digitised heads' network scored while the mapped
+# network is scored (GEOS releases the GIL: at full size 136 -> 73 s for the rule, session 38); the same numbers
+# as one after the other.
 with ThreadPoolExecutor(max_workers=2) as pool:
     later = pool.submit(read_raster, inp.dem)
     digitised = (pool.submit(score_network, reference, read_vector(inp.mapped_network_digitised, crs=crs), gully != 255,
