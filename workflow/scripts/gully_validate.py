@@ -17,7 +17,7 @@ from kitegully.logs import setup_script_logging
 
 log = setup_script_logging(snakemake.log[0])
 # No kitegully.memory.keep_freed_memory here: its single malloc arena serialises the two scoring threads' many small
-# GEOS allocations (full size, session 38: 110 s with it, 73 s without; one network alone 136 vs 142 s).
+# GEOS allocations (full size, session 38: 110 s with it, 73-87 s without; one network alone 136 vs 142 s).
 inp, out, crs = snakemake.input, snakemake.output, snakemake.params.crs
 params = ValidationParams.from_config(snakemake.params.validation)
 reference = check_reference(read_vector(inp.reference, crs=crs), inp.reference)
@@ -25,7 +25,7 @@ catchment = catchment_outline(read_vector(inp.catchment, crs=crs), inp.catchment
 gully, grid = read_raster(inp.gully_map)
 both = "table_digitised" in out.keys()  # gully.heads: both: the digitised heads alone too, the paper's procedure
 # The figure's DEM is decoded and, with gully.heads: both, the digitised heads' network scored while the mapped
-# network is scored (GEOS releases the GIL: at full size 136 -> 73 s for the rule, session 38); the same numbers
+# network is scored (GEOS releases the GIL: at full size 136 -> 73-99 s for the rule, session 38); the same numbers
 # as one after the other.
 with ThreadPoolExecutor(max_workers=2) as pool:
     later = pool.submit(read_raster, inp.dem)
