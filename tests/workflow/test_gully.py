@@ -191,7 +191,10 @@ def test_both_heads_score_the_digitised_heads_alone_beside_them(tmp_path):
     assert alone["length_m"].iloc[0] == pytest.approx(combined["length_m"].iloc[0])
     fit = {name: dict(zip(t["category"], t["percent"]))["good_fit"] for name, t in (("alone", alone), ("both", combined))}
     assert 80 < fit["alone"] <= fit["both"] + 1e-6
-    assert "digitised heads alone" in (tmp_path / "tiny_twin" / "logs" / "gully" / "validate.log").read_text()
+    log = (tmp_path / "tiny_twin" / "logs" / "gully" / "validate.log").read_text()
+    assert "digitised heads alone" in log
+    # scored side by side in two threads: each log line names its network
+    assert "all heads: reference:" in log and "digitised heads alone: reference:" in log
 
 
 @pytest.mark.slow
