@@ -192,3 +192,20 @@ def test_input_errors(tmp_path):
     write_vector(pts, tmp_path / "h2.gpkg")
     with pytest.raises(InputError, match="h2.gpkg: CRS"):
         read_heads(tmp_path / "h2.gpkg", CRS)
+
+
+def test_the_tiled_inputs_keep_one_float64_fill_and_the_tracing_surface_as_its_path(tmp_path):
+    from kitegully.gully.inputs import read_tiled_inputs
+    from kitegully.io.raster import GridSpec, write_raster
+
+    grid = GridSpec(500000.0, 4001000.0, 0.2, 6, 4, "EPSG:32632")
+    z = np.arange(24, dtype=np.float32).reshape(4, 6) + 100.25
+    for name in ("filled", "depth", "trace_surface"):
+        write_raster(tmp_path / f"{name}.tif", z, grid)
+    write_raster(tmp_path / "crowns.tif", (z > 110).astype(np.uint8), grid, nodata=255)
+    got = read_tiled_inputs({k: tmp_path / f"{k}.tif" for k in ("filled", "depth", "trace_surface", "crowns")})
+    assert sorted(got) == ["crown_mask", "depth", "filled", "trace_surface"]  # no smoothed given: none passed
+    assert got["filled"].dtype == np.float64 and np.array_equal(got["filled"], z.astype(np.float64))
+    assert got["trace_surface"] == tmp_path / "trace_surface.tif"
+    assert got["crown_mask"].dtype == bool and got["crown_mask"].sum() == int((z > 110).sum())
+    assert read_tiled_inputs({}) == {}

@@ -4,7 +4,8 @@ import numpy as np
 
 from kitegully.gully import GullyParams, gully_summary, map_gullies, map_raster
 from kitegully.gully.heads import automatic_head_params
-from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads, read_orthophoto_on_grid
+from kitegully.gully.inputs import (check_dem, check_heads_on_dem, read_heads, read_orthophoto_on_grid,
+                                   read_tiled_inputs)
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import write_vector
@@ -22,16 +23,8 @@ if source == "truth_plus_noise":
 hx, hy = read_heads(inp.heads, crs) if heads != "automatic" else (np.zeros(0), np.zeros(0))
 auto = automatic_head_params(heads, snakemake.params.automatic_heads, dem, grid, inp.get("checkpoints"), params.head_snap,
                              needed=params.needs_incision_params)
-# tiled sites: merged tiles and the surface the tiled fill was made from; the fill as the float64 the map works in
-# (no float32 copy kept beside it), the tracing surface as a path that the fill branch reads and drops (0.32 GB each
-# at 80 M cells while the detector makes its second ground surface, where the rule's memory peaks)
-tiled = {k: read_raster(inp[k])[0] for k in ("smoothed", "depth") if k in inp.keys()}
-if "filled" in inp.keys():
-    tiled["filled"] = read_raster(inp.filled)[0].astype(np.float64)
-if "trace_surface" in inp.keys():
-    tiled["trace_surface"] = inp.trace_surface
-if "crowns" in inp.keys():  # tiled sites with gully.crowns: the mask the tiled fill's surface was made with
-    tiled["crown_mask"] = read_raster(inp.crowns)[0] == 1
+tiled = read_tiled_inputs({k: inp[k] for k in ("smoothed", "depth", "filled", "trace_surface", "crowns")  # tiled sites
+                           if k in inp.keys()})
 ortho = read_orthophoto_on_grid(inp.ortho, grid) if "ortho" in inp.keys() and "crowns" not in inp.keys() else None
 res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, workers=snakemake.threads,
                   auto_heads=auto if heads != "digitised" else None, incision=auto, ortho=ortho, **tiled,

@@ -16,22 +16,19 @@ from kitegully.io.vectors import read_vector
 from kitegully.logs import setup_script_logging
 
 log = setup_script_logging(snakemake.log[0])
-# No kitegully.memory.keep_freed_memory here: its single malloc arena serialises the two scoring threads' many small
-# GEOS allocations (full size, session 38: 110 s with it, 73-87 s without; one network alone 136 vs 142 s).
+# no keep_freed_memory: its one malloc arena serialises the threads' GEOS allocations (110 vs 73-87 s, full size)
 inp, out, crs = snakemake.input, snakemake.output, snakemake.params.crs
 params = ValidationParams.from_config(snakemake.params.validation)
 reference = check_reference(read_vector(inp.reference, crs=crs), inp.reference)
 catchment = catchment_outline(read_vector(inp.catchment, crs=crs), inp.catchment) if getattr(inp, "catchment", None) else None
 gully, grid = read_raster(inp.gully_map)
-both = "table_digitised" in out.keys()  # gully.heads: both: the digitised heads alone too, the paper's procedure
-# The figure's DEM is decoded and, with gully.heads: both, the digitised heads' network scored while the mapped
-# network is scored (GEOS releases the GIL: at full size 136 -> 73-99 s for the rule, session 38); the same numbers
-# as one after the other.
+valid, both = gully != 255, "table_digitised" in out.keys()  # both: the digitised heads alone too (paper's procedure)
+# the DEM decoded and the digitised heads' network scored beside the mapped one (GEOS frees the GIL; 136 -> 73-99 s)
 with ThreadPoolExecutor(max_workers=2) as pool:
     later = pool.submit(read_raster, inp.dem)
-    digitised = (pool.submit(score_network, reference, read_vector(inp.mapped_network_digitised, crs=crs), gully != 255,
-                             grid, params, catchment, geometries=False, label="digitised heads alone") if both else None)
-    res = score_network(reference, read_vector(inp.mapped_network, crs=crs), gully != 255, grid, params, catchment,
+    digitised = (pool.submit(score_network, reference, read_vector(inp.mapped_network_digitised, crs=crs), valid, grid,
+                             params, catchment, geometries=False, label="digitised heads alone") if both else None)
+    res = score_network(reference, read_vector(inp.mapped_network, crs=crs), valid, grid, params, catchment,
                         label="all heads" if both else None)
     dem, _ = later.result()
     alone = digitised.result() if both else None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 import shapely
@@ -62,3 +63,26 @@ def read_orthophoto_on_grid(path: str | Path, grid) -> np.ndarray:
             reproject(rasterio.band(src, b + 1), out[b], dst_transform=grid.transform, dst_crs=grid.crs,
                       resampling=Resampling.average, src_nodata=src.nodata if src.nodata is not None else 0, dst_nodata=0)
     return out
+
+
+def read_tiled_inputs(paths: Mapping[str, str | Path]) -> dict[str, np.ndarray | str | Path]:
+    """The tiled jobs' products a large site's gully map takes, as :func:`kitegully.gully.map_gullies` keywords.
+
+    ``paths`` may hold ``smoothed`` and ``depth`` (the merged depth tiles), ``filled`` (the
+    tiled fill), ``trace_surface`` (the surface it was made from) and ``crowns`` (the crown
+    mask it was made with); absent keys are left out. The fill is read as the float64 the
+    map works in (no float32 copy kept beside it) and the tracing surface is passed as its
+    path, which the map's fill branch reads and drops: 0.32 GB each at 80 M cells while the
+    detector makes its second ground surface, where the rule's memory peaks (session 38).
+    """
+    from kitegully.io.raster import read_raster
+
+    tiled: dict[str, np.ndarray | str | Path] = {k: read_raster(paths[k])[0] for k in ("smoothed", "depth")
+                                                  if k in paths}
+    if "filled" in paths:
+        tiled["filled"] = read_raster(paths["filled"])[0].astype(np.float64)
+    if "trace_surface" in paths:
+        tiled["trace_surface"] = paths["trace_surface"]
+    if "crowns" in paths:
+        tiled["crown_mask"] = read_raster(paths["crowns"])[0] == 1
+    return tiled

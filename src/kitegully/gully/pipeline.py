@@ -291,10 +291,11 @@ def map_gullies(
                              "resolve or least_cost")
         if filled.shape != dem.shape:
             raise ValueError(f"filled DEM has shape {filled.shape}, the tracing surface {dem.shape}")
+    trace_surface_file = isinstance(trace_surface, (str, os.PathLike))
     if trace_surface is not None:
         if filled is None:
             raise ValueError("a tracing surface made elsewhere is only used with the filled DEM made from it")
-        ts_shape = read_grid(trace_surface).shape if isinstance(trace_surface, (str, os.PathLike)) else np.shape(trace_surface)
+        ts_shape = read_grid(trace_surface).shape if trace_surface_file else np.shape(trace_surface)
         if ts_shape != dem.shape:
             raise ValueError(f"tracing surface has shape {ts_shape}, the DEM {dem.shape}")
     hidden = None
@@ -321,7 +322,7 @@ def map_gullies(
             z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip, hidden=hidden)
         else:
             (z_heads, n_holes), zi = hole_filled(dem, grid, params), (
-                read_raster(trace_surface)[0] if isinstance(trace_surface, (str, os.PathLike)) else trace_surface)
+                read_raster(trace_surface)[0] if trace_surface_file else trace_surface)
         if filled is None:
             fz, n_raised = priority_flood_fill(zi, params.fill_epsilon_m if params.flat_routing == "epsilon" else 0.0)
         else:
