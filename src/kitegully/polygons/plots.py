@@ -68,6 +68,18 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
     if len(sections):
         sections.plot(ax=ax[1], color="lime", linewidth=0.4)
         handles.append(Line2D([], [], color="lime", label="cross-sections"))
+    pid = None
+    if len(sections) and len(morph):
+        pid = int(morph.sort_values("length_m", ascending=False)["polygon_id"].iloc[0])
+        main_axis = axes[(axes["polygon_id"] == pid) & ((axes["branch"] == 0) if "branch" in axes else True)]
+        if len(main_axis):
+            # black with a white halo: outside the plasma ramp of the thresholds (whose last colour is yellow)
+            xs, ys = main_axis.geometry.iloc[0].xy
+            ax[1].plot(xs, ys, color="white", linewidth=3.0, solid_capstyle="round")
+            ax[1].plot(xs, ys, color="black", linewidth=1.4, solid_capstyle="round")
+            ax[1].plot(xs[0], ys[0], "o", color="black", mec="white", ms=5)
+            handles.append(Line2D([], [], color="black", lw=1.4, marker="o", markevery=[0], mec="white",
+                                  label=f"main axis of polygon {pid} (c; dot = 0 m)"))
     ax[1].legend(handles=handles, loc="lower left", fontsize=7)
     ax[1].set_title("(b) gully polygons by fill-depth threshold over the hillshade")
     for a in ax[:2]:
@@ -76,8 +88,7 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
         a.set_xlim(ext[0], ext[1])
         a.set_ylim(ext[2], ext[3])
     a = ax[2]
-    if len(sections) and len(morph):
-        pid = int(morph.sort_values("length_m", ascending=False)["polygon_id"].iloc[0])
+    if pid is not None:
         s = sections[sections["polygon_id"] == pid]
         if "branch" in s:  # the main stem (branch 0); tributaries have their own stations
             s = s[s["branch"] == 0]
@@ -92,9 +103,7 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
         h1, l1 = a.get_legend_handles_labels()
         h2, l2 = b.get_legend_handles_labels()
         a.legend(h1 + h2, l1 + l2, loc="upper right", fontsize=7)
-        main_axis = axes[(axes["polygon_id"] == pid) & ((axes["branch"] == 0) if "branch" in axes else True)]
-        ax[1].plot(*main_axis.geometry.iloc[0].xy, color="yellow", linewidth=1.2)
-    a.set_title("(c) cross-sections every ~10 m along the main medial axis (yellow in b)")
+    a.set_title("(c) cross-sections every ~10 m along the main medial axis (black in b)")
     save_figure(fig, path, attribution)
 
 
