@@ -156,6 +156,7 @@ def validation_map(
     ax.set_xlabel("easting (m)")
     ax.set_ylabel("northing (m)")
     ax.set_title(f"Gully network validation (tolerance {tolerance_m:g} m)")
-    ax.legend(loc="lower right", fontsize=7)
+    # below the map (the tight bounding box takes it in): inside, it hid the gullies of a corner
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=7, frameon=False)
     ax.ticklabel_format(useOffset=False, style="plain")
     return fig
