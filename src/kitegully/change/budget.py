@@ -233,17 +233,32 @@ class Variogram:
 
     @property
     def total(self) -> float:
+        """Total sill: the nugget plus the spherical sills (at least 1e-12)."""
         return max(self.nugget + sum(self.sills), 1e-12)
 
     @property
     def f_nugget(self) -> float:
+        """The nugget as a fraction of the total sill."""
         return self.nugget / self.total
 
     def model(self, h: np.ndarray) -> np.ndarray:
+        """Modelled semivariance at lags ``h``.
+
+        Parameters
+        ----------
+        h : ndarray
+            Lags (m).
+
+        Returns
+        -------
+        ndarray
+            ``c₀ + Σ cₖ·sph(h/rₖ)``, in the units of the empirical semivariance.
+        """
         h = np.asarray(h, float)
         return self.nugget + sum(c * spherical(h, r) for c, r in zip(self.sills, self.ranges_m))
 
     def describe(self) -> str:
+        """One line for the log: the nugget and each spherical's sill and range (m)."""
         parts = ", ".join(f"{c:.3f} at {r:.1f} m" for c, r in zip(self.sills, self.ranges_m))
         return f"nugget {self.nugget:.3f}, spherical {parts}"
 

@@ -75,6 +75,7 @@ class Coregistration:
         return pd.DataFrame(rows, columns=["quantity", "value", "unit"])
 
     def as_dict(self) -> dict:
+        """Every field as a plain dict (:func:`dataclasses.asdict`)."""
         return asdict(self)
 
 

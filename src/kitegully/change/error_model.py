@@ -95,6 +95,7 @@ class ErrorModel:
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> "ErrorModel":
+        """Rebuild a model from the dict :meth:`to_json` made."""
         return cls([np.asarray(e, np.float64) for e in d["edges"]], np.asarray(d["nmad"], np.float64),
                    np.asarray(d["count"], np.int64), float(d["reference_nmad"]))
 

@@ -119,6 +119,7 @@ class MatchParams:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "MatchParams":
+        """Build from ``dense.matching`` (keys of the same names; others ignored); raises InputError on a bad value."""
         p = cls(**{f.name: cfg[f.name] for f in fields(cls) if f.name in cfg})
         if p.sgm_directions not in (4, 8):
             raise InputError(f"dense.matching.sgm_directions: must be 4 or 8, got {p.sgm_directions}")

@@ -87,6 +87,7 @@ class ViewSet:
     sparse_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def to_local(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Site map coordinates ``(x, y)`` in the local frame: ``local = site − offset``."""
         return np.asarray(x, float) - self.offset[0], np.asarray(y, float) - self.offset[1]
 
 

@@ -355,6 +355,20 @@ def read_class_names(path: str | Path) -> dict[int, str]:
 
 
 def codes_of(names: dict[int, str], wanted: Sequence[str]) -> list[int]:
+    """Codes of the land-cover classes named in ``wanted``.
+
+    Parameters
+    ----------
+    names : dict of int to str
+        Class code → name (:func:`read_class_names`).
+    wanted : sequence of str
+        Class names to look up; names not in ``names`` are ignored.
+
+    Returns
+    -------
+    list of int
+        The codes whose name is in ``wanted``, in the order of ``names``.
+    """
     return [c for c, n in names.items() if n in set(wanted)]
 
 

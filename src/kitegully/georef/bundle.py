@@ -69,6 +69,7 @@ class Block:
     gcp_obs_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def copy(self) -> "Block":
+        """A copy of the block with every array copied (no memory shared)."""
         return Block(**{k: np.array(v, copy=True) for k, v in self.__dict__.items()})
 
     def reprojection_rms(self) -> float:

@@ -64,6 +64,26 @@ class GcpObs:
 
 @dataclass
 class GeorefResult:
+    """Outcome of :func:`georeference_block`.
+
+    Attributes
+    ----------
+    block : Block
+        The adjusted block in the local frame.
+    offset : ndarray (3,)
+        Offset of the local frame (m), ``site = local + offset``: the GCPs' median plan position
+        rounded to 100 m, and 0 in z.
+    transform : Similarity
+        Model → local similarity.
+    residuals : DataFrame
+        Residuals of every GCP after the adjustment (columns :data:`RESIDUAL_COLUMNS`).
+    loo : DataFrame
+        Leave-one-out residuals of the used GCPs (columns :data:`RESIDUAL_COLUMNS`).
+    report : dict
+        Run report: similarity scale, method, GSD (m), offset, residual statistics and, with
+        the GCP bundle, the adjustment's own report.
+    """
+
     block: Block
     offset: np.ndarray
     transform: Similarity

@@ -186,5 +186,16 @@ def residual_figure(
 
 
 def write_residual_tables(residuals: pd.DataFrame, loo: pd.DataFrame, res_path: str | Path, loo_path: str | Path) -> None:
+    """Write the GCP residual and leave-one-out tables (CSV, each with a Markdown copy beside it).
+
+    Parameters
+    ----------
+    residuals : DataFrame
+        Residuals of every GCP after the adjustment.
+    loo : DataFrame
+        Leave-one-out residuals of the used GCPs.
+    res_path, loo_path : path
+        CSV files of the two tables.
+    """
     write_table(residuals, res_path)
     write_table(loo, loo_path)

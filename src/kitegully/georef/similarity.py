@@ -21,9 +21,11 @@ class Similarity:
     t: np.ndarray
 
     def apply(self, a: np.ndarray) -> np.ndarray:
+        """Transform points ``a`` (N × 3): ``scale · R a + t``."""
         return self.scale * np.asarray(a) @ self.R.T + self.t
 
     def as_dict(self) -> dict:
+        """Scale, rotation matrix (nested lists) and translation (m) as a JSON-ready dict."""
         return {"scale": float(self.scale), "rotation": self.R.tolist(), "translation_m": self.t.tolist()}
 
 

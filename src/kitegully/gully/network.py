@@ -343,6 +343,7 @@ class GullyNetwork:
 
     @property
     def n_segments(self) -> int:
+        """Number of traced segments."""
         return int(self.seg_order.size)
 
     def mask(self) -> np.ndarray:
@@ -356,6 +357,7 @@ class GullyNetwork:
         return int(np.sum(self.ends == END_PIT))
 
     def n_paths_to_outlet(self) -> int:
+        """Paths that reached an outlet (``ends == END_OUTLET``)."""
         return int(np.sum(self.ends == END_OUTLET))
 
     def save(self, path) -> None:

@@ -42,31 +42,39 @@ class Findings:
     facts: dict = field(default_factory=dict)
 
     def add(self, level: str, source: str, message: str) -> None:
+        """Append a finding; ``level`` must be one of :data:`LEVELS` (else ValueError)."""
         if level not in LEVELS:
             raise ValueError(f"unknown finding level {level!r}")
         self.items.append(Finding(level, str(source), message))
 
     def error(self, source, message: str) -> None:
+        """Add an error: the run is refused."""
         self.add("error", source, message)
 
     def warning(self, source, message: str) -> None:
+        """Add a warning: the run goes on, the report says why it may suffer."""
         self.add("warning", source, message)
 
     def note(self, source, message: str) -> None:
+        """Add a note: a fact worth knowing."""
         self.add("note", source, message)
 
     def of(self, level: str) -> list[Finding]:
+        """The findings of one level, in the order they were added."""
         return [f for f in self.items if f.level == level]
 
     @property
     def errors(self) -> list[Finding]:
+        """The error findings, in order."""
         return self.of("error")
 
     @property
     def ok(self) -> bool:
+        """True when there is no error."""
         return not self.errors
 
     def as_dict(self) -> dict:
+        """The report: verdict (``accepted``/``refused``), findings by level (each with its ``line``), facts."""
         return {
             "verdict": "accepted" if self.ok else "refused",
             "errors": [asdict(f) | {"line": f.line} for f in self.of("error")],

@@ -70,6 +70,18 @@ def heights_are_placeholders(z: np.ndarray) -> bool:
 
 
 def units_name(units: str) -> str:
+    """English name of a unit code, for messages.
+
+    Parameters
+    ----------
+    units : str
+        ``m``, ``ft`` or ``us_ft``.
+
+    Returns
+    -------
+    str
+        ``metres``, ``feet`` or ``US survey feet`` (KeyError for any other code).
+    """
     return {"m": "metres", "ft": "feet", "us_ft": "US survey feet"}[units]
 
 

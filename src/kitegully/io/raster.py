@@ -50,6 +50,7 @@ class GridSpec:
 
     @property
     def transform(self) -> Affine:
+        """Affine transform from (col, row) to map coordinates, as rasterio uses it (north-up, origin top-left)."""
         return Affine(self.cell, 0.0, self.x0, 0.0, -self.cell, self.y0)
 
     @property
@@ -200,14 +201,17 @@ class Raster:
 
     @property
     def transform(self) -> Affine:
+        """Affine transform of the raster's grid."""
         return self.grid.transform
 
     @property
     def crs(self) -> str:
+        """CRS of the raster's grid."""
         return self.grid.crs
 
     @property
     def cell(self) -> float:
+        """Cell size of the raster's grid (m)."""
         return self.grid.cell
 
     @property

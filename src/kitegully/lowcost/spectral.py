@@ -118,6 +118,7 @@ class SpectralParams:
 
     @property
     def wavelengths(self) -> np.ndarray:
+        """Wavelength grid (nm): ``wl_min_nm`` to ``wl_max_nm`` inclusive in steps of ``wl_step_nm``."""
         return np.arange(self.wl_min_nm, self.wl_max_nm + 0.5 * self.wl_step_nm, self.wl_step_nm)
 
 

@@ -91,6 +91,7 @@ class SurveyParams:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "SurveyParams":
+        """Build from ``lowcost.survey`` (``dense`` with ``dsm_method: dense``); raises InputError naming a bad key."""
         config_section(cfg, "lowcost.survey", [k for k in cls.__dataclass_fields__ if k != "dense"], optional=("dense",))
         if cfg["dsm_method"] not in ("tin", "dense"):
             raise InputError(f"lowcost.survey.dsm_method: must be tin or dense, got {cfg['dsm_method']!r}")
@@ -406,6 +407,7 @@ class BareSoilParams:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "BareSoilParams":
+        """Build from ``lowcost.bare_soil`` (``obia`` checked by ``ObiaParams``); raises InputError naming a bad key."""
         from kitegully.obia.scene import ObiaParams
         config_section(cfg, "lowcost.bare_soil", ["tile_cells", "min_reflectance", "obia"])
         p = ObiaParams.from_config(cfg["obia"])

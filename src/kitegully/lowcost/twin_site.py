@@ -291,6 +291,21 @@ def make_texture(p: LowcostTwinParams, grid: GridSpec, cls: np.ndarray, targets:
 
 
 def make_camera(cam: Mapping[str, Any], model: str) -> Camera:
+    """A kite camera with its principal point at the image centre.
+
+    Parameters
+    ----------
+    cam : mapping
+        The ``camera`` keys of ``lowcost.twin``: image size (px), sensor size and focal length
+        (mm), ``k1``.
+    model : str
+        EXIF model name (the make is ``SONY``).
+
+    Returns
+    -------
+    Camera
+        Focal length ``focal_length_mm · image_width_px / sensor_width_mm`` (px); ``k2`` = 0.
+    """
     w, h = int(cam["image_width_px"]), int(cam["image_height_px"])
     f = float(cam["focal_length_mm"]) * w / float(cam["sensor_width_mm"])
     return Camera(width=w, height=h, f=f, cx=(w - 1) / 2.0, cy=(h - 1) / 2.0, k1=float(cam["k1"]), k2=0.0,

@@ -91,6 +91,7 @@ class ThresholdResult:
     valleys: list = field(default_factory=list)
 
     def as_dict(self) -> dict:
+        """The thresholds and their diagnostics as a dict, without the histogram (``water_cells`` only when set)."""
         keys = ("valley", "otsu", "bimodal", "reason", "low_peak", "high_peak", "valley_ratio", "low_fraction", "valleys")
         out = {k: getattr(self, k) for k in keys}
         if self.water_cells is not None:

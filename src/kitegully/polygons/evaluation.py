@@ -65,6 +65,7 @@ class EvaluationParams:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "EvaluationParams":
+        """Build from ``polygons.evaluation`` (``operators`` allowed, not read); raises InputError naming a bad key."""
         cfg = config_section(cfg, "polygons.evaluation", ["zone_m", "wide_gully_m", "match_distance_m"], optional=["operators"])
         return cls(zone_m=float(cfg["zone_m"]), wide_gully_m=float(cfg["wide_gully_m"]), match_distance_m=float(cfg["match_distance_m"]))
 

@@ -70,11 +70,13 @@ class WindowGrid(GridSpec):
         return cls(g.x0, g.y0, g.cell, g.width, g.height, g.crs, grid.x0, grid.y0, int(r0), int(c0))
 
     def rowcol(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fractional (row, col) in the window of map points, cell centres at integers (parent's minus the offset)."""
         col = (np.asarray(x) - self.parent_x0) / self.cell - 0.5
         row = (self.parent_y0 - np.asarray(y)) / self.cell - 0.5
         return row - self.row0, col - self.col0
 
     def xy(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Map coordinates of the centres of window cells ``(row, col)``, computed as the parent grid does."""
         x = self.parent_x0 + (np.asarray(col) + self.col0 + 0.5) * self.cell
         y = self.parent_y0 - (np.asarray(row) + self.row0 + 0.5) * self.cell
         return x, y

@@ -73,6 +73,7 @@ class ImageInfo:
     camera: str = ""
 
     def as_row(self) -> dict:
+        """The fields as a dict: one row of the image table."""
         return asdict(self)
 
 

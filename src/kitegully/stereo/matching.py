@@ -153,6 +153,7 @@ class Disparity:
 
     @property
     def valid(self) -> np.ndarray:
+        """Boolean mask of the matched pixels (finite disparity)."""
         return np.isfinite(self.d)
 
 

@@ -86,6 +86,7 @@ class PrintedMarks:
 
     @property
     def half_plate_m(self) -> float:
+        """Half the side of a plate (m): ``plate_ratio · diameter_m / 2``."""
         return 0.5 * self.design.plate_ratio * self.design.diameter_m
 
     def intersect(self, C: np.ndarray, d: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

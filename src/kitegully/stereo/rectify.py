@@ -164,6 +164,7 @@ class Rectification:
 
     @property
     def focal_px(self) -> float:
+        """Focal length of the rectified cameras (px): ``P1[0, 0]``."""
         return float(self.P1[0, 0])
 
     @property

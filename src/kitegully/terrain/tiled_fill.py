@@ -310,6 +310,7 @@ class TileFill:
         }
 
     def summary(self) -> "TileSummary":
+        """What the merge reads of this tile: label count, spill graph and perimeter ring."""
         return TileSummary(self.tile, self.n_labels, self.edges, self.perimeter())
 
     def save(self, path: str | Path) -> None:
@@ -322,6 +323,7 @@ class TileFill:
 
     @classmethod
     def load(cls, path: str | Path) -> "TileFill":
+        """Read a tile written by :meth:`save`."""
         with np.load(path) as d:
             return cls(Tile(*(int(v) for v in d["tile"])), d["filled"], d["labels"], int(d["n_labels"]),
                        (d["ea"], d["eb"], d["ew"]))
@@ -337,12 +339,14 @@ class TileSummary:
     perimeter: dict[str, np.ndarray]
 
     def save(self, path: str | Path) -> None:
+        """Save the tile, label count, spill graph and perimeter ring (one ``.npz``)."""
         t = self.tile
         np.savez(path, tile=np.array([t.tid, t.ti, t.tj, t.r0, t.c0, t.h, t.w]), n_labels=self.n_labels,
                  ea=self.edges[0], eb=self.edges[1], ew=self.edges[2], **self.perimeter)
 
     @classmethod
     def load(cls, path: str | Path) -> "TileSummary":
+        """Read a summary written by :meth:`save`."""
         with np.load(path) as d:
             per = {k: d[k] for k in ("top_z", "top_l", "bottom_z", "bottom_l", "left_z", "left_l", "right_z", "right_l")}
             return cls(Tile(*(int(v) for v in d["tile"])), int(d["n_labels"]), (d["ea"], d["eb"], d["ew"]), per)
@@ -452,10 +456,12 @@ class SpillElevations:
         return out
 
     def save(self, path: str | Path) -> None:
+        """Save the offsets and spill elevations (one ``.npz``)."""
         np.savez(path, offsets=self.offsets, spill=self.spill)
 
     @classmethod
     def load(cls, path: str | Path) -> "SpillElevations":
+        """Read spill elevations written by :meth:`save`."""
         with np.load(path) as d:
             return cls(d["offsets"], d["spill"])
 

@@ -45,6 +45,17 @@ def kites_from_config(cfg: Mapping[str, Any], model: str | None = None) -> dict[
 
 
 def atmosphere_from_config(cfg: Mapping[str, Any]) -> Atmosphere:
+    """The atmosphere of a ``tether`` config section.
+
+    Parameters
+    ----------
+    cfg : mapping
+        The ``tether`` section; reads ``atmosphere.air_density_kg_m3`` and ``atmosphere.gravity_m_s2``.
+
+    Returns
+    -------
+    Atmosphere
+    """
     a = cfg["atmosphere"]
     return Atmosphere(air_density_kg_m3=a["air_density_kg_m3"], gravity_m_s2=a["gravity_m_s2"])
 
@@ -67,11 +78,37 @@ def planning_camera_from_config(cam: Mapping[str, Any]) -> PlanningCamera:
 
 
 def sweep_lengths(cfg: Mapping[str, Any]) -> np.ndarray:
+    """Line lengths of the sweep (m): from 0 in steps of ``sweep.line_length_step_m``.
+
+    Parameters
+    ----------
+    cfg : mapping
+        The ``tether`` section; reads ``sweep.max_line_length_m`` and ``sweep.line_length_step_m``.
+
+    Returns
+    -------
+    ndarray
+        Line lengths (m), ``max_line_length_m`` included when it is a whole number of steps.
+    """
     s = cfg["sweep"]
     return np.arange(0.0, s["max_line_length_m"] + 0.5 * s["line_length_step_m"], s["line_length_step_m"])
 
 
 def schedule_from_config(flight: Mapping[str, Any], settle_s: float) -> LineSchedule:
+    """The line schedule of one observed flight.
+
+    Parameters
+    ----------
+    flight : mapping
+        One entry of ``observed.flights``; its ``line_schedule`` lists ``start_s`` and
+        ``line_length_m`` of each step.
+    settle_s : float
+        Seconds after each change of length whose fixes are dropped.
+
+    Returns
+    -------
+    LineSchedule
+    """
     steps = flight["line_schedule"]
     return LineSchedule(
         start_s=tuple(float(s["start_s"]) for s in steps),

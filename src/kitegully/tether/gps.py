@@ -117,6 +117,18 @@ class LineSchedule:
     settle_s: float = 30.0
 
     def length_at(self, elapsed_s: np.ndarray) -> np.ndarray:
+        """Line length paid out at each elapsed time.
+
+        Parameters
+        ----------
+        elapsed_s : ndarray
+            Seconds after the first paired fix.
+
+        Returns
+        -------
+        ndarray
+            Line length (m); NaN before the first step and within ``settle_s`` after each later change.
+        """
         idx = np.searchsorted(np.asarray(self.start_s), elapsed_s, side="right") - 1
         lengths = np.where(idx >= 0, np.asarray(self.lengths_m)[np.clip(idx, 0, None)], np.nan)
         since = elapsed_s - np.asarray(self.start_s)[np.clip(idx, 0, None)]

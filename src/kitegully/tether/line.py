@@ -158,6 +158,7 @@ class LineSolution:
 
     @property
     def n_nodes(self) -> int:
+        """Number of nodes along the line, the kite's included."""
         return self.x.shape[1]
 
     def position(self, wind_index: int, line_length_m: float) -> KitePosition:

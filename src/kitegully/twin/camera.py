@@ -59,6 +59,7 @@ class Camera:
 
     @property
     def pixel_pitch_mm(self) -> float:
+        """Pixel pitch on the sensor (mm): sensor width / image width."""
         return self.sensor_width_mm / self.width
 
     @property
@@ -122,6 +123,7 @@ class Camera:
         return (u >= lo) & (v >= lo) & (u <= self.width - 0.5 - margin_px) & (v <= self.height - 0.5 - margin_px)
 
     def to_dict(self) -> dict[str, Any]:
+        """The fields plus the COLMAP ``RADIAL`` model and parameters, pixel pitch (mm) and conventions."""
         d = asdict(self)
         d.update(
             colmap_model="RADIAL",
@@ -132,11 +134,13 @@ class Camera:
         return d
 
     def write_json(self, path: str | Path) -> None:
+        """Write :meth:`to_dict` as indented JSON, creating the parent folder."""
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
 
     @classmethod
     def read_json(cls, path: str | Path) -> "Camera":
+        """Read a camera written by :meth:`write_json` (extra keys ignored); InputError if unreadable."""
         try:
             d = json.loads(Path(path).read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError) as exc:
@@ -178,6 +182,7 @@ class Pose:
     C: np.ndarray
 
     def world_to_camera(self, X: np.ndarray) -> np.ndarray:
+        """World points (N×3) in the camera frame: ``R (X − C)``."""
         X = np.atleast_2d(np.asarray(X, dtype=float))
         return (X - self.C) @ self.R.T
 
@@ -192,11 +197,33 @@ class Pose:
 
 
 def rotation_x(a: float) -> np.ndarray:
+    """Rotation matrix about the x axis.
+
+    Parameters
+    ----------
+    a : float
+        Angle (radians), right-handed.
+
+    Returns
+    -------
+    ndarray (3, 3)
+    """
     c, s = np.cos(a), np.sin(a)
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
 def rotation_y(a: float) -> np.ndarray:
+    """Rotation matrix about the y axis.
+
+    Parameters
+    ----------
+    a : float
+        Angle (radians), right-handed.
+
+    Returns
+    -------
+    ndarray (3, 3)
+    """
     c, s = np.cos(a), np.sin(a)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 

@@ -94,16 +94,19 @@ class FlightSettings:
 
     @property
     def downwind_unit(self) -> np.ndarray:
+        """Unit vector pointing downwind (east, north)."""
         az = np.radians(self.wind_from_deg + 180.0)
         return np.array([np.sin(az), np.cos(az)])
 
     @property
     def along_unit(self) -> np.ndarray:
+        """Unit vector along the walked lines, towards ``line_azimuth_deg`` (east, north)."""
         az = np.radians(self.line_azimuth_deg)
         return np.array([np.sin(az), np.cos(az)])
 
     @property
     def across_unit(self) -> np.ndarray:
+        """Unit vector across the walked lines, 90° clockwise of :attr:`along_unit` (east, north)."""
         az = np.radians(self.line_azimuth_deg + 90.0)
         return np.array([np.sin(az), np.cos(az)])
 

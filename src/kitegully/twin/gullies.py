@@ -50,6 +50,7 @@ class Gully:
 
     @property
     def length(self) -> float:
+        """Centreline length from the head to the last vertex (m); 0 with fewer than two vertices."""
         return float(self.s[-1]) if len(self.x) > 1 else 0.0
 
 
@@ -348,6 +349,21 @@ class Segments:
 
     @classmethod
     def from_network(cls, gullies: list[Gully], u_exponent: float) -> "Segments":
+        """The centreline segments of every gully (gullies with fewer than two vertices skipped).
+
+        Parameters
+        ----------
+        gullies : list of Gully
+            Traced gullies with ``width`` and ``depth`` (m) at each vertex.
+        u_exponent : float
+            Cross-section exponent ``p`` of U-shaped gullies; V-shaped ones take 1.
+
+        Returns
+        -------
+        Segments
+            Per segment: end points, half-widths ``h0, h1`` and depths ``d0, d1`` (m) at its ends,
+            exponent ``p`` and gully id.
+        """
         parts = []
         for g in gullies:
             if len(g.x) < 2:

@@ -53,6 +53,11 @@ class Fields:
 
     @classmethod
     def from_config(cls, f: dict, seed: int) -> "Fields":
+        """Build from the ``twin.fields`` section and the seed of the layout's jitter.
+
+        The class shares are normalised to sum to 1; the row and plot jitters are capped at 0.45
+        of the row depth and the plot length.
+        """
         s = f["class_shares"]
         total = s["ploughed"] + s["grass"] + s["bare_eroded"]
         return cls(
@@ -70,10 +75,12 @@ class Fields:
         return np.where(k <= 0, k * self.row_depth, k * self.row_depth + jit)
 
     def col_boundary(self, bank, row, j):
+        """Distance along row ``row`` of the boundary before plot ``j`` (m), jittered per bank, row and plot."""
         jit = self.plot_jitter * (2.0 * hash01(bank, row, j, seed=self.seed + 13) - 1.0)
         return np.asarray(j) * self.plot_length + jit
 
     def col_offset(self, bank, row):
+        """Shift (m) of the plot boundaries along row ``row`` of ``bank``, in [0, ``plot_length``)."""
         return self.plot_length * hash01(bank, row, seed=self.seed + 17)
 
 

@@ -51,11 +51,13 @@ class Scene:
     band_names: tuple[str, ...]
 
     def cast_args(self) -> tuple:
+        """The scene's arguments of the ray-casting kernel (``dsm`` … ``zmax``), in its order."""
         return (self.dsm, self.x0, self.y0, self.cell, self.block_max, self.block, self.super_max,
                 self.block * self.super_factor, self.zmin, self.zmax)
 
     @property
     def super_factor(self) -> int:
+        """Blocks per super-block side."""
         return self.super_block // self.block
 
 
@@ -531,6 +533,7 @@ class Photographic:
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> "Photographic":
+        """Build from a config mapping holding every attribute's key (read as float; other keys ignored)."""
         return cls(**{k: float(cfg[k]) for k in cls.__dataclass_fields__})
 
 

@@ -170,10 +170,12 @@ class TwinSite:
 
     @property
     def tex_grid(self) -> GridSpec:
+        """The texture grid: the DEM grid refined by ``tex_factor``."""
         return self.grid.refined(self.tex_factor)
 
     @property
     def bounds(self):
+        """(xmin, ymin, xmax, ymax) of the DEM grid in map units."""
         return self.grid.bounds
 
 
@@ -278,6 +280,20 @@ def place_buildings(bcfg: dict, valley: Valley, fields: lcm.Fields, network, z_t
 # ---------------------------------------------------------------------------- tiles
 @dataclass
 class Tile:
+    """Rasters of one tile of a twin site (:func:`compute_tile`).
+
+    Attributes
+    ----------
+    dtm : ndarray float32
+        Ground elevation (m): relief, field banks, gullies and furrows (epoch 2: sheet erosion too).
+    dsm : ndarray float32
+        Surface elevation (m): the ground plus shrubs, trees and roofs; the water level on water.
+    lc : ndarray uint8
+        Land-cover codes (:data:`kitegully.twin.landcover.CODE`).
+    phase : ndarray float32
+        Coordinate across the furrows (m), :func:`kitegully.twin.landcover.furrow_phase`.
+    """
+
     dtm: np.ndarray
     dsm: np.ndarray
     lc: np.ndarray
@@ -574,5 +590,14 @@ def site_json(site: TwinSite) -> dict:
 
 
 def write_site_json(site: TwinSite, path: Path) -> None:
+    """Write :func:`site_json` of ``site`` as indented JSON, creating the parent folder.
+
+    Parameters
+    ----------
+    site : TwinSite
+        The planned site.
+    path : Path
+        The JSON file.
+    """
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(json.dumps(site_json(site), indent=2) + "\n", encoding="utf-8")

@@ -59,10 +59,12 @@ class Valley:
     # --- frame -------------------------------------------------------------------------
     @property
     def flow(self) -> tuple[float, float]:
+        """Unit vector (east, north) down the valley, at azimuth ``azimuth_rad``."""
         return float(np.sin(self.azimuth_rad)), float(np.cos(self.azimuth_rad))
 
     @property
     def right(self) -> tuple[float, float]:
+        """Unit vector (east, north) towards the right bank: :attr:`flow` turned 90° clockwise."""
         return float(np.cos(self.azimuth_rad)), float(-np.sin(self.azimuth_rad))
 
     def uv(self, x, y):
