@@ -26,6 +26,22 @@ def epoch_rng(seed: int, epoch: int, stage: str, item: str) -> np.random.Generat
     ``rng_for(seed, "<stage>.<item>")`` (= ``default_rng([seed, crc32("<stage>.<item>")])``),
     so its numbers are unchanged; a later epoch ``n`` draws from
     ``rng_for(seed, stage, "epoch<n>", item)``, independent of epoch 1.
+
+    Parameters
+    ----------
+    seed : int
+        The master seed.
+    epoch : int
+        Survey epoch, from 1.
+    stage : str
+        Stage name.
+    item : str
+        Item of the stage.
+
+    Returns
+    -------
+    numpy.random.Generator
+        The epoch's stream.
     """
     if int(epoch) == 1:
         return rng_for(seed, f"{stage}.{item}")
@@ -37,7 +53,24 @@ def epoch_seed(seed: int, epoch: int, stage: str, item: str) -> int:
 
     Epoch 1 keeps ``crc32("<stage>.<item>") ^ seed`` (its numbers unchanged); a later epoch
     draws the int from :func:`epoch_rng`.
+
+    Parameters
+    ----------
+    seed : int
+        The master seed.
+    epoch : int
+        Survey epoch, from 1.
+    stage : str
+        Stage name.
+    item : str
+        Item of the stage.
+
+    Returns
+    -------
+    int
+        The stream's integer seed.
     """
+
     if int(epoch) == 1:
         return int(zlib.crc32(f"{stage}.{item}".encode("utf-8")) ^ int(seed))
     return int(epoch_rng(seed, epoch, stage, item).integers(0, 2**32 - 1))

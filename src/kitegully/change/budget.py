@@ -210,7 +210,22 @@ def mask_groups(specs: Sequence[Mapping[str, Any]], grid: GridSpec) -> list[Mask
 
 
 def unstable_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGroup], shape: tuple[int, int]) -> np.ndarray:
-    """Union of the masks flagged ``unstable`` (excluded from stable ground)."""
+    """Union of the masks flagged ``unstable`` (excluded from stable ground).
+
+    Parameters
+    ----------
+    specs : sequence of mapping
+        The budget mask specs; a mask is flagged by a true ``unstable`` key.
+    groups : sequence of MaskGroup
+        The rasterised groups (:func:`mask_groups`); a flagged mask's union group is used.
+    shape : tuple of int
+        Shape ``(H, W)`` of the grid (cells).
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        Cells of the flagged masks.
+    """
     flagged = {s["name"] for s in specs if s.get("unstable")}
     out = np.zeros(shape, bool)
     for g in groups:
@@ -276,6 +291,28 @@ def empirical_variogram(z: np.ndarray, grid: GridSpec, ok: np.ndarray, max_lag_m
     Short lags (up to 64 cells, doubling) come from every pair of ``ok`` cells at that row
     and column offset; longer lags from all pairs of ``samples`` random ``ok`` cells, binned.
     O(cells · log 64 + samples²).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        The field, e.g. standardised dh; non-finite cells are left out.
+    grid : GridSpec
+        Grid of ``z``; its cell size (m) sets the lags.
+    ok : ndarray (H, W) bool
+        Cells to use.
+    max_lag_m : float
+        Longest lag (m).
+    bins : int
+        Number of long-lag bins, from the last short lag to ``max_lag_m``.
+    samples : int
+        Most random cells for the long lags.
+    seed : int
+        Master seed of the random subset.
+
+    Returns
+    -------
+    DataFrame
+        One row per lag with enough pairs: ``lag_m`` (m), ``semivariance`` and ``pairs``.
     """
     rows = []
     k = 1
@@ -312,6 +349,20 @@ def fit_variogram(emp: pd.DataFrame, cell: float, max_lag_m: float) -> Variogram
     Ranges lie in [cell, max_lag]; the two-range model (short: noise and texture, long:
     georeferencing and correlated matching errors) is kept when it converges with a lower
     weighted misfit, as in Hugonnet et al. (2022).
+
+    Parameters
+    ----------
+    emp : DataFrame
+        Empirical variogram (:func:`empirical_variogram`): ``lag_m``, ``semivariance``, ``pairs``.
+    cell : float
+        Cell size (m), the shortest range.
+    max_lag_m : float
+        Longest range (m).
+
+    Returns
+    -------
+    Variogram
+        The better model, its sphericals sorted by range; ``emp`` is its ``empirical`` table.
     """
     if len(emp) < 4:
         raise ValueError("too few variogram lags to fit a model")
@@ -350,6 +401,20 @@ def correlation_factor(area_m2: float, cell: float, vg: Variogram) -> float:
 
     Nugget share × a/A plus, per spherical, its share × F(A, r) (Rolstad et al. 2009, disc
     of the same area).
+
+    Parameters
+    ----------
+    area_m2 : float
+        The area A (m²).
+    cell : float
+        Cell size (m); a is its square.
+    vg : Variogram
+        The fitted model.
+
+    Returns
+    -------
+    float
+        The factor; NaN when ``area_m2`` is not positive.
     """
     if area_m2 <= 0:
         return float("nan")
@@ -367,6 +432,24 @@ def mean_correlation(rows: np.ndarray, cols: np.ndarray, cell: float, vg: Variog
 
     Var(mean of n unit-σ cells) ≈ this mean for large n; it is the offset-estimate variance
     of a co-registration fitted on exactly these (scattered) cells. O(samples²).
+
+    Parameters
+    ----------
+    rows, cols : ndarray
+        Row and column indices of the cells.
+    cell : float
+        Cell size (m).
+    vg : Variogram
+        The fitted model.
+    samples : int
+        Most cells used; more are subsampled at random.
+    seed : int
+        Master seed of the random subset.
+
+    Returns
+    -------
+    float
+        The mean ρ (at least 0) plus 1/n for the n cells used; 1.0 for fewer than two cells.
     """
     if rows.size < 2:
         return 1.0
@@ -387,6 +470,27 @@ def budget_row(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray, cell: fl
 
     ``coreg_sd_m``: SD of the co-registration's vertical offset, an error shared by every
     cell (adds A·σ_offset in quadrature to the correlated SD).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DEM of difference (m).
+    sigma : ndarray (H, W)
+        σ_DoD of each cell (m).
+    counted : ndarray (H, W) bool
+        Cells to count; those with a non-finite DoD or σ are left out.
+    cell : float
+        Cell size (m).
+    vg : Variogram or None
+        Model of the standardised dh; None gives a NaN correlated SD.
+    coreg_sd_m : float
+        See above (m).
+
+    Returns
+    -------
+    dict
+        ``area_m2``, ``erosion_m3``, ``deposition_m3``, ``net_m3``, ``net_sd_m3``, ``net_sd_independent_m3``,
+        ``net_sd_correlated_m3``, ``net_sd_coregistration_m3`` and ``mean_dh_m``.
     """
     return budget_row_from_sums(budget_sums(dod, sigma, counted), cell, vg, coreg_sd_m)
 
@@ -396,6 +500,24 @@ def budget_sums(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray) -> tupl
 
     Returns ``(n, Σ max(−DoD, 0), Σ max(DoD, 0), Σ σ²)`` (float64 sums, m and m²); sums of
     disjoint parts (tiles) add up to the whole's (up to the order of floating-point sums).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DEM of difference (m).
+    sigma : ndarray (H, W)
+        σ_DoD of each cell (m).
+    counted : ndarray (H, W) bool
+        Cells to count.
+
+    Returns
+    -------
+    n : int
+        Number of cells summed.
+    erosion, deposition : float
+        Σ max(−DoD, 0) and Σ max(DoD, 0) (m).
+    sigma2 : float
+        Σ σ² (m²).
     """
     c = counted & np.isfinite(dod) & np.isfinite(sigma)
     d, s = dod[c].astype(np.float64), sigma[c].astype(np.float64)
@@ -404,7 +526,24 @@ def budget_sums(dod: np.ndarray, sigma: np.ndarray, counted: np.ndarray) -> tupl
 
 def budget_row_from_sums(sums: tuple[int, float, float, float], cell: float, vg: Variogram | None,
                          coreg_sd_m: float = 0.0) -> dict[str, float]:
-    """:func:`budget_row` from :func:`budget_sums` (of the whole area, e.g. summed over tiles)."""
+    """:func:`budget_row` from :func:`budget_sums` (of the whole area, e.g. summed over tiles).
+
+    Parameters
+    ----------
+    sums : tuple of (int, float, float, float)
+        ``(n, Σ max(−DoD, 0), Σ max(DoD, 0), Σ σ²)`` (m and m²).
+    cell : float
+        Cell size (m).
+    vg : Variogram or None
+        Model of the standardised dh; None gives a NaN correlated SD.
+    coreg_sd_m : float
+        SD of the co-registration's vertical offset (m).
+
+    Returns
+    -------
+    dict
+        The columns of :func:`budget_row`.
+    """
     n, ero_sum, dep_sum, s2_sum = sums
     a = cell * cell
     ero = float(ero_sum * a)
@@ -426,7 +565,30 @@ def compute_budgets(dod: np.ndarray, sigma: np.ndarray, detected: Mapping[str, n
 
     ``net_sd_m3`` = √(correlated² + co-registration²) (the independent-cell SD where no
     variogram was fitted).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DEM of difference (m); its finite cells are the valid ones.
+    sigma : ndarray (H, W)
+        σ_DoD of each cell (m).
+    detected : mapping
+        Detection method name to its ndarray (H, W) bool map of detected cells; one row each.
+    groups : sequence of MaskGroup
+        The budget masks (:func:`mask_groups`).
+    cell : float
+        Cell size (m).
+    vg : Variogram or None
+        Model of the standardised dh; None gives a NaN correlated SD.
+    coreg_sd_m : float
+        SD of the co-registration's vertical offset (m), shared by every cell.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``mask``, ``method``, the :func:`budget_row` columns and ``mask_area_m2`` (the mask's valid cells, m²).
     """
+
     valid = np.isfinite(dod)
     rows = []
     for g in groups:

@@ -85,6 +85,22 @@ def height_above_ground(z: np.ndarray, cell: float, window_m: float, fill: float
     Objects narrower than the window (shrubs, trees, buildings) stand above it, the ground
     does not. Nodata cells take ``fill`` for the filters (default the highest elevation of
     ``z``; a tile of a larger grid passes the whole grid's). O(cells · window).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Surface elevations (m); NaN is nodata.
+    cell : float
+        Cell size (m).
+    window_m : float
+        Side of the opening's square window (m), rounded to an odd number of cells (at least 3).
+    fill : float or None
+        Elevation (m) given to nodata cells; None takes the highest elevation of ``z``.
+
+    Returns
+    -------
+    ndarray (H, W)
+        Height above the ground (m).
     """
     k = max(3, int(round(window_m / cell)) | 1)
     zf = np.where(np.isfinite(z), z, np.nanmax(z) if fill is None else fill)
@@ -99,6 +115,24 @@ def above_ground(z: np.ndarray, cell: float, window_m: float, height_m: float, f
 
     Shrubs, trees and buildings: not stable ground (vegetation grows and moves, dense
     matching smooths it); the dilation catches their edges. O(cells · window).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Surface elevations (m); NaN is nodata.
+    cell : float
+        Cell size (m).
+    window_m : float
+        Side of the opening's square window (m).
+    height_m : float
+        Height above the ground (m) above which a cell stands out.
+    fill : float or None
+        Elevation (m) given to nodata cells; None takes the highest elevation of ``z``.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        Cells above the ground, dilated.
     """
     k = max(3, int(round(window_m / cell)) | 1)
     h = height_above_ground(z, cell, window_m, fill)
@@ -181,7 +215,30 @@ def fit_shift_plane(info: Coregistration, z1s: np.ndarray, gxs: np.ndarray, gys:
     ``z1s`` (float32), ``gxs, gys, tans`` (slope terms, float64) and ``px, py`` (offsets from
     the grid centre, m) are the sampled cells' values; ``z2_at(dx, dy)`` gives DEM₂ resampled
     at those cells shifted by (dx, dy) m (float32). O(iterations × samples).
+
+    Parameters
+    ----------
+    info : Coregistration
+        Start of the fit; its shift, offset and tilt accumulate here.
+    z1s : ndarray
+        Epoch-1 elevations of the sampled cells (m).
+    gxs, gys : ndarray
+        Slopes ∂z/∂x and ∂z/∂y of epoch 1 at the sampled cells (m/m).
+    tans : ndarray
+        Tangent of the slope at the sampled cells; below ``coreg_min_slope_deg`` a cell gets no shift terms.
+    px, py : ndarray
+        East and north offsets of the sampled cells from the grid centre (m).
+    z2_at : callable
+        ``z2_at(dx, dy)``: epoch-2 elevations (m) at the sampled cells shifted by (dx, dy) m.
+    params : ChangeParams
+        Reads the ``coreg_*`` settings (iterations, tolerance, outlier NMAD, tilt, minimum slope).
+
+    Returns
+    -------
+    Coregistration
+        ``info``, updated in place.
     """
+
     flat = tans < np.tan(np.radians(params.coreg_min_slope_deg))
     for it in range(1, params.coreg_max_iterations + 1):
         info.iterations = it

@@ -113,6 +113,24 @@ def matching_voids(epochs: tuple[Epoch, ...], grid: GridSpec, min_correlation: f
     sampled at the nearest cell (an NCC is not interpolated across a void edge). The voids
     and the edges of ``valid`` (cells where both DEMs hold an elevation) then grow by
     ``margin_m`` (Euclidean distance between cell centres). O(cells).
+
+    Parameters
+    ----------
+    epochs : tuple of Epoch
+        The epochs; each one's ``correlation`` raster, if any, is read.
+    grid : GridSpec
+        The common grid.
+    min_correlation : float or None
+        Lowest correlation that counts as matched; None adds no void.
+    margin_m : float
+        Distance (m) by which the voids and the edges of ``valid`` grow; 0 adds none.
+    valid : ndarray (H, W) bool or None
+        Cells where both DEMs hold an elevation; None grows the voids only.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        The voids and their margin.
     """
     out = np.zeros((grid.height, grid.width), bool)
     if min_correlation is None or all(e.correlation is None for e in epochs):
@@ -138,7 +156,20 @@ def matching_voids(epochs: tuple[Epoch, ...], grid: GridSpec, min_correlation: f
 
 
 def overlap_grid(a: GridSpec, b: GridSpec, a_path: str = "epoch 1", b_path: str = "epoch 2") -> GridSpec:
-    """Grid of ``a`` clipped to the overlap with ``b`` (whole cells of ``a``)."""
+    """Grid of ``a`` clipped to the overlap with ``b`` (whole cells of ``a``).
+
+    Parameters
+    ----------
+    a, b : GridSpec
+        Grids of the two DEMs.
+    a_path, b_path : str
+        Names of the two DEMs in messages.
+
+    Returns
+    -------
+    GridSpec
+        A window of ``a``.
+    """
     if rasterio.crs.CRS.from_user_input(a.crs) != rasterio.crs.CRS.from_user_input(b.crs):
         raise InputError(f"{b_path}: CRS {b.crs} differs from {a_path}'s {a.crs}; reproject one DEM onto the other's CRS")
     ax0, ay0, ax1, ay1 = a.bounds
@@ -158,7 +189,22 @@ def resample(r: Raster, grid: GridSpec, dx: float = 0.0, dy: float = 0.0) -> np.
     """Bilinear samples of ``r`` at the cell centres of ``grid`` shifted by (dx, dy) m.
 
     NaN propagates to every sample whose 2 × 2 neighbourhood touches nodata. O(cells).
+
+    Parameters
+    ----------
+    r : Raster
+        Source raster; NaN is nodata.
+    grid : GridSpec
+        Grid whose cell centres are sampled.
+    dx, dy : float
+        Shift east and north (m).
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        Samples on ``grid``; NaN outside ``r``.
     """
+
     if grid == r.grid and dx == 0.0 and dy == 0.0:
         return r.data.astype(np.float32, copy=True)
     xs, ys = grid.cell_centres()

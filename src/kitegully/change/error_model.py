@@ -52,6 +52,24 @@ def terrain_predictors(z: np.ndarray, cell: float, window_m: float, object_windo
     :func:`kitegully.change.coregister.height_above_ground` over ``object_window_m`` (the
     change stage's object filter window). NaN cells take ``fill`` (default the highest
     elevation) for the filters and stay NaN. O(cells · object window).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Elevations (m); NaN is nodata.
+    cell : float
+        Cell size (m).
+    window_m : float
+        Smoothing window (m) of slope and curvature.
+    object_window_m : float
+        Window (m) of the height above the ground.
+    fill : float or None
+        Elevation (m) given to NaN cells for the filters; None takes the highest elevation of ``z``.
+
+    Returns
+    -------
+    slope_deg, curvature_per_m, height_above_ground_m : ndarray (H, W) float32
+        The predictors in the order of :data:`PREDICTORS`, as a list; NaN where ``z`` is NaN.
     """
     ok = np.isfinite(z)
     zf = np.where(ok, z, (np.nanmax(z) if ok.any() else 0.0) if fill is None else fill).astype(np.float64)
@@ -127,7 +145,20 @@ def lattice_step(n_cells: int, max_samples: int | None = None) -> int:
 
 
 def predictor_halo(cell: float, window_m: float, object_window_m: float) -> int:
-    """Cells beyond a window that :func:`terrain_predictors` reads for the window's cells."""
+    """Cells beyond a window that :func:`terrain_predictors` reads for the window's cells.
+
+    Parameters
+    ----------
+    cell : float
+        Cell size (m).
+    window_m, object_window_m : float
+        The smoothing and object windows (m) passed to :func:`terrain_predictors`.
+
+    Returns
+    -------
+    int
+        Halo width (cells).
+    """
     k = max(1, int(round(window_m / cell)))
     ko = max(3, int(round(object_window_m / cell)) | 1)
     return max(k // 2 + 2, max(3, (ko // 3) | 1) // 2 + 2 * (ko // 2)) + 1
@@ -151,8 +182,24 @@ def checkpoint_cells(epochs: Any, grid: Any) -> tuple[np.ndarray, np.ndarray] | 
 
 
 def factor_row(model: ErrorModel | None, factor: np.ndarray | None = None, dod: np.ndarray | None = None) -> dict[str, Any]:
-    """The factor's row for ``sigma.csv``: its median, 90th percentile and maximum over the DoD's cells (no model: uniform)."""
+    """The factor's row for ``sigma.csv``: its median, 90th percentile and maximum over the DoD's cells (no model: uniform).
+
+    Parameters
+    ----------
+    model : ErrorModel or None
+        The fitted model; None gives the uniform row.
+    factor : ndarray (H, W) or None
+        σ multiplier per cell (:meth:`ErrorModel.factor`); None gives the uniform row.
+    dod : ndarray (H, W) or None
+        The DoD; its finite cells are summarised. None gives the uniform row.
+
+    Returns
+    -------
+    dict
+        ``epoch``, ``source`` (the text of the row) and ``sigma_m`` (NaN).
+    """
     if model is None or factor is None or dod is None:
+
         return {"epoch": "DoD factor", "source": "heteroscedastic: too few unchanged cells, uniform", "sigma_m": np.nan}
     ok = np.isfinite(dod)
     med, p90, top = (float(v) for v in np.percentile(factor[ok], [50, 90, 100])) if ok.any() else (1.0, 1.0, 1.0)

@@ -30,7 +30,25 @@ NO_CHANGE_M = 1e-3
 
 
 def detection_table(dod: np.ndarray, sigma: np.ndarray, true: np.ndarray, detected: Mapping[str, np.ndarray]) -> pd.DataFrame:
-    """Detected / missed / false counts per method (see module docstring)."""
+    """Detected / missed / false counts per method (see module docstring).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        Measured DoD (m).
+    sigma : ndarray (H, W)
+        σ_DoD (m).
+    true : ndarray (H, W)
+        True change, epoch 2 − epoch 1 (m).
+    detected : mapping
+        Method name to its ndarray (H, W) bool of detected cells.
+
+    Returns
+    -------
+    DataFrame
+        One row per method: ``method``, ``true_change_cells``, ``detected``, ``missed``, ``detection_rate``,
+        ``stable_cells``, ``false``, ``false_rate``.
+    """
     ok = np.isfinite(dod) & np.isfinite(true) & np.isfinite(sigma)
     big = ok & (np.abs(true) > 2 * sigma)
     still = ok & (np.abs(true) < NO_CHANGE_M)
@@ -46,7 +64,30 @@ def detection_table(dod: np.ndarray, sigma: np.ndarray, true: np.ndarray, detect
 
 def moritani_plots(dod: np.ndarray, true: np.ndarray, cell: float, plot_m: float, min_lowering_m: float,
                    min_coverage: float = 0.8) -> tuple[pd.DataFrame, dict[str, float]]:
-    """Mean lowering per square plot (measured A, true M) and MAE, MRE, b over eroding plots."""
+    """Mean lowering per square plot (measured A, true M) and MAE, MRE, b over eroding plots.
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        Measured DoD (m).
+    true : ndarray (H, W)
+        True change (m).
+    cell : float
+        Cell size (m).
+    plot_m : float
+        Side of a plot (m), rounded to whole cells; a partial plot at the grid's edge is dropped.
+    min_lowering_m : float
+        Least true mean lowering of a kept plot (m).
+    min_coverage : float
+        Least share of a kept plot's cells where both ``dod`` and ``true`` are finite.
+
+    Returns
+    -------
+    plots : DataFrame
+        One row per kept plot: ``plot_row``, ``plot_col``, ``true_lowering_m``, ``measured_lowering_m``, ``coverage``.
+    summary : dict
+        ``plots``, ``plot_m``, ``mae_m``, ``mre_pct`` and ``b`` (no ``plot_m`` and NaN values when no plot is kept).
+    """
     k = max(1, int(round(plot_m / cell)))
     H, W = (dod.shape[0] // k) * k, (dod.shape[1] // k) * k
 
@@ -72,7 +113,26 @@ def moritani_plots(dod: np.ndarray, true: np.ndarray, cell: float, plot_m: float
 
 
 def headcut_table(measured: pd.DataFrame, true1: pd.DataFrame, true2: pd.DataFrame, max_dist_m: float) -> pd.DataFrame:
-    """Measured retreat beside the true retreat of the nearest true epoch-1 head (gully_id, retreat_m)."""
+    """Measured retreat beside the true retreat of the nearest true epoch-1 head (gully_id, retreat_m).
+
+    Parameters
+    ----------
+    measured : DataFrame
+        Measured heads: ``x_digitised``, ``y_digitised``, ``retreat_m`` and optionally ``retreat_mid_m``,
+        ``retreat_dod_m``.
+    true1 : GeoDataFrame
+        True epoch-1 heads (points) with ``gully_id``.
+    true2 : DataFrame
+        True epoch-2 heads with ``gully_id`` and ``retreat_m``.
+    max_dist_m : float
+        Farthest a true head may lie from a digitised head (m).
+
+    Returns
+    -------
+    DataFrame
+        ``measured`` plus ``true_gully_id``, ``digitising_offset_m``, ``true_retreat_m``, ``error_m`` (and
+        ``error_mid_m``, ``error_dod_m`` beside their estimates); NaN where no true head is near enough.
+    """
     out = measured.copy()
     tx, ty = true1.geometry.x.to_numpy(), true1.geometry.y.to_numpy()
     ret = dict(zip(true2["gully_id"], true2["retreat_m"]))
@@ -144,7 +204,37 @@ def evaluate_change(dod_path: str, sigma_path: str, thresholded: Mapping[str, st
     ``out["headcuts_on_truth"]`` and summary rows: what the method measures where the surfaces
     resolve every head, beside what it measures on the photogrammetric DEMs (the split of
     the error between method and DEM).
+
+    Parameters
+    ----------
+    dod_path, sigma_path : str
+        The stage's DoD and σ_DoD rasters.
+    thresholded : mapping
+        Threshold method name to its thresholded DoD raster (finite and non-zero: detected).
+    truth1, truth2 : str
+        True surfaces of epoch 1 and epoch 2 (rasters).
+    masks : sequence of mapping
+        Budget mask specs, as given to the stage.
+    budget_csv, headcuts_csv : str
+        The stage's budget and headcut tables.
+    true_heads1, true_heads2 : str or None
+        True heads of each epoch (vector files); None leaves the true retreat NaN.
+    cfg : mapping
+        See above.
+    out : mapping
+        Output paths by key: ``detection``, ``budget_vs_truth``, ``headcuts_vs_truth``, ``moritani_plots``,
+        ``summary`` and, when written, ``headcuts_on_truth`` and ``widening_vs_truth``.
+    widening : tuple or None
+        See above; None writes no widening table.
+    headcut_ceiling : tuple or None
+        See above; None skips the run on the true surfaces.
+
+    Returns
+    -------
+    dict
+        The summary table as quantity to value.
     """
+
     dod_r = Raster.read(dod_path)
     dod, grid = dod_r.data, dod_r.grid
     sigma = Raster.read(sigma_path).data

@@ -75,7 +75,22 @@ def noisy_dem(truth: Raster, nm: NoiseModel) -> np.ndarray:
 
 
 def export_epoch(truth_dsm: str | Path, out_path: str | Path, nm: NoiseModel) -> Path:
-    """Write ``truth_dsm`` seen through ``nm`` to ``out_path`` and the model beside it (``.json``)."""
+    """Write ``truth_dsm`` seen through ``nm`` to ``out_path`` and the model beside it (``.json``).
+
+    Parameters
+    ----------
+    truth_dsm : str or Path
+        The truth DSM (GeoTIFF).
+    out_path : str or Path
+        The noisy DEM to write (GeoTIFF); its folder is created.
+    nm : NoiseModel
+        The noise model.
+
+    Returns
+    -------
+    Path
+        ``out_path``.
+    """
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     t = Raster.read(truth_dsm)
@@ -86,8 +101,24 @@ def export_epoch(truth_dsm: str | Path, out_path: str | Path, nm: NoiseModel) ->
 
 
 def export_epoch2(truth_dsm: str | Path, out_dir: str | Path, nm: NoiseModel = NoiseModel()) -> Path:
-    """Write ``epoch2_dsm.tif`` (and ``epoch2_dsm.json``, the noise model) into ``out_dir``."""
+    """Write ``epoch2_dsm.tif`` (and ``epoch2_dsm.json``, the noise model) into ``out_dir``.
+
+    Parameters
+    ----------
+    truth_dsm : str or Path
+        The twin's epoch-2 truth DSM (GeoTIFF).
+    out_dir : str or Path
+        Folder to write into; it is created.
+    nm : NoiseModel
+        The noise model (default: :class:`NoiseModel`'s defaults).
+
+    Returns
+    -------
+    Path
+        The written ``epoch2_dsm.tif``.
+    """
     return export_epoch(truth_dsm, Path(out_dir) / "epoch2_dsm.tif", nm)
+
 
 
 #: Epoch 1 of the controlled check (benchmarks/change_controlled.py): the same noise, no

@@ -99,6 +99,23 @@ def locate_channel(z: np.ndarray, grid: GridSpec, x: float, y: float, params: Ch
     """Coarse head (x, y) and unit downstream axis (tx, ty) of the channel nearest (x, y) on DEM ``z``; None if none.
 
     Works on a window of radius + 4σ around the point: O(window cells · object window).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        The DEM on ``grid`` (m).
+    grid : GridSpec
+        Grid of ``z``.
+    x, y : float
+        The digitised head (m, grid CRS).
+    params : ChangeParams
+        ``headcut_*`` keys and ``stable_object_window_m`` (the ground surface's window).
+
+    Returns
+    -------
+    tuple of float or None
+        ``(x, y, tx, ty)``: the coarse head (m) and the unit downstream axis; None when no channel is found or
+        its axis is too short.
     """
     c = grid.cell
     rad = params.headcut_search_radius_m / c
@@ -142,6 +159,28 @@ def depth_profile(z: np.ndarray, ground: np.ndarray, grid: GridSpec, origin: tup
     ``origin`` (row, col) of ``grid``. Bank level (median of the ground ``window_m`` to
     ``2·window_m`` beyond the thalweg band, mean of both sides) minus the thalweg (lowest
     DEM elevation within ``thalweg_halfwidth_m``). Bilinear sampling every half cell across.
+
+    Parameters
+    ----------
+    z, ground : ndarray
+        Windows of the DEM and of its ground surface (m).
+    grid : GridSpec
+        The whole grid.
+    origin : tuple of int
+        ``(row, col)`` of the windows' first cell on ``grid``.
+    x0, y0 : float
+        The axis point at station 0 (m).
+    t : ndarray (2,)
+        Unit downstream axis (x, y).
+    s : ndarray
+        Stations (m, downstream positive).
+    params : ChangeParams
+        Reads ``headcut_thalweg_halfwidth_m`` and ``headcut_window_m``.
+
+    Returns
+    -------
+    ndarray
+        Depth at each station (m); NaN where the samples are all NaN.
     """
     du = grid.cell / 2
     a, w = params.headcut_thalweg_halfwidth_m, params.headcut_window_m
@@ -215,6 +254,21 @@ def fit_head(s: np.ndarray, d: np.ndarray, params: ChangeParams) -> dict[str, fl
     linear least-squares problem per (lip, L); only D_bot > D_top counts. NaN where no
     finite fit exists; ``rms`` is the fit's residual RMS (see :func:`head_observed`).
     O(lips · lengths · stations).
+
+    Parameters
+    ----------
+    s : ndarray
+        Evenly spaced stations (m, downstream positive, 0 at the coarse head).
+    d : ndarray
+        Incision depth at each station (m); NaN stations are left out of the fit.
+    params : ChangeParams
+        Reads ``headcut_window_m`` and ``headcut_max_retreat_m``.
+
+    Returns
+    -------
+    dict
+        ``lip`` (station, m), ``length`` (ramp length, m), ``top`` and ``bottom`` (``D_top``, ``D_bot``, m) and
+        ``rms`` (m).
     """
     w, step = params.headcut_window_m, float(s[1] - s[0])
     reach = params.headcut_max_retreat_m + w
@@ -249,6 +303,22 @@ def head_observed(s: np.ndarray, d: np.ndarray, fit: Mapping[str, float], params
     void (DSM edge, no match) is placed by the model alone. (A stricter gate, rise ≥ 1.96 ×
     the fit's residual RMS, was tried on the default twin: it dropped 8 of 15 stable heads
     and no moving one; not adopted.)
+
+    Parameters
+    ----------
+    s : ndarray
+        Stations of the profile (m, downstream positive).
+    d : ndarray
+        Incision depth at each station (m).
+    fit : mapping
+        :func:`fit_head`'s result (``lip``, ``top``, ``bottom``).
+    params : ChangeParams
+        Reads ``headcut_window_m``.
+
+    Returns
+    -------
+    bool
+        True when the lip is a measurement.
     """
     if not np.isfinite(fit.get("lip", np.nan)):
         return False
@@ -264,6 +334,20 @@ def locate_head(s: np.ndarray, d: np.ndarray, params: ChangeParams) -> dict[str,
     docstring (its own ``D_top``/``D_bot``, reported beside the lip); ``top``/``bottom`` are
     the fitted levels. The lip is NaN where there is no fit or it fails :func:`head_observed`;
     the half-height point is NaN where there is no crossing.
+
+    Parameters
+    ----------
+    s : ndarray
+        Evenly spaced stations (m, downstream positive, 0 at the coarse head).
+    d : ndarray
+        Incision depth at each station (m).
+    params : ChangeParams
+        Reads ``headcut_window_m`` and ``headcut_max_retreat_m``.
+
+    Returns
+    -------
+    dict
+        ``lip`` and ``mid`` (stations, m), ``top`` and ``bottom`` (fitted levels, m).
     """
     w = params.headcut_window_m
     step = float(s[1] - s[0])
@@ -287,8 +371,32 @@ def locate_head(s: np.ndarray, d: np.ndarray, params: ChangeParams) -> dict[str,
 
 def dod_reach(dod: np.ndarray, grid: GridSpec, x1: float, y1: float, up: np.ndarray, radius_m: float,
               lowering_m: float, touch_m: float) -> float:
-    """Upslope reach (m) of the significant-lowering piece touching (x1, y1); 0 when none touches (the pre-session-6 estimate)."""
+    """Upslope reach (m) of the significant-lowering piece touching (x1, y1); 0 when none touches (the pre-session-6 estimate).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DoD on ``grid`` (m).
+    grid : GridSpec
+        Grid of ``dod``.
+    x1, y1 : float
+        The epoch-1 head (m).
+    up : ndarray (2,)
+        Unit upslope axis (x, y).
+    radius_m : float
+        Search radius around the head (m).
+    lowering_m : float
+        Significant lowering (m): cells with DoD below ``-lowering_m``.
+    touch_m : float
+        A piece with a cell this close to the head (m) touches it.
+
+    Returns
+    -------
+    float
+        The reach (m), at least 0.
+    """
     c = grid.cell
+
     ra, rb, ca, cb, r0f, c0f = _window(grid, x1, y1, int(np.ceil(radius_m / c)))
     win = dod[ra:rb, ca:cb]
     rr, cc = np.mgrid[ra:rb, ca:cb]

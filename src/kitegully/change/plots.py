@@ -18,7 +18,25 @@ def _decimate(a: np.ndarray, max_px: int) -> tuple[np.ndarray, int]:
 
 def plot_dod_map(dod: np.ndarray, grid: GridSpec, path: str | Path, limit_m: float, max_px: int = 1500,
                  title: str = "DEM of difference (epoch 2 − epoch 1)", attribution: str | None = None) -> None:
-    """DoD map, diverging colour map centred on 0 (red = lowering, blue = raising)."""
+    """DoD map, diverging colour map centred on 0 (red = lowering, blue = raising).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DoD (m).
+    grid : GridSpec
+        Grid of ``dod``; gives the map's extent.
+    path : str or Path
+        Output PNG file.
+    limit_m : float
+        Colour range ±``limit_m`` (m).
+    max_px : int
+        Most pixels along the longer side; the DoD is decimated by a whole step to fit.
+    title : str
+        Figure title.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+    """
     d, _ = _decimate(dod, max_px)
     x0, y0, x1, y1 = grid.bounds
     fig, ax = new_figure(figsize=(7, 5))
@@ -34,7 +52,19 @@ def plot_dod_map(dod: np.ndarray, grid: GridSpec, path: str | Path, limit_m: flo
 
 def plot_budget_bars(budget: pd.DataFrame, path: str | Path, masks: list[str] | None = None,
                      attribution: str | None = None) -> None:
-    """Net volume per mask and method with ±1σ error bars (the stated ``net_sd_m3``)."""
+    """Net volume per mask and method with ±1σ error bars (the stated ``net_sd_m3``).
+
+    Parameters
+    ----------
+    budget : DataFrame
+        Budget table (:func:`kitegully.change.budget.compute_budgets`); a ``true_net_m3`` column adds the truth.
+    path : str or Path
+        Output PNG file.
+    masks : list of str or None
+        Masks to show; None shows every mask of the table.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+    """
     b = budget if masks is None else budget[budget["mask"].isin(masks)]
     masks_ = list(dict.fromkeys(b["mask"]))
     methods = list(dict.fromkeys(b["method"]))
@@ -58,7 +88,25 @@ def plot_budget_bars(budget: pd.DataFrame, path: str | Path, masks: list[str] | 
 
 def plot_histogram(dod: np.ndarray, stable: np.ndarray, path: str | Path, limit_m: float, lod_m: float,
                    bins: int = 121, attribution: str | None = None) -> None:
-    """Histogram of elevation change: all valid cells vs stable ground, LoD lines at ±LoD."""
+    """Histogram of elevation change: all valid cells vs stable ground, LoD lines at ±LoD.
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DoD (m); its finite cells are the valid ones.
+    stable : ndarray (H, W) bool
+        Stable ground.
+    path : str or Path
+        Output PNG file.
+    limit_m : float
+        Histogram range ±``limit_m`` (m); values beyond it are clipped to it.
+    lod_m : float
+        Level of detection (m), drawn at ±``lod_m``.
+    bins : int
+        Number of bins.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+    """
     ok = np.isfinite(dod)
     edges = np.linspace(-limit_m, limit_m, bins + 1)
     fig, ax = new_figure(figsize=(6, 4))
@@ -76,8 +124,19 @@ def plot_histogram(dod: np.ndarray, stable: np.ndarray, path: str | Path, limit_
 
 
 def plot_variogram(vg, path: str | Path, attribution: str | None = None) -> None:
-    """Empirical variogram of standardised stable-ground dh and its nugget + spherical fit."""
+    """Empirical variogram of standardised stable-ground dh and its nugget + spherical fit.
+
+    Parameters
+    ----------
+    vg : Variogram or None
+        The fitted variogram; None draws a "not fitted" note.
+    path : str or Path
+        Output PNG file.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+    """
     fig, ax = new_figure(figsize=(6, 4))
+
     if vg is None:
         ax.text(0.5, 0.5, "variogram not fitted (too few stable cells)", ha="center", transform=ax.transAxes)
         save_figure(fig, path, attribution)

@@ -125,6 +125,30 @@ def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, gr
 
     Returns ``(variogram or None, offset SD m)``. Needs the whole site's arrays (the stable
     cells' median and NMAD, random pairs over the site). O(cells · log 64 + samples²).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DoD (m).
+    sigma : ndarray (H, W)
+        σ_DoD (m).
+    stable : ndarray (H, W) bool
+        Stable ground; cells beyond ``coreg_outlier_nmad`` NMAD of the median dh/σ are left out.
+    grid : GridSpec
+        The common grid.
+    params : ChangeParams
+        Reads the ``variogram_*`` keys, ``coreg_outlier_nmad``, ``coreg_enabled`` and ``seed``.
+    out : mapping
+        Output paths by key; writes ``variogram`` and ``variogram_png``.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+
+    Returns
+    -------
+    vg : Variogram or None
+        The fitted variogram of dh/σ; None when the fit failed.
+    coreg_sd : float
+        SD of the co-registration offset (m); 0 without a variogram or with co-registration off.
     """
     zs = dod / sigma
     ok = stable & np.isfinite(zs)
@@ -163,7 +187,51 @@ def write_products(budget: pd.DataFrame, coreg, sigma_rows: list, sigma: np.ndar
 
     ``budget`` is :func:`kitegully.change.budget.compute_budgets`'s table; ``top_masks`` the
     budget masks without their ``:value`` rows (the bar figure's groups).
+
+    Parameters
+    ----------
+    budget : DataFrame
+        See above.
+    coreg : Coregistration
+        The applied co-registration.
+    sigma_rows : list
+        Rows of the σ table (dicts): each epoch's σ and, if applied, the heteroscedastic factor.
+    sigma : ndarray (H, W)
+        σ_DoD (m).
+    n_void : int
+        Cells with a DoD left out as matching voids.
+    grid : GridSpec
+        The common grid.
+    z1, z2 : ndarray (H, W)
+        Epoch-1 and co-registered epoch-2 DEMs (m).
+    dod : ndarray (H, W)
+        DoD (m).
+    stable : ndarray (H, W) bool
+        Stable ground.
+    heads_path : str or None
+        Heads digitised at epoch 1; None writes an empty headcut table.
+    sections_path : str or None
+        Epoch-1 cross-sections; None writes an empty widening table.
+    params : ChangeParams
+        The stage's parameters.
+    out : mapping
+        Output paths by key (:data:`OUTPUTS`).
+    top_masks : list of str
+        See above.
+    figure : mapping or None
+        ``limit_m`` and ``max_px`` of the figures (default 1.0 m and 1500 px).
+    attribution : str or None
+        Data attribution printed on the figures; None prints none.
+    t0 : float
+        :func:`time.perf_counter` at the stage's start (s).
+
+    Returns
+    -------
+    dict
+        Summary numbers: shift and offset, stable-ground NMAD before and after, median σ_DoD,
+        whole-site raw net volume and its SD, void area and seconds.
     """
+
     write_table(budget, out["budget"])
     write_table(coreg.table(), out["coregistration"])
     sig_tab = unc.sigma_table(sigma_rows, sigma)

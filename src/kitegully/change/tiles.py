@@ -109,7 +109,24 @@ def _window(grid: GridSpec, tiling: TilingParams, name: str, halo: int) -> tuple
 
 
 def resample_window(r: Raster, grid: GridSpec, rs: slice, cs: slice, dx: float = 0.0, dy: float = 0.0) -> np.ndarray:
-    """:func:`kitegully.change.dod.resample` of the window ``rs, cs`` of ``grid`` (the same values, cell for cell)."""
+    """:func:`kitegully.change.dod.resample` of the window ``rs, cs`` of ``grid`` (the same values, cell for cell).
+
+    Parameters
+    ----------
+    r : Raster
+        Source raster; NaN is nodata.
+    grid : GridSpec
+        The whole grid.
+    rs, cs : slice
+        Rows and columns of the window on ``grid``.
+    dx, dy : float
+        Shift east and north (m).
+
+    Returns
+    -------
+    ndarray float32
+        Samples on the window; NaN outside ``r``.
+    """
     if grid == r.grid and dx == 0.0 and dy == 0.0:
         return r.data[rs, cs].astype(np.float32, copy=True)
     xs, ys = grid.cell_centres()
@@ -155,6 +172,23 @@ def plan_change(epochs: Sequence[Mapping[str, Any]], out_json: str | Path, site_
     """Rule ``change_plan``: the highest epoch-1 elevation and both epochs' σ (number or raster) with their sources.
 
     O(cells): both DEMs on the common grid once (as the untiled stage).
+
+    Parameters
+    ----------
+    epochs : sequence of mapping
+        Two epoch specs (older first): ``name, dem, nodata, accuracy``.
+    out_json : str or Path
+        The plan to write (JSON); its folder is created.
+    site_crs : str or None
+        The DEMs must be in this CRS.
+    checkpoint_outlier_nmad : float or None
+        Blunder rule of a σ from checkpoints (:func:`kitegully.change.uncertainty.epoch_sigma`).
+
+    Returns
+    -------
+    dict
+        The plan: ``z1_max`` (m), ``shape`` of the common grid, ``sigma`` (m per epoch, None for an error
+        raster) and ``sigma_info``.
     """
     e1, e2, _ = _load(epochs, site_crs)
     grid, z1, z2 = on_common_grid(e1, e2)
@@ -240,6 +274,31 @@ def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     """Rule ``change_stable_tile``: stable ground, co-registration candidates and dh before co-registration of one tile.
 
     Returns the tile's stable cells. O(window cells · object window).
+
+    Parameters
+    ----------
+    epochs : sequence of mapping
+        Two epoch specs (older first).
+    masks : sequence of mapping
+        Budget mask specs.
+    plan_json : str or Path
+        The ``change_plan`` JSON.
+    params : ChangeParams
+        The stage's parameters.
+    tiling : TilingParams
+        The site's tiling.
+    name : str
+        The tile's name, e.g. ``r000_c000``.
+    out_npz : str or Path
+        Archive to write: the core's ``stable``, ``base`` (candidates) and ``dh``, its origin ``r0, c0`` and,
+        with ``heteroscedastic``, the error model's samples.
+    site_crs : str or None
+        The DEMs must be in this CRS.
+
+    Returns
+    -------
+    int
+        Number of stable cells in the tile's core.
     """
     plan = json.loads(Path(plan_json).read_text())
     e1, e2, grid, t, rs, cs, cr, cc, z1, z2, gw, voids = _tile_surfaces(epochs, site_crs, tiling, name, params, 0)
@@ -285,6 +344,24 @@ def coregister_tiles(stable_files: Sequence[str | Path], epochs: Sequence[Mappin
     The sample is the untiled one (every ``n/coreg_max_samples``-th candidate cell in row-major
     order of the whole grid); slopes and DEM₂ are evaluated at the sampled cells only.
     O(cells) bytes for the masks; O(iterations × samples) for the fit.
+
+    Parameters
+    ----------
+    stable_files : sequence of str or Path
+        The ``change_stable_tile`` archives of all tiles.
+    epochs : sequence of mapping
+        Two epoch specs (older first).
+    params : ChangeParams
+        The stage's parameters.
+    out_json : str or Path
+        Record to write (JSON): the fit's fields, ``applied`` and, with ``heteroscedastic``, ``error_model``.
+    site_crs : str or None
+        The DEMs must be in this CRS.
+
+    Returns
+    -------
+    Coregistration
+        The fit with its ``before`` statistics; ``after`` is left empty.
     """
     e1, e2, grid = _load(epochs, site_crs)
     shape = (grid.height, grid.width)
@@ -325,6 +402,29 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     """Rule ``change_tile``: DoD, σ_DoD, thresholds and the budget rows' partial sums of one tile.
 
     O(window cells · masks).
+
+    Parameters
+    ----------
+    epochs : sequence of mapping
+        Two epoch specs (older first).
+    masks : sequence of mapping
+        Budget mask specs.
+    plan_json : str or Path
+        The ``change_plan`` JSON.
+    coreg_json : str or Path
+        The ``change_coregister`` JSON.
+    stable_npz : str or Path
+        This tile's ``change_stable_tile`` archive.
+    params : ChangeParams
+        The stage's parameters.
+    tiling : TilingParams
+        The site's tiling.
+    name : str
+        The tile's name, e.g. ``r000_c000``.
+    out_npz : str or Path
+        Archive to write: the core's rasters and detections, the void count and the budget rows' sums.
+    site_crs : str or None
+        The DEMs must be in this CRS.
     """
     plan = json.loads(Path(plan_json).read_text())
     co = json.loads(Path(coreg_json).read_text())
@@ -367,7 +467,24 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
 
 
 def budgets_from_tiles(tile_files: Sequence[str | Path], cell: float, vg: Any, coreg_sd_m: float):
-    """The budget table from the tiles' partial sums, rows in the untiled order (site, then each mask's rows)."""
+    """The budget table from the tiles' partial sums, rows in the untiled order (site, then each mask's rows).
+
+    Parameters
+    ----------
+    tile_files : sequence of str or Path
+        The ``change_tile`` archives.
+    cell : float
+        Cell size (m).
+    vg : Variogram or None
+        Model of the standardised dh; None gives a NaN correlated SD.
+    coreg_sd_m : float
+        SD of the co-registration's vertical offset (m).
+
+    Returns
+    -------
+    DataFrame
+        The columns of :func:`kitegully.change.budget.compute_budgets`.
+    """
     import pandas as pd
 
     acc: dict[str, list] = {}
@@ -397,7 +514,36 @@ def merge_change(tile_files: Sequence[str | Path], plan_json: str | Path, coreg_
     """Rule ``change_merge``: every product of :func:`kitegully.change.stage.detect_change` from the tiles.
 
     Returns the same summary. O(cells) to write the rasters; the budgets O(tiles × rows).
+
+    Parameters
+    ----------
+    tile_files : sequence of str or Path
+        The ``change_tile`` archives of all tiles.
+    plan_json, coreg_json : str or Path
+        The ``change_plan`` and ``change_coregister`` JSONs.
+    epochs : sequence of mapping
+        Two epoch specs (older first).
+    heads_path : str or None
+        GeoPackage of heads digitised at epoch 1, or None.
+    params : ChangeParams
+        The stage's parameters.
+    out : mapping
+        Output paths by key (:data:`kitegully.change.stage.OUTPUTS` and ``thresholded_<method>``).
+    site_crs : str or None
+        The DEMs must be in this CRS.
+    figure : mapping or None
+        ``limit_m`` and ``max_px`` of the figures.
+    attribution : str or None
+        Data attribution printed on the figures; None prints none.
+    sections_path : str or None
+        Epoch-1 cross-sections whose width is measured on both DEMs, or None.
+
+    Returns
+    -------
+    dict
+        The summary of :func:`kitegully.change.stage.detect_change`, plus ``tiles`` (the number of tiles).
     """
+
     from rasterio.crs import CRS
 
     t0 = time.perf_counter()

@@ -115,7 +115,20 @@ def epoch_sigma(epoch: Epoch, grid: GridSpec, outlier_nmad: float | None = 4.0) 
 
 
 def propagate(sigma1: np.ndarray | float, sigma2: np.ndarray | float, shape: tuple[int, int]) -> np.ndarray:
-    """σ_DoD = √(σ₁² + σ₂²) as a float32 array of ``shape``."""
+    """σ_DoD = √(σ₁² + σ₂²) as a float32 array of ``shape``.
+
+    Parameters
+    ----------
+    sigma1, sigma2 : float or ndarray (H, W)
+        σ of epoch 1 and epoch 2 (m).
+    shape : tuple of int
+        Shape ``(H, W)`` of the result.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        σ_DoD (m).
+    """
     return np.broadcast_to(np.sqrt(np.square(sigma1) + np.square(sigma2)), shape).astype(np.float32)
 
 
@@ -128,6 +141,20 @@ def coherence_posterior(dod: np.ndarray, sigma: np.ndarray, params: ChangeParams
     """Posterior probability that change is real after GCD's spatial-coherence update.
 
     O(cells): two box filters of the sign indicators.
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DoD (m); NaN is nodata.
+    sigma : ndarray (H, W)
+        σ_DoD (m).
+    params : ChangeParams
+        Reads the ``coherence_*`` keys.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        p(A|E); NaN where ``dod`` is NaN.
     """
     ok = np.isfinite(dod)
     w = params.coherence_window
@@ -145,8 +172,24 @@ def coherence_posterior(dod: np.ndarray, sigma: np.ndarray, params: ChangeParams
 
 
 def detect(dod: np.ndarray, sigma: np.ndarray, params: ChangeParams) -> dict[str, np.ndarray]:
-    """Boolean maps of detected change per threshold method (:data:`THRESHOLD_METHODS`)."""
+    """Boolean maps of detected change per threshold method (:data:`THRESHOLD_METHODS`).
+
+    Parameters
+    ----------
+    dod : ndarray (H, W)
+        DoD (m).
+    sigma : ndarray (H, W)
+        σ_DoD (m).
+    params : ChangeParams
+        Reads ``min_lod_m``, ``t_factor``, ``confidence`` and the ``coherence_*`` keys.
+
+    Returns
+    -------
+    dict
+        Method name to its ndarray (H, W) bool of detected cells (only cells where both inputs are finite).
+    """
     a = np.abs(dod)
+
     ok = np.isfinite(dod) & np.isfinite(sigma)
     with np.errstate(invalid="ignore"):
         out = {

@@ -55,6 +55,25 @@ def edge_width(s: np.ndarray, z: np.ndarray, inner: tuple[float, float], min_dep
     interpolated along the profile when they are at most ``MAX_NODATA`` of it. NaN width when
     the profile has more nodata, no cell deeper than ``min_depth_m`` inside ``inner``, or an
     edge that does not close before the profile ends (the banks moved beyond the margin).
+
+    Parameters
+    ----------
+    s : ndarray
+        Stations along the profile (m).
+    z : ndarray
+        Elevation at each station (m); NaN is nodata.
+    inner : tuple of float
+        See above (m).
+    min_depth_m : float
+        Depth below the reference line (m) at which the edges lie.
+    end_m : float
+        Length of each end (m) whose median elevation sets the reference line.
+
+    Returns
+    -------
+    width, depth : float
+        Channel width and its greatest depth inside ``inner`` (m); both NaN for a profile of fewer than
+        5 samples or too much nodata, or an empty ``inner``.
     """
     ok = np.isfinite(z)
     if s.size < 5 or ok.mean() < 1.0 - MAX_NODATA or ok.sum() < 2:
@@ -126,7 +145,22 @@ def true_widths(sections: gpd.GeoDataFrame, polygons: gpd.GeoDataFrame, margin_m
     """Length of each extended section line inside the true gully polygons (the piece nearest its middle), m.
 
     Evaluation only (true polygons of a twin).
+
+    Parameters
+    ----------
+    sections : GeoDataFrame
+        The epoch-1 cross-sections (lines).
+    polygons : GeoDataFrame
+        The true gully polygons.
+    margin_m : float
+        Extension of each section line at both ends (m).
+
+    Returns
+    -------
+    ndarray
+        Width of each section (m); 0 where its line misses the polygons.
     """
+
     union = shapely.union_all(polygons.geometry.to_numpy()) if len(polygons) else shapely.Polygon()
     out = []
     for geom in sections.geometry:

@@ -86,7 +86,21 @@ def ring_order(centres: np.ndarray) -> np.ndarray:
 
 
 def pair_geometry_ok(a: OrientedPhoto, b: OrientedPhoto, p: "PairMatching") -> bool:
-    """A stereo pair worth rectifying: baseline across the view (not along it), axes not too convergent."""
+    """A stereo pair worth rectifying: baseline across the view (not along it), axes not too convergent.
+
+    Parameters
+    ----------
+    a, b : OrientedPhoto
+        First and second photo of the pair (model frame).
+    p : PairMatching
+        Matching settings; reads ``min_baseline_angle_deg`` and ``max_convergence_deg``.
+
+    Returns
+    -------
+    bool
+        True if the baseline makes at least ``min_baseline_angle_deg`` with ``a``'s optical axis and the two axes
+        converge by at most ``max_convergence_deg``; False for coincident centres.
+    """
     base = b.centre - a.centre
     nb = np.linalg.norm(base)
     if nb <= 0:
@@ -124,6 +138,17 @@ def match_pair(
     img_a: np.ndarray, img_b: np.ndarray, a: OrientedPhoto, b: OrientedPhoto, sparse_xyz: np.ndarray, p: PairMatching
 ) -> tuple[np.ndarray, np.ndarray]:
     """Dense points (model frame) and their colours from one photo pair.
+
+    Parameters
+    ----------
+    img_a, img_b : ndarray (H, W, 3) uint8
+        RGB photos of ``a`` and ``b`` at full size.
+    a, b : OrientedPhoto
+        Orientations of the two photos (model frame).
+    sparse_xyz : ndarray (N, 3)
+        Sparse SfM points (model frame); those in front of both photos set the disparity range and check the matches.
+    p : PairMatching
+        Matching settings.
 
     Returns
     -------
@@ -208,7 +233,28 @@ def match_pair(
 def dense_points(
     photos: list[OrientedPhoto], images: dict[str, np.ndarray], sparse_xyz: np.ndarray, p: PairMatching
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Dense points of all ring pairs (model frame), their colours and the number of pairs matched."""
+    """Dense points of all ring pairs (model frame), their colours and the number of pairs matched.
+
+    Parameters
+    ----------
+    photos : list of OrientedPhoto
+        Registered photos of the ring.
+    images : mapping
+        RGB photo (H, W, 3) uint8 of each photo name.
+    sparse_xyz : ndarray (N, 3)
+        Sparse SfM points (model frame).
+    p : PairMatching
+        Matching settings.
+
+    Returns
+    -------
+    xyz : ndarray (N, 3) float64
+        Dense points of all pairs (model frame).
+    colours : ndarray (N, 3) uint8
+        Colour of each point, from the first photo of its pair.
+    n_pairs : int
+        Number of pairs that gave points.
+    """
     pairs = ring_pairs(photos, p)
     xyz, rgb, n_ok = [], [], 0
     for k, (i, j) in enumerate(pairs):

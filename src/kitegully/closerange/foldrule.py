@@ -71,6 +71,20 @@ def unmix_paint(lin: np.ndarray, bg: np.ndarray, paint_lin: np.ndarray) -> np.nd
     ``lin`` and ``bg`` are (3, ...) linear-light colours of the pixels and their background,
     ``paint_lin`` the paint's (3,) linear colour; returns ``f`` with the shape of ``lin[0]``
     (0 where the two unknowns are not determined).  O(pixels).
+
+    Parameters
+    ----------
+    lin : ndarray (3, ...)
+        Linear-light colours of the pixels.
+    bg : ndarray (3, ...)
+        Linear-light colours of their background, same shape as ``lin``.
+    paint_lin : ndarray (3,)
+        Linear colour of the paint.
+
+    Returns
+    -------
+    ndarray
+        Paint share ``f`` of each pixel, shape of ``lin[0]``.
     """
     a1 = paint_lin.reshape((3,) + (1,) * (lin.ndim - 1)).astype(lin.dtype) - bg
     y = lin - bg

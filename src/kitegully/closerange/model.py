@@ -276,6 +276,27 @@ def match_markers(
     Cost: O(C(k,3) · m!/(m−3)! · k·m) for k candidates and m surveyed spheres
     (8 candidates, 4 spheres: ~1 300 hypotheses, milliseconds).
 
+    Parameters
+    ----------
+    model_xyz : ndarray (k, 3)
+        Triangulated sphere centres (model frame), most rays first.
+    survey_xyz : ndarray (m, 3)
+        Surveyed sphere centres (m).
+    survey_ids : list of str
+        Names of the surveyed spheres, for the error messages.
+    budget_m : float
+        Survey accuracy (m): largest residual of a paired sphere.
+    max_candidates : int
+        Number of model candidates used.
+    plausible : callable or None
+        Check of a similarity; None accepts every one.
+    radii : ndarray (k,) or None
+        Radius of each candidate (model units); None skips the size check.
+    radius_m : float
+        Surveyed sphere radius (m).
+    radius_tolerance : float
+        Relative tolerance on the scaled candidate radius.
+
     Returns
     -------
     similarity, the model rows used, the survey row paired with each, and the (n, 3)

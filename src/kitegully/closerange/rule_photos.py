@@ -96,7 +96,22 @@ class RuleView:
 
 
 def strip_width_px(focal_px: float, strip_width_m: float, nearest_m: float) -> float:
-    """Widest the strip can appear (px): its width at the nearest distance the camera comes to the ground."""
+    """Widest the strip can appear (px): its width at the nearest distance the camera comes to the ground.
+
+    Parameters
+    ----------
+    focal_px : float
+        Focal length (px).
+    strip_width_m : float
+        Width of the painted strip (m).
+    nearest_m : float
+        Nearest distance from the camera to the ground (m).
+
+    Returns
+    -------
+    float
+        Apparent strip width (px).
+    """
     return focal_px * strip_width_m / nearest_m
 
 

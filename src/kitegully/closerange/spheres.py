@@ -138,7 +138,22 @@ def _whiteness(image: np.ndarray) -> np.ndarray:
 
 
 def neutral_mask(image: np.ndarray, max_chroma: float, min_level_dn: float) -> np.ndarray:
-    """Pixels whose 3 × 3-mean colour is grey (chroma below ``max_chroma``) and not dark (max >= ``min_level_dn``)."""
+    """Pixels whose 3 × 3-mean colour is grey (chroma below ``max_chroma``) and not dark (max >= ``min_level_dn``).
+
+    Parameters
+    ----------
+    image : ndarray (H, W, 3) or (H, W)
+        RGB photo (DN); a single-band image is tested for its level only.
+    max_chroma : float
+        Largest ``(max − min) / max`` of a grey pixel.
+    min_level_dn : float
+        Least brightest-band level of a pixel (DN).
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        True for neutral, bright pixels.
+    """
     im = np.asarray(image, dtype=np.float32)
     if im.ndim == 2:
         return ndimage.uniform_filter(im, 3) >= min_level_dn
@@ -365,7 +380,24 @@ def detect_spheres(image: np.ndarray, camera: Camera, params: SphereDetection = 
 
 
 def fit_sphere_outline_residuals(rays: np.ndarray, axis: np.ndarray, alpha: float, f: float) -> np.ndarray:
-    """Residuals (px, in the virtual plane at focal length ``f``) of outline rays from the cone (``axis``, ``alpha``)."""
+    """Residuals (px, in the virtual plane at focal length ``f``) of outline rays from the cone (``axis``, ``alpha``).
+
+    Parameters
+    ----------
+    rays : ndarray (N, 3)
+        Directions (camera frame) through the outline points.
+    axis : ndarray (3,)
+        Unit direction of the cone's axis, the sphere centre (camera frame).
+    alpha : float
+        Half-angle of the cone (rad).
+    f : float
+        Focal length (px) that expresses the residuals in pixels.
+
+    Returns
+    -------
+    ndarray (N,)
+        Signed distance of each ray from the cone's circle in the virtual plane (px); positive outside.
+    """
     d = np.asarray(rays, float)
     p = d @ _rays_to_axis(axis).T
     return f * np.hypot(p[:, 0], p[:, 1]) / p[:, 2] - f * np.tan(alpha)

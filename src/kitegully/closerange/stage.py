@@ -223,6 +223,36 @@ def scene_walk(
 
     What :func:`photograph_scene` renders; also read by the walk-geometry benchmark
     (``benchmarks/closerange_walk_geometry.py``) without rendering.
+
+    Parameters
+    ----------
+    ortho_path, dem_path : str
+        The scene's orthophoto and DEM.
+    truth_markers_path, truth_eroded_path : str
+        The scene's truth masks of the marker spheres and of the eroded area.
+    meta : dict
+        Scene parameters and the reference eroded area (m²).
+    markers : DataFrame
+        Observed marker centres ``gcp_id, x, y, z, radius_m``.
+    walk_cfg : mapping
+        The pole walk's config section (:meth:`PoleWalk.from_config`).
+    sphere_radius_m : float
+        Radius of the marker spheres (m).
+    folding_rule : bool
+        Lay the folding rule in the scene.
+    seed : int
+        Master seed; the rule's placement and the walk draw their own streams from it.
+    scene : str
+        Scene name.
+
+    Returns
+    -------
+    pscene : PoleScene
+        The photographed world.
+    walk : PoleWalk
+        The walk's settings.
+    poses : list of Pose
+        Camera poses on the ring.
     """
     from kitegully.obia.scene import read_scene_rasters
     from kitegully.seeds import rng_for
@@ -253,6 +283,35 @@ def photograph_scene(
     Twin side: the scene's truth (marker mask, eroded mask) builds the photographed world.
     Returns ``{"n_images", "camera_centres", "spheres", "rule", "render_s"}`` (truth, for
     the evaluation only).
+
+    Parameters
+    ----------
+    ortho_path, dem_path : str
+        The scene's orthophoto and DEM.
+    truth_markers_path, truth_eroded_path : str
+        The scene's truth masks of the marker spheres and of the eroded area.
+    meta : dict
+        Scene parameters and the reference eroded area (m²).
+    markers : DataFrame
+        Observed marker centres ``gcp_id, x, y, z, radius_m``.
+    walk_cfg : mapping
+        The pole walk's config section (:meth:`PoleWalk.from_config`).
+    sphere_radius_m : float
+        Radius of the marker spheres (m).
+    folding_rule : bool
+        Lay the folding rule in the scene.
+    seed : int
+        Master seed; the rule's placement, the walk and the photos draw their own streams from it.
+    scene : str
+        Scene name.
+    photo_dir : str or Path
+        Folder the photos are written to (created if missing).
+
+    Returns
+    -------
+    dict
+        Truth record: ``scene``, ``n_images``, ``render_s`` (s), ``camera_centres``, ``spheres`` and ``rule``
+        (None without a rule).
     """
     from kitegully.seeds import rng_for
     from kitegully.twin.exif import exif_bytes, write_jpeg
@@ -361,6 +420,36 @@ def measure_rule(
     2 cm strip is 1–5 px wide in the photos and smeared below any defensible paint share in
     the 2 cm orthophoto (README, closerange); the orthophoto's own threshold (a 1-cell strip
     covers at least half a cell) stays principled, so it is kept as the fallback.
+
+    Parameters
+    ----------
+    photos : sequence of OrientedPhoto
+        Oriented photos of the scene (model frame).
+    images : mapping
+        RGB photo (rows, cols, 3) uint8 of each photo name.
+    sim : Similarity
+        Model → survey frame (the sphere similarity).
+    ortho : ndarray (3, rows, cols) uint8
+        Photogrammetric orthophoto.
+    dem : ndarray (rows, cols) float
+        Photogrammetric DEM (m, NaN = no data).
+    grid : GridSpec
+        Grid of ``ortho`` and ``dem``.
+    params : CloseRangeParams
+        Stage settings; reads the ``rule_*`` settings, ``pole_height_m`` and ``outlier_tolerance_m``.
+    rng_photos : Generator
+        Random stream for the measurement in the photos.
+    rng_ortho : Generator
+        Random stream for RANSAC in the orthophoto.
+
+    Returns
+    -------
+    rule : dict or None
+        The legs' measurement; None when the rule is not found.
+    method : str or None
+        ``"photos"``, ``"orthophoto"`` or None.
+    note : str
+        Why the photos gave no rule; empty when they did.
     """
     from kitegully.closerange.rule_photos import measure_rule_in_photos
 
@@ -648,6 +737,21 @@ def closerange_tables(
     photogrammetric classification and the truth mask: the direct classification is then
     also scored on the cells the photogrammetric one covers (``oa_direct_same_cells_pct``),
     which separates the effect of the crop from that of the SfM defects.
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Scene records, failed ones included.
+    confusion_sfm, confusion_direct : sequence of dict
+        Confusion records of the succeeded scenes on the photogrammetric and the direct orthophotos.
+    same_cells : sequence of (str, str, str)
+        Paths of the direct classification, the photogrammetric classification and the truth mask, in the order
+        of ``confusion_sfm``; empty to skip the same-cells score.
+
+    Returns
+    -------
+    CloseRangeTables
+        ``table1`` (Table 1 per scene) and ``accuracy`` (OBIA accuracy per scene), each with an ``all`` row.
     """
     from kitegully.io.raster import read_raster
     from kitegully.obia.accuracy import accuracies, confusion_matrix

@@ -134,7 +134,26 @@ class DatumCheck:
 
 
 def dsm_height_at(dsm: np.ndarray, grid: GridSpec, x: float, y: float, radius_m: float) -> tuple[float, int]:
-    """Median of the valid DSM cells whose centres lie within ``radius_m`` of (x, y), and their count."""
+    """Median of the valid DSM cells whose centres lie within ``radius_m`` of (x, y), and their count.
+
+    Parameters
+    ----------
+    dsm : ndarray (rows, cols)
+        The DSM (m, NaN = no value) on ``grid``.
+    grid : GridSpec
+        Its grid.
+    x, y : float
+        The point (site CRS, m).
+    radius_m : float
+        Radius of the disc whose cells are used (m).
+
+    Returns
+    -------
+    z : float
+        Median height of the valid cells in the disc (m); NaN when there are none.
+    n : int
+        Number of valid cells in the disc.
+    """
     r, c = grid.rowcol(np.array([x]), np.array([y]))
     k = int(np.ceil(radius_m / grid.cell)) + 1
     r0, c0 = int(np.floor(r[0])), int(np.floor(c[0]))
@@ -205,6 +224,29 @@ def used_gcps(gcp_file: str, residuals_csv: str, crs: str, gcp_format: str = "au
 
     Targets the georeferencing QA left out (outlier, ray miss, a moved target with a
     stale coordinate) are not used to judge the DSM either.
+
+    Parameters
+    ----------
+    gcp_file : str
+        The GCP file (ODM list or CSV).
+    residuals_csv : str
+        The georef stage's ``gcp_residuals.csv``; needs the columns ``gcp_id`` and ``used``.
+    crs : str
+        The site CRS the coordinates are returned in.
+    gcp_format : str
+        Format of ``gcp_file``: ``odm``, ``csv`` or ``auto`` (by suffix).
+    csv_crs : str or None
+        CRS of the coordinates in a CSV file; None = the site CRS.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``gcp_id, x, y, z`` (site CRS, m), one row per used target.
+
+    Raises
+    ------
+    InputError
+        When ``residuals_csv`` lacks the columns ``gcp_id`` or ``used``.
     """
     from kitegully.georef.gcp_io import read_gcps
 

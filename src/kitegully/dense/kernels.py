@@ -83,6 +83,20 @@ def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np
     Serial on purpose: it is ~2 % of a tile's time, and running the directions (or the
     paths of one direction) in parallel was measured slower on the shared 2-core machine
     (extra buffers and thread barriers; see README, dense matching speed).
+
+    Parameters
+    ----------
+    cost : ndarray (H, W, K)
+        Matching cost per cell and label (converted to contiguous float32).
+    p1, p2 : float
+        Penalties (cost units) for a one-step change of label and for a larger jump.
+    directions : int
+        Number of aggregation directions: 4 (rows and columns) or 8 (with the diagonals).
+
+    Returns
+    -------
+    ndarray (H, W, K) float32
+        Aggregated cost: the sum of the path costs over the directions.
     """
     cost = np.ascontiguousarray(cost, dtype=np.float32)
     total = np.zeros_like(cost)
@@ -95,7 +109,17 @@ def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np
 def ncc_cost(score, nan_cost, out):
     """SGM cost ``(1 − NCC)/2`` (float32, ``nan_cost`` where NaN) of ``score`` (K, H, W),
     written transposed into ``out`` (H, W, K). Serial: a parallel region costs more than
-    this pass on the shared 2-core machine. O(K·H·W)."""
+    this pass on the shared 2-core machine. O(K·H·W).
+
+    Parameters
+    ----------
+    score : ndarray (K, H, W) float32
+        Multi-view NCC per label and cell (NaN = not judged).
+    nan_cost : float
+        Cost written where the NCC is NaN.
+    out : ndarray (H, W, K) float32
+        Receives the cost; written in place.
+    """
     K, H, W = score.shape
     one = np.float32(1.0)
     half = np.float32(0.5)
@@ -112,7 +136,17 @@ def sgm_winner(agg, d_out, off_out):
     """Label of least aggregated cost ``agg`` (H, W, K) per cell (first on ties, as
     ``np.argmin``) into ``d_out`` and the sub-step offset in [−0.5, 0.5] of a parabola
     through the costs around it (0 at the first and last label) into ``off_out``, in the
-    float32 arithmetic of the former numpy code. Serial (as :func:`ncc_cost`). O(H·W·K)."""
+    float32 arithmetic of the former numpy code. Serial (as :func:`ncc_cost`). O(H·W·K).
+
+    Parameters
+    ----------
+    agg : ndarray (H, W, K) float32
+        Aggregated cost per cell and label (:func:`sgm_aggregate`).
+    d_out : ndarray (H, W) int64
+        Receives the winning label; written in place.
+    off_out : ndarray (H, W) float32
+        Receives the sub-step offset (labels); written in place.
+    """
     H, W, K = agg.shape
     two = np.float32(2.0)
     half = np.float32(0.5)
@@ -159,6 +193,29 @@ def occlusion_mask(dsm, x0, y0, cell, zmax, xs, ys, Z, C, step, tolerance, out):
 
     The ray is marched in horizontal steps of ``step`` until it rises above ``zmax``.
     O(H·W·L/step) with L the horizontal run of the ray below ``zmax``.
+
+    Parameters
+    ----------
+    dsm : ndarray (h, w)
+        Surface elevations (local, m; NaN = no value, never blocks).
+    x0, y0 : float
+        Top-left corner of ``dsm`` (local, m).
+    cell : float
+        Cell size of ``dsm`` (m); each ray sample takes the height of the cell that contains it.
+    zmax : float
+        Elevation (local, m) above which nothing blocks the ray (the top of ``dsm``): the march stops there.
+    xs, ys : ndarray (W,), (H,)
+        Local coordinates of the ground cell centres (m).
+    Z : ndarray (H, W)
+        Ground elevation of each cell (local, m); NaN cells are not blocked.
+    C : ndarray (3,)
+        Camera centre (local, m).
+    step : float
+        Horizontal step of the march (m).
+    tolerance : float
+        Height (m) by which the surface must rise above the ray to block it.
+    out : ndarray (H, W) bool
+        Receives the mask; written in place. Also True where the camera is not above the ground point.
     """
     for i in prange(Z.shape[0]):
         for j in range(Z.shape[1]):
@@ -191,7 +248,19 @@ def occlusion_mask(dsm, x0, y0, cell, zmax, xs, ys, Z, C, step, tolerance, out):
 @njit(cache=True, parallel=True)
 def openness_kernel(z, cell, radius, out):
     """Positive openness (degrees): mean over 8 directions of 90° minus the highest
-    elevation angle within ``radius`` cells. NaN cells are skipped. O(H·W·8·radius)."""
+    elevation angle within ``radius`` cells. NaN cells are skipped. O(H·W·8·radius).
+
+    Parameters
+    ----------
+    z : ndarray (H, W) float64
+        Elevations (m, NaN = no value).
+    cell : float
+        Cell size (m).
+    radius : int
+        Search radius along each direction (cells).
+    out : ndarray (H, W) float64
+        Receives the openness (degrees); written in place. NaN where ``z`` is NaN or no direction has a valid cell.
+    """
     H, W = z.shape
     di = (0, 1, 1, 1, 0, -1, -1, -1)
     dj = (1, 1, 0, -1, -1, -1, 0, 1)
@@ -236,6 +305,27 @@ def sample_stack(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
     on the candidate elevation: it is computed once per view and cell and the candidates
     add only ``R[:, 2]·(Z − Cz)``, in the same order of operations as :func:`_project`, so
     the samples are bit for bit those of projecting every candidate in full.
+
+    Parameters
+    ----------
+    imgs : typed list of ndarray (h, w) float32
+        Grey pyramid level of each view.
+    Rs : ndarray (V, 3, 3) float64
+        Rotations world → camera.
+    Cs : ndarray (V, 3) float64
+        Projection centres (local, m).
+    Ps : ndarray (V, 5) float64
+        Intrinsics ``(f, cx, cy, k1, k2)`` in level-0 pixels.
+    levels : ndarray (V,) int64
+        Pyramid level of each image in ``imgs``.
+    xs, ys : ndarray (W,), (H,)
+        Local coordinates of the cell centres (m).
+    base : ndarray (H, W) float64
+        Lowest candidate elevation of each cell (local, m); a NaN cell gets NaN samples.
+    dz : float
+        Step between candidates (m).
+    out : ndarray (K, V, H, W) float32
+        Receives the samples; written in place. K is the number of candidates.
     """
     K, V, H, W = out.shape
     for i in prange(H):
@@ -303,6 +393,19 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
     per-cell loop would, so the scores are bit for bit those of the former kernel
     (benchmarks/dense_kernels_speed.py; tests/dense/test_kernels_ncc.py checks them
     against the definition).
+
+    Parameters
+    ----------
+    stack : ndarray (K, V, H, W) float32
+        The resampled images (:func:`sample_stack`; NaN = no sample).
+    half : int
+        Window half-size (cells).
+    min_std : ndarray (V,) float64
+        Lowest window standard deviation (DN) of each view.
+    score : ndarray (K, H, W) float32
+        Receives the mean pairwise NCC; written in place. Also NaN within ``half`` cells of the tile's edges.
+    nviews : ndarray (K, H, W) int16
+        Receives the number of usable views; written in place (0 within ``half`` cells of the edges).
     """
     K, V, H, W = stack.shape
     m = 2 * half + 1
@@ -415,6 +518,41 @@ def best_view_ortho(imgs, Rs, Cs, Ps, levels, widths, heights, xs, ys, Z, dsm, x
     blocked by ``dsm`` (as :func:`occlusion_mask`) gives the colour (bilinear, pyramid
     ``levels``). ``out`` (B, H, W) gets NaN and ``source`` −1 where no view qualifies.
     Only the winning view's ray is usually marched: O(H·W·(V log V + L/step)).
+
+    Parameters
+    ----------
+    imgs : typed list of ndarray (h, w, B) float32
+        Colour pyramid level of each view.
+    Rs : ndarray (V, 3, 3) float64
+        Rotations world → camera.
+    Cs : ndarray (V, 3) float64
+        Projection centres (local, m).
+    Ps : ndarray (V, 5) float64
+        Intrinsics ``(f, cx, cy, k1, k2)`` in level-0 pixels.
+    levels : ndarray (V,) int64
+        Pyramid level of each image in ``imgs``.
+    widths, heights : ndarray (V,) int64
+        Level-0 image sizes (px).
+    xs, ys : ndarray (W,), (H,)
+        Local coordinates of the orthophoto cell centres (m).
+    Z : ndarray (H, W) float64
+        Surface elevation of each orthophoto cell (local, m); NaN cells get no colour.
+    dsm : ndarray (h, w) float64
+        Surface elevations for the occlusion test (local, m; NaN = no value, never blocks).
+    x0, y0 : float
+        Top-left corner of ``dsm`` (local, m).
+    cell : float
+        Cell size of ``dsm`` (m).
+    zmax : float
+        Elevation (local, m) above which nothing blocks a ray (the top of ``dsm``): the march stops there.
+    step : float
+        Horizontal step of the ray march (m).
+    tolerance : float
+        Height (m) by which the surface must rise above a ray to block it.
+    out : ndarray (B, H, W) float32
+        Receives the colours (0–255 as the images); written in place.
+    source : ndarray (H, W) int64
+        Receives the index in ``imgs`` of the chosen view; written in place.
     """
     V = len(imgs)
     nb = out.shape[0]

@@ -155,14 +155,45 @@ class TileResult:
 
 def view_levels(views: ViewSet, idx: list[int], z_ground: float, cell: float) -> np.ndarray:
     """Image pyramid level per view whose pixel size is closest to ``cell`` (in log scale), so
-    the 2×2-mean pyramid acts as the anti-aliasing filter of the ground resampling."""
+    the 2×2-mean pyramid acts as the anti-aliasing filter of the ground resampling.
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images.
+    idx : list of int
+        Indices of the views in ``views.images``.
+    z_ground : float
+        Ground elevation (local, m) at which each view's nadir pixel size is taken.
+    cell : float
+        Ground cell size (m).
+
+    Returns
+    -------
+    ndarray (len(idx),) int
+        Pyramid level of each view (0 or more).
+    """
     gsd = np.array([views.images[i].gsd_at(z_ground) for i in idx])
     ratio = np.maximum(cell / np.maximum(gsd, 1e-9), 1.0)
     return np.floor(np.log2(ratio) + 0.5).astype(int)
 
 
 def visible_views(views: ViewSet, x: tuple[float, float], y: tuple[float, float], z: tuple[float, float]) -> list[int]:
-    """Images whose frame intersects the box ``x × y × z`` (local coordinates)."""
+    """Images whose frame intersects the box ``x × y × z`` (local coordinates).
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images.
+    x, y, z : (float, float)
+        Low and high bounds of the box along each axis (local, m).
+
+    Returns
+    -------
+    list of int
+        Indices in ``views.images`` of the images that have all eight corners of the box in front of the camera
+        and the bounding box of their projections overlapping the frame.
+    """
     X = np.array([[a, b, c] for a in x for b in y for c in z], float)
     out = []
     for k, v in enumerate(views.images):
@@ -176,7 +207,24 @@ def visible_views(views: ViewSet, x: tuple[float, float], y: tuple[float, float]
 
 
 def height_base_ratio(views: ViewSet, idx: list[int], z_ground: float, max_ratio: float = 20.0) -> float:
-    """Median over image pairs of flying height / horizontal base, clipped to [1, ``max_ratio``]."""
+    """Median over image pairs of flying height / horizontal base, clipped to [1, ``max_ratio``].
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images.
+    idx : list of int
+        Indices of the images in ``views.images``.
+    z_ground : float
+        Ground elevation (local, m); the flying height is the median camera height above it.
+    max_ratio : float
+        Upper bound of the ratio, also returned when fewer than two images are given.
+
+    Returns
+    -------
+    float
+        The height-to-base ratio.
+    """
     C = np.array([views.images[i].C for i in idx])
     if len(C) < 2:
         return max_ratio

@@ -47,7 +47,22 @@ def fill_dsm(dsm: np.ndarray) -> np.ndarray:
 
 
 def finest_level(views: ViewSet, zloc: np.ndarray, ocell: float) -> int:
-    """Finest pyramid level any view needs: from the whole filled DSM's median (views' local frame)."""
+    """Finest pyramid level any view needs: from the whole filled DSM's median (views' local frame).
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images (all of them are considered).
+    zloc : ndarray (H, W)
+        Filled DSM in the views' local frame (m).
+    ocell : float
+        Orthophoto cell size (m).
+
+    Returns
+    -------
+    int
+        The lowest pyramid level of :func:`kitegully.dense.matching.view_levels` over all views.
+    """
     return int(view_levels(views, list(range(len(views.images))), float(np.median(zloc)), ocell).min())
 
 

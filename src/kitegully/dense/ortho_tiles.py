@@ -49,6 +49,20 @@ def ortho_tiles(shape: tuple[int, int], params: DenseParams, tiling: TilingParam
     split into the tiling's ``n_rows x n_cols`` near-equal rectangles; names as
     :meth:`TilingParams.names`.
 
+    Parameters
+    ----------
+    shape : (int, int)
+        (rows, cols) of the DSM grid.
+    params : DenseParams
+        ``orthophoto`` (upsample, tile_cells) sets the block side.
+    tiling : TilingParams
+        The site's tiling.
+
+    Returns
+    -------
+    list of Tile
+        The tile windows (DSM cells), in row-major order.
+
     Raises
     ------
     InputError
@@ -61,7 +75,22 @@ def ortho_tiles(shape: tuple[int, int], params: DenseParams, tiling: TilingParam
 
 
 def load_views(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path) -> ViewSet:
-    """The georeferenced model's views (as the dense stage reads them; images are read lazily)."""
+    """The georeferenced model's views (as the dense stage reads them; images are read lazily).
+
+    Parameters
+    ----------
+    model_dir : path
+        Folder of the COLMAP model.
+    transform_json : path or None
+        The georeferencing stage's ``transform.json`` (its ``offset_m``); None = the model is in site coordinates.
+    image_dir : path
+        Folder holding the images named as in the model.
+
+    Returns
+    -------
+    ViewSet
+        The oriented images in a local frame (:func:`kitegully.dense.views.views_from_reconstruction`).
+    """
     import pycolmap
 
     rec = pycolmap.Reconstruction(str(model_dir))
@@ -120,6 +149,36 @@ def render_ortho_tile(views: ViewSet, filled_tif: str | Path, plan_json: str | P
     level. ``out_npz``: ``image`` (B, h*up, w*up) uint8, ``source`` int16 and ``meta`` (JSON).
     Memory O((window + 2 margin)^2) plus the image cache; cost as the untiled rendering
     of the window.
+
+    Parameters
+    ----------
+    views : ViewSet
+        The model's views.
+    filled_tif : path
+        The filled DSM of :func:`plan_orthophoto` (site elevations).
+    plan_json : path
+        The plan of :func:`plan_orthophoto` (``finest_level``, ``block_cells``).
+    params : DenseParams
+        ``orthophoto`` (upsample, tile_cells, overlap_m, occlusion_tolerance_m) and ``max_cached_images``.
+    tiling : TilingParams
+        The site's tiling.
+    tile_name : str
+        Name of the tile to render (:func:`ortho_tiles`).
+    out_npz : path
+        Output file.
+    arrays : list of ndarray or None
+        Images in memory instead of the files (tests); None = read the image files.
+
+    Returns
+    -------
+    dict
+        The tile's ``meta``: ``tile`` (name), window (``r0, c0, h, w``, DSM cells), ``upsample``, ``seconds``,
+        ``peak_memory_mb`` and the DSM ``grid``.
+
+    Raises
+    ------
+    InputError
+        ``tile_name`` is not in the tiling, or the plan's ``block_cells`` is not that of ``dense.orthophoto``.
     """
     import rasterio
     from rasterio.windows import Window
@@ -161,7 +220,29 @@ def merge_ortho_tiles(tile_files: Sequence[str | Path], dsm_tif: str | Path, out
     The tiles go into a plain tiled GeoTIFF with the internal mask band (True where an image
     saw the cell), which GDAL's COG driver then copies with ``average`` overviews, as
     :func:`kitegully.io.raster.write_raster` makes the untiled orthophoto. ``stats_json``:
-    ``orthophoto_s`` (sum of the tile jobs' rendering time), ``tile_jobs``, ``peak_memory_mb``.
+    ``orthophoto_s`` (sum of the tile jobs' rendering time), ``tile_jobs``, ``tile_peak_memory_mb``, ``merge_peak_memory_mb``.
+
+    Parameters
+    ----------
+    tile_files : sequence of path
+        The ``.npz`` files of :func:`render_ortho_tile`, one per tile.
+    dsm_tif : path
+        The merged DSM; its grid is refined by the tiles' ``upsample`` to the orthophoto grid.
+    out_tif : path
+        The orthophoto COG.
+    stats_json : path
+        Output file of the statistics.
+
+    Returns
+    -------
+    dict
+        The statistics written to ``stats_json``: ``orthophoto_s``, ``tile_jobs``, ``tile_peak_memory_mb`` (MB,
+        largest over the tiles) and ``merge_peak_memory_mb`` (MB).
+
+    Raises
+    ------
+    InputError
+        The tiles disagree with the DSM grid or on ``upsample``, or their cells do not add up to the grid's.
     """
     import rasterio
     import rasterio.shutil

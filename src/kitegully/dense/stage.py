@@ -198,7 +198,29 @@ def site_grid(views: ViewSet, params: DenseParams, crs: str, site_json: str | Pa
     """DSM grid of ``params.cell_m`` metres (``auto`` is resolved before, by
     :func:`kitegully.dense.cell.choose_cell`): the configured extent, the site's extent (``extent: site``, from
     ``site_json``) or the trimmed tie-point extent (``extent: null``); origin snapped to
-    whole multiples of the cell (so it aligns with any grid of the same cell)."""
+    whole multiples of the cell (so it aligns with any grid of the same cell).
+
+    Parameters
+    ----------
+    views : ViewSet
+        The model's views; their tie points give the extent when ``extent`` is null.
+    params : DenseParams
+        ``cell_m`` (m, a number by now), ``extent`` and ``extent_percentile``.
+    crs : str
+        Site CRS of the grid.
+    site_json : path or None
+        The twin's ``site.json``; needed by ``extent: site``.
+
+    Returns
+    -------
+    GridSpec
+        The smallest grid of that cell covering the extent (site CRS).
+
+    Raises
+    ------
+    InputError
+        ``extent: site`` without ``site_json``, ``extent: null`` with fewer than 10 tie points, or an empty extent.
+    """
     cell = float(params.cell_m)
     ext = params.extent
     if ext == "site":
@@ -239,7 +261,21 @@ def _show(ax, img, grid: GridSpec, max_px: int, cmap: str = "gray", **kw):
 
 def shading_figures(dsm: np.ndarray, grid: GridSpec, sh: ShadingParams, figure_max_px: int, hill_png: str | Path,
                     open_png: str | Path) -> None:
-    """Hillshade and openness figures of the DSM (Fig. 8 style), axes in site metres."""
+    """Hillshade and openness figures of the DSM (Fig. 8 style), axes in site metres.
+
+    Parameters
+    ----------
+    dsm : ndarray (H, W)
+        The DSM (m, NaN = no value) on ``grid``.
+    grid : GridSpec
+        Its grid (site CRS).
+    sh : ShadingParams
+        Sun azimuth and altitude (degrees) and openness radius (m).
+    figure_max_px : int
+        The rasters are decimated to at most this many pixels per side.
+    hill_png, open_png : path
+        Output files of the hillshade and the openness figure.
+    """
     hs = hillshade(dsm, grid.cell, sh.azimuth_deg, sh.altitude_deg)
     fig, ax = new_figure(figsize=(7, 6))
     im = _show(ax, np.where(np.isfinite(dsm), hs, np.nan), grid, figure_max_px, vmin=0, vmax=1)

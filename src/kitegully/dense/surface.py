@@ -52,6 +52,27 @@ def tile_z_range(views: ViewSet, box: tuple[float, float, float, float], margin:
     the plane. The extrapolation is bounded by the elevation range of all tie points, so a
     badly conditioned fit cannot widen it beyond the site's relief.
     O(points).
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images and their tie points (local frame).
+    box : (float, float, float, float)
+        The tile's extent ``(xmin, ymin, xmax, ymax)`` (local, m).
+    margin : float
+        Margin added below and above the range (m).
+    min_points : int
+        Fewest tie points inside ``box`` for the tile's own range and plane fit.
+
+    Returns
+    -------
+    lo, hi : float
+        Lowest and highest elevation of the search (local, m).
+
+    Raises
+    ------
+    InputError
+        The model has no tie points.
     """
     P = views.sparse_points
     if len(P) == 0:
@@ -79,7 +100,24 @@ def tile_z_range(views: ViewSet, box: tuple[float, float, float, float], margin:
 
 
 def count_seen(views: ViewSet, idx: list[int], xs: np.ndarray, ys: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Number of images (among ``idx``) whose frame contains each ground point. O(cells·V)."""
+    """Number of images (among ``idx``) whose frame contains each ground point. O(cells·V).
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images.
+    idx : list of int
+        Indices in ``views.images`` of the images to test.
+    xs, ys : ndarray (W,), (H,)
+        Local coordinates of the cell centres (m).
+    z : ndarray (H, W)
+        Ground elevation of each cell (local, m).
+
+    Returns
+    -------
+    ndarray (H, W) int16
+        Number of images that have the point in front of the camera and inside the frame.
+    """
     X = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None], z), axis=-1)
     n = np.zeros(z.shape, np.int16)
     for i in idx:
@@ -97,6 +135,30 @@ def dense_surface(views: ViewSet, grid: GridSpec, params: MatchParams, tile_cell
     ``arrays`` optionally gives the images in memory (same order as ``views.images``).
     Cost: O(tiles · per-tile cost of :func:`match_tile`); memory O(grid) for the outputs plus
     O(tile² · labels) working memory and the image cache.
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images and their tie points.
+    grid : GridSpec
+        The DSM grid (site CRS).
+    params : MatchParams
+        The matcher's parameters.
+    tile_cells : int
+        Core tile side (cells); rounded up to a multiple of ``2**(levels − 1)``.
+    overlap_cells : int
+        Margin matched on every side of a tile and then dropped (cells); rounded up to a multiple of
+        ``2**(levels − 1)``.
+    max_cached_images : int
+        Image pyramids kept in the LRU cache.
+    arrays : list of ndarray or None
+        Images in memory; None = read the image files.
+
+    Returns
+    -------
+    DenseResult
+        DSM (site elevations, NaN nodata), NCC, usable and seeing image counts on ``grid``, matching time (s)
+        and the number of tiles.
     """
     f = 2 ** (params.levels - 1)
     T = max(f, int(np.ceil(tile_cells / f)) * f)

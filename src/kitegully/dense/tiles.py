@@ -72,6 +72,20 @@ def dense_tiles(shape: tuple[int, int], params: DenseParams, tiling: TilingParam
     the last row and column of blocks are clipped to the grid. The tile names
     (``r000_c000`` ...) are those of :meth:`TilingParams.names`.
 
+    Parameters
+    ----------
+    shape : (int, int)
+        (rows, cols) of the DSM grid.
+    params : DenseParams
+        ``tile_cells`` and ``matching.levels`` set the block side (:func:`matching_block`).
+    tiling : TilingParams
+        The site's tiling.
+
+    Returns
+    -------
+    list of Tile
+        The tile windows (DSM cells), in row-major order.
+
     Raises
     ------
     InputError
@@ -86,6 +100,37 @@ def load_views_and_grid(model_dir: str | Path, transform_json: str | Path | None
     """The model's views, the cell choice, the resolved parameters and the DSM grid (as the untiled stage).
 
     Returns ``(views, cell, params, grid)``; deterministic, so every tile job finds the same grid.
+
+    Parameters
+    ----------
+    model_dir : path
+        Georeferenced COLMAP model folder (local frame).
+    transform_json : path or None
+        The georef stage's ``transform.json`` (offset of the local frame); None = no offset.
+    image_dir : path
+        Folder of the prepared images the model names.
+    crs : str
+        Site CRS.
+    params : DenseParams
+        The stage's parameters (``cell_m`` may be ``auto``).
+    site_json : path or None
+        The twin's ``site.json`` (needed by ``extent: site``).
+
+    Returns
+    -------
+    views : ViewSet
+        The oriented images.
+    cell : CellChoice
+        The DSM cell and how it was chosen.
+    params : DenseParams
+        ``params`` with ``cell_m`` set to the chosen cell (m).
+    grid : GridSpec
+        The DSM grid (site CRS).
+
+    Raises
+    ------
+    InputError
+        ``model_dir`` is not a COLMAP model folder.
     """
     import pycolmap
 
@@ -157,6 +202,29 @@ def match_tile_window(views: ViewSet, grid: GridSpec, tile: Tile, params: DenseP
     Runs :func:`kitegully.dense.surface.dense_surface` on the sub-grid of the window, so its
     blocks (each with its ``O``-cell halo) are those of the untiled run (module docstring).
     ``arrays`` optionally gives the images in memory. Cost O(window cells x labels x views).
+
+    Parameters
+    ----------
+    views : ViewSet
+        The oriented images.
+    grid : GridSpec
+        The site's DSM grid.
+    tile : Tile
+        The window (cells of ``grid``); its origin must lie on the matching blocks.
+    params : DenseParams
+        ``matching``, ``tile_cells``, ``overlap_cells`` and ``max_cached_images``.
+    arrays : list of ndarray or None
+        Images in memory; None = read the image files.
+
+    Returns
+    -------
+    DenseResult
+        The window's DSM (site elevations), NCC and image counts.
+
+    Raises
+    ------
+    ValueError
+        The tile's origin is not on the matching blocks.
     """
     T, _ = matching_block(params)
     if tile.r0 % T or tile.c0 % T:
@@ -167,7 +235,29 @@ def match_tile_window(views: ViewSet, grid: GridSpec, tile: Tile, params: DenseP
 
 def save_dense_tile(out_npz: str | Path, res: DenseResult, tile: Tile, grid: GridSpec, params: DenseParams,
                     extra: Mapping | None = None) -> dict:
-    """Save one tile job's result (``dsm``, ``ncc``, ``nseen`` and the JSON ``meta``) for :func:`merge_dense_tiles`."""
+    """Save one tile job's result (``dsm``, ``ncc``, ``nseen`` and the JSON ``meta``) for :func:`merge_dense_tiles`.
+
+    Parameters
+    ----------
+    out_npz : path
+        Output file.
+    res : DenseResult
+        The window's result (:func:`match_tile_window`).
+    tile : Tile
+        Its window.
+    grid : GridSpec
+        The site's DSM grid.
+    params : DenseParams
+        The stage's parameters (block side and halo: :func:`matching_block`).
+    extra : mapping or None
+        Further ``meta`` entries (``images``, ``gsd_measured_m``); they override the defaults.
+
+    Returns
+    -------
+    dict
+        The ``meta``: window, block side, halo, blocks, matching time (s), cell (m), grid, peak memory (MB)
+        and ``extra``.
+    """
     T, O = matching_block(params)
     meta = {"tile": tile.name, "r0": tile.r0, "c0": tile.c0, "h": tile.h, "w": tile.w, "block_cells": T,
             "halo_cells": O, "blocks": res.tiles, "matching_s": res.seconds, "images": 0, "gsd_measured_m": float("nan"),
@@ -300,6 +390,26 @@ def finish_dense_surface(dsm_tif: str | Path, stats_json: str | Path, ortho_stat
     ``matching_s`` and ``orthophoto_s`` sum the tile jobs' times (the CPU-bound parts,
     whatever ran in parallel) and ``median_ncc`` is read from a histogram (±5e-5). Memory
     O(grid): the shading reads the whole DSM. Cost O(cells).
+
+    Parameters
+    ----------
+    dsm_tif : path
+        The merged DSM.
+    stats_json : path
+        The statistics of :func:`merge_dense_tiles`.
+    ortho_stats_json : path
+        The statistics of :func:`kitegully.dense.ortho_tiles.merge_ortho_tiles`.
+    params : DenseParams
+        ``shading`` and ``figure_max_px``.
+    threads : int
+        Threads granted to the rule (written to the summary).
+    out : mapping
+        Product name → path; keys hillshade, openness, summary.
+
+    Returns
+    -------
+    dict
+        The summary written to ``out["summary"]``.
     """
     stats = json.loads(Path(stats_json).read_text(encoding="utf-8"))
     ortho = json.loads(Path(ortho_stats_json).read_text(encoding="utf-8"))

@@ -250,6 +250,20 @@ class PyramidCache:
         Levels finer than ``min_level`` are dropped after the pyramid is built (an image
         is re-read in the rare case such a level is asked for), so a cached image costs
         little more than the levels in use.
+
+        Parameters
+        ----------
+        i : int
+            Index of the image in ``views.images`` (or in ``arrays``).
+        s : int
+            Pyramid level (0 = full resolution, each level 2×2 block means of the one below).
+        colour : bool
+            All bands instead of the luminance.
+
+        Returns
+        -------
+        ndarray (h, w) float32, or (h, w, B) float32 with ``colour``
+            The level (0–255 for images read from file).
         """
         key = (i, colour)
         pyr = self._cache.get(key)

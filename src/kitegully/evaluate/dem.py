@@ -136,7 +136,22 @@ class TruthParams:
 def sample_bilinear(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Bilinear interpolation of raster ``z`` at map points; NaN outside the grid or where
     any of the four surrounding cell centres is NaN. Points between the outermost cell
-    centres and the grid edge take the nearest edge values. O(points)."""
+    centres and the grid edge take the nearest edge values. O(points).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Raster values.
+    grid : GridSpec
+        Grid of ``z``.
+    x, y : ndarray
+        Map coordinates of the points (m, CRS of ``grid``).
+
+    Returns
+    -------
+    ndarray float64
+        Interpolated value at each point, in the shape of ``x``.
+    """
     r, c = grid.rowcol(np.asarray(x, float), np.asarray(y, float))
     H, W = z.shape
     inside = (r >= -0.5) & (c >= -0.5) & (r <= H - 0.5) & (c <= W - 0.5)
@@ -153,7 +168,24 @@ def sample_bilinear(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray)
 
 
 def sample_nearest(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, fill=0) -> np.ndarray:
-    """Value of the cell containing each map point (``fill`` outside the grid, 0 by default)."""
+    """Value of the cell containing each map point (``fill`` outside the grid, 0 by default).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Raster values.
+    grid : GridSpec
+        Grid of ``z``.
+    x, y : ndarray
+        Map coordinates of the points (m, CRS of ``grid``).
+    fill : scalar
+        Value of points outside the grid.
+
+    Returns
+    -------
+    ndarray
+        Cell value at each point, in the shape of ``x`` and the dtype of ``z``.
+    """
     r, c = grid.rowcol(np.asarray(x, float), np.asarray(y, float))
     r = np.rint(r).astype(int)
     c = np.rint(c).astype(int)
@@ -267,7 +299,22 @@ def read_checkpoints(path: str | Path) -> pd.DataFrame:
 
 def checkpoint_errors(dsm: np.ndarray, grid: GridSpec, points: pd.DataFrame) -> pd.DataFrame:
     """One row per checkpoint: ``id, x_m, y_m, z_ref_m, z_model_m, error_m`` (NaN where the
-    DSM has no value there)."""
+    DSM has no value there).
+
+    Parameters
+    ----------
+    dsm : ndarray (H, W)
+        The DSM (m), NaN nodata.
+    grid : GridSpec
+        Grid of ``dsm``.
+    points : DataFrame
+        Checkpoints with columns ``id, x, y, z`` (m, site CRS; :func:`read_checkpoints`).
+
+    Returns
+    -------
+    DataFrame
+        One row per checkpoint; ``error_m`` is the bilinear DSM value minus ``z`` (m).
+    """
     zm = sample_bilinear(dsm, grid, points["x"].to_numpy(), points["y"].to_numpy())
     return pd.DataFrame({
         "id": points["id"].to_numpy(), "x_m": points["x"].to_numpy(), "y_m": points["y"].to_numpy(),
@@ -276,7 +323,24 @@ def checkpoint_errors(dsm: np.ndarray, grid: GridSpec, points: pd.DataFrame) -> 
 
 
 def resample_to(z: np.ndarray, grid: GridSpec, target: GridSpec, nearest: bool = False) -> np.ndarray:
-    """Values of raster ``z`` at the cell centres of ``target`` (bilinear or nearest)."""
+    """Values of raster ``z`` at the cell centres of ``target`` (bilinear or nearest).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Raster values.
+    grid : GridSpec
+        Grid of ``z``.
+    target : GridSpec
+        Grid to resample onto.
+    nearest : bool
+        True: value of the containing cell (0 outside ``grid``); False: bilinear (NaN outside).
+
+    Returns
+    -------
+    ndarray (target.height, target.width)
+        The resampled raster.
+    """
     xs, ys = target.cell_centres()
     X, Y = np.meshgrid(xs, ys)
     if nearest:
@@ -286,7 +350,24 @@ def resample_to(z: np.ndarray, grid: GridSpec, target: GridSpec, nearest: bool =
 
 def error_raster(model: np.ndarray, grid: GridSpec, reference: np.ndarray, ref_grid: GridSpec) -> np.ndarray:
     """``model − reference`` on the model's grid (reference resampled bilinearly when the
-    grids differ). Raises InputError when the CRSs differ or the grids do not overlap."""
+    grids differ). Raises InputError when the CRSs differ or the grids do not overlap.
+
+    Parameters
+    ----------
+    model : ndarray (H, W)
+        The model DEM (m).
+    grid : GridSpec
+        Grid of ``model``.
+    reference : ndarray
+        The reference DEM (m).
+    ref_grid : GridSpec
+        Grid of ``reference``.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        Error ``model − reference`` (m); NaN where either has no value.
+    """
     if grid.crs != ref_grid.crs:
         raise InputError(f"reference DEM CRS {ref_grid.crs} differs from the model's {grid.crs}")
     ref = reference if ref_grid == grid else resample_to(reference, ref_grid, grid)
@@ -297,7 +378,22 @@ def error_raster(model: np.ndarray, grid: GridSpec, reference: np.ndarray, ref_g
 
 def stats_by_class(err: np.ndarray, classes: np.ndarray, names: dict[int, str]) -> pd.DataFrame:
     """Error statistics per land-cover class (plus ``all``): columns ``landcover``,
-    ``mean_m, median_m, sd_m, rmse_m, nmad_m, p05_m, p95_m, n``, and the area share."""
+    ``mean_m, median_m, sd_m, rmse_m, nmad_m, p05_m, p95_m, n`` (the caller adds the area share).
+
+    Parameters
+    ----------
+    err : ndarray (H, W)
+        Error raster (m), NaN where unknown.
+    classes : ndarray (H, W) int
+        Land-cover class code of each cell, on the grid of ``err``.
+    names : dict of int to str
+        Class code → name (:func:`read_class_names`).
+
+    Returns
+    -------
+    DataFrame
+        One row for ``all`` cells, then one per class of ``names`` present in ``classes``, in code order.
+    """
     rows = [{"landcover": "all", **error_stats(err)}]
     for code in sorted(names):
         m = classes == code
@@ -326,6 +422,34 @@ def profile_comparison(model: np.ndarray, grid: GridSpec, reference: np.ndarray,
     Returns the profile (``distance_m, x_m, y_m, z_model_m, z_ref_m, error_m, vegetation``)
     and the statistics table of the errors for the whole profile and without vegetation
     (rows ``whole``, ``no_vegetation``; columns ``min_m … sd_m, n``).
+
+    Parameters
+    ----------
+    model : ndarray (H, W)
+        The model DEM (m).
+    grid : GridSpec
+        Grid of ``model``.
+    reference : ndarray
+        The reference DEM (m).
+    ref_grid : GridSpec
+        Grid of ``reference``.
+    vertices : sequence of [x, y]
+        Profile polyline in the site CRS (m), at least two vertices.
+    spacing : float
+        Sample spacing along the profile (m).
+    classes : ndarray int or None
+        Land-cover class codes; None: no sample counts as vegetation.
+    class_grid : GridSpec or None
+        Grid of ``classes``.
+    vegetation_codes : sequence of int
+        Class codes counted as vegetation (nearest cell).
+
+    Returns
+    -------
+    profile : DataFrame
+        One row per sample; ``error_m`` is ``z_model_m − z_ref_m`` (bilinear samples, m).
+    stats : DataFrame
+        Statistics of ``error_m`` for the rows ``whole`` and ``no_vegetation``.
     """
     d, x, y = profile_points(vertices, spacing)
     zm = sample_bilinear(model, grid, x, y)
@@ -381,7 +505,21 @@ def _map_axes(ax):
 
 def checkpoint_figures(errors: pd.DataFrame, hist_png: str | Path, map_png: str | Path, bins: int,
                        limit_m: float, stats: dict[str, float]) -> None:
-    """Histogram (Table 3 style annotation) and map of checkpoint errors (diverging colours)."""
+    """Histogram (Table 3 style annotation) and map of checkpoint errors (diverging colours).
+
+    Parameters
+    ----------
+    errors : DataFrame
+        Checkpoint errors with columns ``x_m, y_m, error_m`` (:func:`checkpoint_errors`).
+    hist_png, map_png : path
+        Output files of the histogram and the map.
+    bins : int
+        Number of histogram bins.
+    limit_m : float
+        Colour scale limit of the map (± m).
+    stats : dict
+        Error statistics (:func:`error_stats`); ``n, mean, sd, nmad`` go in the histogram title.
+    """
     from kitegully.io.figures import new_figure, save_figure
 
     e = errors["error_m"].to_numpy()

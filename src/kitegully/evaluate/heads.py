@@ -17,6 +17,19 @@ def score_heads(
     true, ``median_distance_m`` over matched pairs (NaN without any), and
     ``median_nearest_m`` = median distance from each true head to the nearest detected one.
     O(m·n) memory for the distance matrix.
+
+    Parameters
+    ----------
+    detected_xy, true_xy : ndarray (m, 2), (n, 2)
+        Map coordinates (m) of the detected and the true heads.
+    tolerance_m : float
+        Largest distance of a matched pair (m).
+
+    Returns
+    -------
+    dict
+        ``detected, true, matched, precision, recall, median_distance_m, median_nearest_m,
+        tolerance_m`` as floats; precision is NaN without detected heads, recall NaN without true ones.
     """
     d = np.asarray(detected_xy, float).reshape(-1, 2)
     t = np.asarray(true_xy, float).reshape(-1, 2)

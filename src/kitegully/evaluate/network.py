@@ -104,6 +104,23 @@ class NetworkScorer:
 
         ``clipped`` (from :meth:`clip`) skips clipping ``extracted`` again, and
         ``clipped_buffer`` (:meth:`buffer` of ``clipped``) skips buffering it again.
+
+        Parameters
+        ----------
+        extracted : lines
+            The extracted network, CRS of the reference (m).
+        tolerance_m : float
+            Matching tolerance τ (m), at least 0.
+        clipped : geometry or None
+            ``extracted`` already clipped to the domain; None: clip it here.
+        clipped_buffer : geometry or None
+            Buffer of ``clipped`` by ``tolerance_m``; None: buffer it here.
+
+        Returns
+        -------
+        DataFrame
+            Columns ``category, length_m, percent``; ``percent`` is relative to the reference length
+            (NaN when it is 0).
         """
         if tolerance_m < 0:
             raise ValueError(f"tolerance must be >= 0, got {tolerance_m}")
@@ -176,7 +193,24 @@ def validation_geometries(
 ) -> dict[str, BaseGeometry]:
     """The pieces behind :func:`network_validation`, for maps: ``good_fit``,
     ``false_negative`` (parts of the scored reference), ``false_positive`` (part of the
-    extracted network) and ``not_scored`` (reference outside the scored part)."""
+    extracted network) and ``not_scored`` (reference outside the scored part).
+
+    Parameters
+    ----------
+    reference, extracted : lines
+        The scored reference network and the extracted network, same CRS (m).
+    tolerance_m : float
+        Matching tolerance τ (m): the domain of a network is its buffer of τ.
+    domain : Polygon or None
+        Area where the comparison is made; all lines are clipped to it first.
+    reference_all : lines or None
+        The whole reference network; None: ``reference``.
+
+    Returns
+    -------
+    dict of str to geometry
+        Keys ``good_fit``, ``false_negative``, ``false_positive``, ``not_scored``.
+    """
     ref, ext, ref_all = _scored_lines(reference, extracted, domain, reference_all)
     ext_dom = _buffer(ext, tolerance_m)
     ref_dom = _buffer(ref_all, tolerance_m)
@@ -326,6 +360,15 @@ def split_at_junctions(
 ) -> tuple[list[BaseGeometry], list[np.ndarray], list[np.ndarray]]:
     """Cut every line at its junctions (second phase of :func:`scored_reference`).
 
+    Parameters
+    ----------
+    lines : list of LineString
+        Reference lines, head first.
+    splits : list of list of float
+        Per line, the distances along it (m) where to cut (:func:`reference_joins`).
+    near_end : float
+        Pieces this short or shorter (m) are dropped.
+
     Returns
     -------
     pieces : list of LineString
@@ -364,6 +407,19 @@ def piece_graph(
 
     Each piece flows into the next piece of its line; the last piece of a line that joins
     another flows into the piece of that line starting at (or containing) the junction.
+
+    Parameters
+    ----------
+    piece_of : list of ndarray of int
+        Piece ids of every line, upstream first (:func:`split_at_junctions`).
+    start_of : list of ndarray of float
+        Distance (m) of every piece's start along its line.
+    joins : list of (from line, into line, distance along it)
+        Junctions from :func:`reference_joins`.
+    n_pieces : int
+        Number of pieces.
+    near_end : float
+        Tolerance (m) added to a junction's distance when finding the piece it falls on.
 
     Returns
     -------
@@ -423,6 +479,22 @@ def footprint(valid: np.ndarray, grid: GridSpec, near=None, margin_cells: int = 
     polygon gives exactly what clipping them to the whole footprint gives (the lines lie
     at least ``margin_cells`` inside its artificial border), at a fraction of the cost on a
     large DEM.
+
+    Parameters
+    ----------
+    valid : ndarray (H, W) bool
+        Valid cells of the raster.
+    grid : GridSpec
+        Grid of ``valid``.
+    near : lines or None
+        Lines to keep the polygon near; None: polygonise all valid cells.
+    margin_cells : int
+        Half-width (cells) of the band around ``near`` that is polygonised.
+
+    Returns
+    -------
+    geometry
+        Union of the polygonised cells (empty Polygon when there are none).
     """
     valid = np.asarray(valid, dtype=bool)
     if near is not None:
@@ -445,6 +517,18 @@ def area_scores(predicted: np.ndarray, truth: np.ndarray, cell_m: float) -> dict
 
     Returns a dict with ``predicted_area_m2``, ``truth_area_m2``, ``intersection_m2``,
     ``precision``, ``recall``, ``iou`` (NaN where a denominator is 0).
+
+    Parameters
+    ----------
+    predicted, truth : ndarray (H, W) bool
+        Predicted and true gully masks on the same grid.
+    cell_m : float
+        Cell size (m).
+
+    Returns
+    -------
+    dict of str to float
+        The areas (m²) and the scores listed above.
     """
     predicted = np.asarray(predicted, dtype=bool)
     truth = np.asarray(truth, dtype=bool)

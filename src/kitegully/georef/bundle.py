@@ -112,6 +112,26 @@ def projection_jacobian(intr, rv, t, X):
     translation) and ``J_X`` (n, 2, 3). Analytic except the rotation columns.
     The NumPy reference of :func:`kitegully.georef.schur.weighted_jacobians`, which
     :func:`adjust` uses (tests compare the two).
+
+    Parameters
+    ----------
+    intr : ndarray (n, 5)
+        Intrinsics ``f, cx, cy, k1, k2`` (px, px, px, -, -) of each observation's camera.
+    rv, t : ndarray (n, 3)
+        Camera-from-world rotation vector (rad) and translation of each observation.
+    X : ndarray (n, 3)
+        World point of each observation.
+
+    Returns
+    -------
+    p : ndarray (n, 2)
+        Projected pixels (px).
+    J_intr : ndarray (n, 2, 5)
+        Derivatives of the pixels by the intrinsics.
+    J_pose : ndarray (n, 2, 6)
+        Derivatives of the pixels by the rotation vector, then the translation.
+    J_X : ndarray (n, 2, 3)
+        Derivatives of the pixels by the world point.
     """
     xc = rotate(rv, X) + t
     z = xc[:, 2]
@@ -363,6 +383,23 @@ def adjust(block: Block, gcp_prior: np.ndarray, s: BundleSettings) -> tuple[Bloc
     Tie points and GCP points are one point set; GCP points carry the prior.
     Phases: :func:`_problem` (indexing), :func:`_levenberg_marquardt` (the solve),
     :func:`_intrinsics_sd` (precision), then the adjusted block and the report.
+
+    Parameters
+    ----------
+    block : Block
+        The block to adjust; it is left unchanged.
+    gcp_prior : ndarray (n_gcp, 3)
+        Surveyed GCP positions in the block's frame (m).
+    s : BundleSettings
+        Weights and options of the adjustment.
+
+    Returns
+    -------
+    adjusted : Block
+        A copy of ``block`` with the adjusted intrinsics, poses, tie points and GCP points.
+    report : dict
+        Problem size, initial and final cost, iterations, tie-point RMS (px) and the
+        a-priori SD of the refined intrinsics per camera.
     """
     pb = _problem(block, gcp_prior, s)
     npt = pb.npt

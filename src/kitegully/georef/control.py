@@ -101,6 +101,31 @@ def collect_observations(
     ``image_rows`` maps the prepared image name (``ImageInfo.sfm_name``) to the block row.
     ``pixel_offset_px`` is added to the file's coordinates first: 0.5 when the file puts
     pixel centres at integer coordinates (COLMAP puts the image corner at 0).
+
+    Parameters
+    ----------
+    gcps : list of GCP
+        The GCPs read from the GCP file.
+    infos : list of ImageInfo
+        The images as the SfM stage prepared them.
+    image_rows : dict of str to int
+        Prepared image name → block row of the registered images.
+    pixel_frame : str
+        Frame of the file's pixel coordinates: ``stored`` or ``display``.
+    sfm_frame : str
+        Pixel frame the SfM worked in (``sfm.image_frame``).
+    pixel_scale : float
+        File pixels per full-resolution pixel.
+    coords_tolerance_m : float
+        Largest spread of a GCP's coordinates over its rows before it is flagged
+        ``inconsistent_coords`` (m).
+    pixel_offset_px : float
+        Added to the file's pixel coordinates (px).
+
+    Returns
+    -------
+    list of GcpObs
+        One per GCP, in the order of ``gcps``: block rows, SfM pixels and flags.
     """
     by_name = {i.name: i for i in infos}
     out = []
@@ -149,13 +174,45 @@ def triangulate_gcps(block: Block, obs: list[GcpObs]) -> tuple[np.ndarray, np.nd
 
 
 def gcp_triangulation_covariance(block: Block, o: GcpObs, X: np.ndarray, sigma_px: float) -> np.ndarray:
-    """Covariance (3×3, m²) of the GCP intersected from its observations with ``sigma_px`` click noise."""
+    """Covariance (3×3, m²) of the GCP intersected from its observations with ``sigma_px`` click noise.
+
+    Parameters
+    ----------
+    block : Block
+        The block whose cameras observe the GCP.
+    o : GcpObs
+        The GCP's observations.
+    X : ndarray (3,)
+        The GCP's position in the block's frame.
+    sigma_px : float
+        Standard deviation of each pixel coordinate of a click (px).
+
+    Returns
+    -------
+    ndarray (3, 3)
+        Covariance (m²); all NaN where fewer than two rays or the geometry is singular.
+    """
     ci = block.cam_of_image[o.rows]
     return triangulation_covariance(block.intr[ci], block.rv[o.rows], block.t[o.rows], X, sigma_px)
 
 
 def reprojection_of(block: Block, o: GcpObs, X: np.ndarray) -> float:
-    """RMS distance (px) between the measured pixels and the projection of ``X``."""
+    """RMS distance (px) between the measured pixels and the projection of ``X``.
+
+    Parameters
+    ----------
+    block : Block
+        The block whose cameras observe the GCP.
+    o : GcpObs
+        The GCP's observations.
+    X : ndarray (3,)
+        The point to project, in the block's frame.
+
+    Returns
+    -------
+    float
+        RMS reprojection error (px); NaN when the GCP has no observations.
+    """
     if len(o.rows) == 0:
         return float("nan")
     ci = block.cam_of_image[o.rows]
@@ -180,6 +237,34 @@ def solve(
     """One georeferencing solution from the GCPs in ``use``: similarity, then (optionally) the GCP bundle.
 
     Returns the block in the local frame, the model→local similarity and a report.
+
+    Parameters
+    ----------
+    block : Block
+        The SfM block in its model frame.
+    obs : list of GcpObs
+        The GCPs' observations.
+    survey_local : ndarray (n_gcp, 3)
+        Surveyed GCP positions in the local frame (m).
+    X_model : ndarray (n_gcp, 3)
+        The GCPs triangulated in the model frame.
+    use : ndarray (n_gcp,) bool
+        The GCPs the solution uses.
+    method : str
+        ``tape_horn``, ``similarity`` or ``gcp_bundle`` (similarity, then the GCP bundle).
+    settings : BundleSettings
+        Options of the GCP bundle adjustment (used by ``gcp_bundle`` only).
+    tape_edges : list of (str, str, float) or None
+        Taped distances ``(gcp_a, gcp_b, m)`` of the ``tape_horn`` method.
+
+    Returns
+    -------
+    local : Block
+        The block in the local frame.
+    sim : Similarity
+        Model → local similarity.
+    report : dict
+        Similarity scale and, with ``gcp_bundle``, the adjustment's own report.
     """
     ids = [o.gcp.gcp_id for o in obs]
     if method == "tape_horn":
@@ -303,6 +388,17 @@ def height_ratio(block: Block, obs: list[GcpObs], X_model: np.ndarray, survey_lo
     then the surveyed heights are regressed on the block's heights with a plane (x, y) for
     the levelling error: ``z_survey = a + k z_block + b x + c y``. O(n).
 
+    Parameters
+    ----------
+    block : Block
+        The SfM block in its model frame.
+    obs : list of GcpObs
+        The GCPs' observations.
+    X_model : ndarray (n, 3)
+        The GCPs triangulated in the model frame.
+    survey_local : ndarray (n, 3)
+        Surveyed GCP positions in the local frame (m).
+
     Returns
     -------
     k, se, n : float, float, int
@@ -332,6 +428,19 @@ def height_ratio(block: Block, obs: list[GcpObs], X_model: np.ndarray, survey_lo
 
 def check_height_units(block: Block, obs: list[GcpObs], X_model: np.ndarray, survey_local: np.ndarray, source: str) -> None:
     """Refuse GCP heights whose differences are 3.28 x (or 0.3048 x) those the photos show.
+
+    Parameters
+    ----------
+    block : Block
+        The SfM block in its model frame.
+    obs : list of GcpObs
+        The GCPs' observations.
+    X_model : ndarray (n, 3)
+        The GCPs triangulated in the model frame.
+    survey_local : ndarray (n, 3)
+        Surveyed GCP positions in the local frame (m).
+    source : str
+        The GCP file as the user gave it, named in the error message.
 
     Raises
     ------
@@ -380,6 +489,17 @@ def plan_only_heights(
     about it; the mean of N optical axes is vertical to about spread/sqrt(N), which is the
     tilt the heights may carry (reported).
 
+    Parameters
+    ----------
+    block : Block
+        The SfM block in its model frame.
+    obs : list of GcpObs
+        The GCPs' observations.
+    X_model : ndarray (n, 3)
+        The GCPs triangulated in the model frame.
+    survey_local : ndarray (n, 3)
+        Surveyed GCP positions in the local frame (m); the first row's height is taken as the placeholder.
+
     Returns
     -------
     survey_local : (n, 3) array
@@ -426,6 +546,26 @@ def select_gcps(obs: list[GcpObs], X_model: np.ndarray, rp_model: np.ndarray, su
     a robust similarity, is skipped for ``tape_horn``, whose GPS positions are not
     accurate enough for it). Raises :class:`InputError` naming every GCP when fewer than
     three are usable. Returns a boolean mask over ``obs``.
+
+    Parameters
+    ----------
+    obs : list of GcpObs
+        The GCPs' observations; their flags are extended in place.
+    X_model : ndarray (n, 3)
+        The GCPs triangulated in the model frame (NaN where not triangulated).
+    rp_model : ndarray (n,)
+        RMS reprojection error of each triangulated GCP (px).
+    survey_local : ndarray (n, 3)
+        Surveyed GCP positions in the local frame (m).
+    qa : GeorefQA
+        QA limits (``max_triangulation_px``, ``max_residual_m``).
+    method : str
+        Georeferencing method; ``tape_horn`` skips the outlier test.
+
+    Returns
+    -------
+    ndarray (n,) bool
+        True for the GCPs the solution uses.
     """
     cand = np.array([len(o.rows) >= 2 and np.all(np.isfinite(X_model[k])) for k, o in enumerate(obs)])
     for k, o in enumerate(obs):
@@ -460,6 +600,32 @@ def leave_one_out(
     516-photo block with every tie point it stopped after 2 iterations, because the relative
     cost decrease is dominated by the 1.2 M tie residuals, and its misfits differed by up to
     0.31 m from these.)
+
+    Parameters
+    ----------
+    block_model : Block
+        The SfM block in its model frame.
+    obs : list of GcpObs
+        The GCPs' observations.
+    survey_local : ndarray (n, 3)
+        Surveyed GCP positions in the local frame (m).
+    X_model : ndarray (n, 3)
+        The GCPs triangulated in the model frame.
+    use : ndarray (n,) bool
+        The GCPs the full solution uses.
+    method : str
+        Georeferencing method, as for :func:`solve`.
+    settings : BundleSettings
+        Options of the GCP bundle adjustment.
+    tape_edges : list of (str, str, float) or None
+        Taped distances ``(gcp_a, gcp_b, m)`` of the ``tape_horn`` method.
+
+    Returns
+    -------
+    d_loo : dict of int to ndarray (3,)
+        Misfit of each checked GCP: triangulated minus surveyed position (local frame, m).
+    rp_loo : dict of int to float
+        RMS reprojection error of each checked GCP's surveyed position (px).
     """
     n_use = int(use.sum())
     d_loo: dict[int, np.ndarray] = {}
@@ -480,6 +646,24 @@ def flag_poor_fits(local: Block, obs: list[GcpObs], use: np.ndarray, X_final: np
 
     σ combines the survey SD, the click noise through the GCP's own rays and the block's
     placement error from the others' leave-one-out residuals.
+
+    Parameters
+    ----------
+    local : Block
+        The adjusted block in the local frame.
+    obs : list of GcpObs
+        The GCPs' observations; their flags are extended in place.
+    use : ndarray (n,) bool
+        The GCPs the solution uses.
+    X_final : ndarray (n, 3)
+        The GCPs triangulated in the adjusted block (local frame, m).
+    d_final : ndarray (n, 3)
+        Triangulated minus surveyed position of each GCP in the adjusted block (m).
+    d_loo : dict of int to ndarray (3,)
+        Leave-one-out misfits (m) by index into ``obs``.
+    params : GeorefParams
+        Method parameters: survey SDs (``sigma_gcp_xy_m``, ``sigma_gcp_z_m``) and
+        ``bundle.sigma_gcp_px``.
     """
     sig_survey = np.array([params.sigma_gcp_xy_m] * 2 + [params.sigma_gcp_z_m])
     for k in np.flatnonzero(use):
@@ -498,7 +682,32 @@ def flag_poor_fits(local: Block, obs: list[GcpObs], use: np.ndarray, X_final: np
 
 def residual_tables(local: Block, obs: list[GcpObs], use: np.ndarray, survey_local: np.ndarray, d_final: np.ndarray,
                     d_loo: dict[int, np.ndarray], rp_loo: dict[int, float]) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The GCP residual table (every GCP) and the leave-one-out table (used GCPs), columns :data:`RESIDUAL_COLUMNS`."""
+    """The GCP residual table (every GCP) and the leave-one-out table (used GCPs), columns :data:`RESIDUAL_COLUMNS`.
+
+    Parameters
+    ----------
+    local : Block
+        The adjusted block in the local frame.
+    obs : list of GcpObs
+        The GCPs' observations.
+    use : ndarray (n,) bool
+        The GCPs the solution uses.
+    survey_local : ndarray (n, 3)
+        Surveyed GCP positions in the local frame (m).
+    d_final : ndarray (n, 3)
+        Triangulated minus surveyed position of each GCP in the adjusted block (m).
+    d_loo : dict of int to ndarray (3,)
+        Leave-one-out misfits (m) by index into ``obs``.
+    rp_loo : dict of int to float
+        Leave-one-out reprojection errors (px) by index into ``obs``.
+
+    Returns
+    -------
+    residuals : DataFrame
+        Residuals of every GCP after the adjustment.
+    loo : DataFrame
+        Leave-one-out residuals of the used GCPs (NaN where too few GCPs were left to leave one out).
+    """
     rows = [_row(o, d_final[k], reprojection_of(local, o, survey_local[k]), bool(use[k])) for k, o in enumerate(obs)]
     residuals = pd.DataFrame(rows, columns=RESIDUAL_COLUMNS)
     loo_rows = []

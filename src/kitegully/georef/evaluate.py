@@ -17,6 +17,29 @@ def evaluate_twin(cameras: pd.DataFrame, truth_poses: pd.DataFrame, residuals: p
 
     ``cameras`` has ``image, x_m, y_m, z_m`` (estimated, site CRS); ``truth_poses`` the
     same columns from ``flight/truth/poses.csv``.
+
+    Parameters
+    ----------
+    cameras : DataFrame
+        Estimated camera positions (site CRS, m).
+    truth_poses : DataFrame
+        True camera positions (site CRS, m).
+    residuals : DataFrame
+        GCP residuals after the adjustment (columns ``used``, ``dx_m``, ``dy_m``, ``dz_m``).
+    loo : DataFrame
+        Leave-one-out residuals (column ``d3_m``).
+    gsd_m : float
+        Ground sampling distance the targets are expressed in (m).
+    n_images : int
+        Number of images of the flight.
+
+    Returns
+    -------
+    table : DataFrame
+        ``image``, ``dx_m``, ``dy_m``, ``dz_m``, ``d3_m`` and ``d3_gsd`` of each image in both tables.
+    summary : dict
+        Image counts, camera and GCP RMSEs (m), the leave-one-out RMSE (m), the target checks
+        and ``all_targets_met``.
     """
     t = truth_poses.set_index("image")[["x_m", "y_m", "z_m"]]
     c = cameras.set_index("image")[["x_m", "y_m", "z_m"]]

@@ -28,7 +28,26 @@ from kitegully.io.tables import write_table
 
 
 def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, offset: np.ndarray, out_dir: str | Path) -> pycolmap.Reconstruction:
-    """Write the adjusted model (COLMAP binary) in the local frame; returns it."""
+    """Write the adjusted model (COLMAP binary) in the local frame; returns it.
+
+    Parameters
+    ----------
+    rec : pycolmap.Reconstruction
+        The SfM model; it is updated in place.
+    block : Block
+        The adjusted block in the local frame.
+    index : ModelIndex
+        Ids that tie the block's rows to ``rec``.
+    offset : ndarray (3,)
+        Offset of the local frame (site CRS, m).
+    out_dir : str or Path
+        Output folder; removed first if it exists.
+
+    Returns
+    -------
+    pycolmap.Reconstruction
+        ``rec`` with the adjusted poses, intrinsics and points.
+    """
     out_dir = Path(out_dir)
     if out_dir.exists():
         shutil.rmtree(out_dir)
@@ -39,7 +58,21 @@ def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, o
 
 
 def write_transform(path: str | Path, crs: str, offset: np.ndarray, sim_dict: dict, report: dict) -> None:
-    """``transform.json``: site CRS, local-frame offset, model→local similarity, run report."""
+    """``transform.json``: site CRS, local-frame offset, model→local similarity, run report.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output JSON file.
+    crs : str
+        Site CRS.
+    offset : ndarray (3,)
+        Offset of the local frame (m), ``site = local + offset``.
+    sim_dict : dict
+        The model → local similarity as a dict.
+    report : dict
+        Run report; NumPy values and NaN/inf are made JSON-safe (NaN/inf as null).
+    """
     doc = {"crs": crs, "offset_m": [float(v) for v in offset], "model_to_local": sim_dict, "report": report}
     Path(path).write_text(json.dumps(clean_json(doc), indent=2) + "\n", encoding="utf-8")
 
@@ -62,7 +95,25 @@ def clean_json(o):
 
 
 def calibration_table(start: Block, adjusted: Block, index: ModelIndex, rec: pycolmap.Reconstruction) -> pd.DataFrame:
-    """One row per camera: model, size and intrinsics from SfM and after the GCP adjustment."""
+    """One row per camera: model, size and intrinsics from SfM and after the GCP adjustment.
+
+    Parameters
+    ----------
+    start : Block
+        The block before the GCP adjustment (SfM intrinsics).
+    adjusted : Block
+        The block after the GCP adjustment.
+    index : ModelIndex
+        Ids that tie the block's rows to ``rec``.
+    rec : pycolmap.Reconstruction
+        The model, for each camera's model name and size.
+
+    Returns
+    -------
+    DataFrame
+        ``camera_id``, ``model``, ``width_px``, ``height_px``, ``f_px``, ``cx_px``, ``cy_px``,
+        ``k1`` and ``k2`` with ``_sfm`` and ``_adjusted`` suffixes, and ``n_images``.
+    """
     rows = []
     for k, cid in enumerate(index.camera_ids):
         cam = rec.cameras[int(cid)]
@@ -80,6 +131,25 @@ def camera_positions(block: Block, index: ModelIndex, offset: np.ndarray, crs: s
     """Projection centres (3-D points, site CRS) with omega/phi/kappa (deg) and image names.
 
     ``original_names`` maps the prepared SfM file names to the input file names.
+
+    Parameters
+    ----------
+    block : Block
+        The adjusted block in the local frame.
+    index : ModelIndex
+        Ids that tie the block's rows to the model (image names).
+    offset : ndarray (3,)
+        Offset of the local frame (m), added to the centres.
+    crs : str
+        Site CRS of the result.
+    original_names : dict of str to str or None
+        Prepared SfM file name → input file name; names not in it are kept as they are.
+
+    Returns
+    -------
+    GeoDataFrame
+        One 3-D point per image with ``image``, ``sfm_image``, ``x_m``, ``y_m``, ``z_m``,
+        ``omega_deg``, ``phi_deg``, ``kappa_deg`` and ``tilt_from_nadir_deg``.
     """
     original_names = original_names or {}
     C = camera_centres(block.rv, block.t) + offset
@@ -148,7 +218,27 @@ def residual_figure(
     path: str | Path, arrow_scale: float | None, attribution: str | None = None,
 ) -> None:
     """Map of GCP residual vectors: plan arrows (after adjustment: black; leave-one-out:
-    orange, dashed) and the vertical residual as a filled circle on a diverging scale."""
+    orange, dashed) and the vertical residual as a filled circle on a diverging scale.
+
+    Parameters
+    ----------
+    residuals : DataFrame
+        Residuals of every GCP after the adjustment (columns ``gcp_id``, ``dx_m``, ``dy_m``,
+        ``dz_m``, ``used``).
+    loo : DataFrame
+        Leave-one-out residuals of the used GCPs.
+    survey : dict of str to ndarray (3,)
+        Surveyed position of each GCP (site CRS, m), by GCP id.
+    cameras : GeoDataFrame
+        Camera positions (columns ``x_m``, ``y_m``).
+    path : str or Path
+        Output PNG file.
+    arrow_scale : float or None
+        Exaggeration of the plan arrows; None picks one so the largest arrow is 15 % of the
+        plotted extent.
+    attribution : str or None
+        Line written below the figure.
+    """
     fig, ax = new_figure(figsize=(6.5, 5.5))
     ax.scatter(cameras["x_m"], cameras["y_m"], s=6, c="0.6", marker="^", label="camera positions", zorder=1)
     xy = np.array([survey[g][:2] for g in residuals["gcp_id"]])

@@ -125,7 +125,22 @@ def read_odm_gcp_list(path: str | Path, site_crs: str) -> list[GCP]:
 
 
 def read_gcp_csv(path: str | Path, site_crs: str, csv_crs: str | None = None) -> list[GCP]:
-    """Parse the CSV form (``gcp_id,x,y,z,image,px,py``) and reproject to ``site_crs``."""
+    """Parse the CSV form (``gcp_id,x,y,z,image,px,py``) and reproject to ``site_crs``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV GCP file.
+    site_crs : str
+        CRS to reproject the GCPs to.
+    csv_crs : str or None
+        CRS of the file's coordinates; None = ``site_crs``.
+
+    Returns
+    -------
+    list of GCP
+        The GCPs in the site CRS (m), rows grouped by ``gcp_id``.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: GCP file not found")
@@ -165,7 +180,24 @@ def _reproject(gcps: list[GCP], src: CRS, site_crs: str, path: Path) -> list[GCP
 
 
 def read_gcps(path: str | Path, site_crs: str, fmt: str = "auto", csv_crs: str | None = None) -> list[GCP]:
-    """Read a GCP file in ``fmt`` (``odm``, ``csv`` or ``auto`` by suffix)."""
+    """Read a GCP file in ``fmt`` (``odm``, ``csv`` or ``auto`` by suffix).
+
+    Parameters
+    ----------
+    path : str or Path
+        The GCP file.
+    site_crs : str
+        CRS to reproject the GCPs to.
+    fmt : str
+        ``odm``, ``csv`` or ``auto`` (``csv`` for a ``.csv`` suffix, else ``odm``).
+    csv_crs : str or None
+        CRS of a CSV file's coordinates; None = ``site_crs``. Not used for ODM files.
+
+    Returns
+    -------
+    list of GCP
+        The GCPs in the site CRS (m).
+    """
     if fmt == "auto":
         fmt = "csv" if Path(path).suffix.lower() == ".csv" else "odm"
     if fmt == "csv":

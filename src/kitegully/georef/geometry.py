@@ -73,7 +73,22 @@ def project(intr: np.ndarray, rv: np.ndarray, t: np.ndarray, X: np.ndarray) -> n
 
 
 def undistort_normalised(intr: np.ndarray, xy: np.ndarray, iterations: int = 20) -> np.ndarray:
-    """Normalised image coordinates (u, v) of pixels (fixed-point inversion of the radial model)."""
+    """Normalised image coordinates (u, v) of pixels (fixed-point inversion of the radial model).
+
+    Parameters
+    ----------
+    intr : ndarray (n, 5) or (5,)
+        Intrinsics ``f, cx, cy, k1, k2`` per pixel, or one set for all.
+    xy : ndarray (n, 2)
+        Pixel positions (px).
+    iterations : int
+        Fixed-point iterations.
+
+    Returns
+    -------
+    ndarray (n, 2)
+        Normalised coordinates ``u, v``.
+    """
     intr = np.atleast_2d(intr)
     ud = (xy[:, 0] - intr[:, 1]) / intr[:, 0]
     vd = (xy[:, 1] - intr[:, 2]) / intr[:, 0]
@@ -98,6 +113,19 @@ def triangulate(
     Each observation ``k`` of point ``point_index[k]`` contributes a ray from its camera
     centre; the point minimising the squared perpendicular distances to its rays solves
     a 3×3 system. Vectorised: O(observations + points).
+
+    Parameters
+    ----------
+    intr : ndarray (n_obs, 5)
+        Intrinsics ``f, cx, cy, k1, k2`` of each observation's camera.
+    rv, t : ndarray (n_obs, 3)
+        Rotation vector and translation (camera from world) of each observation's image.
+    xy : ndarray (n_obs, 2)
+        Measured pixels (px).
+    point_index : ndarray (n_obs,) int
+        Point of each observation.
+    n_points : int
+        Number of points.
 
     Returns
     -------

@@ -56,6 +56,28 @@ def select_tie_points(
     at the strip ends, whose points have short tracks, keep their share. ``image_size`` is
     (n_images, 2) width and height (px). ``max_tie_points = 0`` keeps all.
     O(observations · log observations).
+
+    Parameters
+    ----------
+    obs_image, obs_point : ndarray (n_obs,) int
+        Image row and point index of each observation.
+    obs_xy : ndarray (n_obs, 2)
+        Pixel of each observation (px).
+    n_points : int
+        Number of tie points.
+    max_tie_points : int
+        Most tie points to keep; 0 or less keeps all.
+    image_size : ndarray (n_images, 2)
+        Width and height of each image (px).
+    grid : (int, int) or None
+        Cells ``(nx, ny)`` per image; None ranks by track length alone.
+    rng : numpy.random.Generator
+        Seeded generator that breaks ties.
+
+    Returns
+    -------
+    ndarray (n_kept,) int
+        Sorted indices of the kept tie points.
     """
     if max_tie_points <= 0 or max_tie_points >= n_points:
         return np.arange(n_points)
@@ -83,7 +105,26 @@ def select_tie_points(
 def block_from_reconstruction(
     rec: pycolmap.Reconstruction, max_tie_points: int, seed: int, tie_grid: tuple[int, int] | None = None,
 ) -> tuple[Block, ModelIndex]:
-    """Arrays of a model with at most ``max_tie_points`` tie points chosen by :func:`select_tie_points`. O(observations)."""
+    """Arrays of a model with at most ``max_tie_points`` tie points chosen by :func:`select_tie_points`. O(observations).
+
+    Parameters
+    ----------
+    rec : pycolmap.Reconstruction
+        The SfM model; only its registered images are used.
+    max_tie_points : int
+        Most tie points to keep; 0 keeps all.
+    seed : int
+        Seed of the generator that breaks ties in the selection.
+    tie_grid : (int, int) or None
+        Cells ``(nx, ny)`` per image for the balanced selection; None keeps the longest tracks.
+
+    Returns
+    -------
+    block : Block
+        The model's cameras, poses, kept tie points and their observations (no GCPs).
+    index : ModelIndex
+        Ids that tie the block's rows to ``rec``, with every point and observation of the model.
+    """
     image_ids = np.array(sorted(rec.reg_image_ids()), dtype=int)
     img_row = {int(i): k for k, i in enumerate(image_ids)}
     camera_ids = np.array(sorted(rec.cameras.keys()), dtype=int)
@@ -156,6 +197,22 @@ def write_block_to_reconstruction(rec: pycolmap.Reconstruction, block: Block, in
 
     The model's coordinates are the block's local frame, i.e. site CRS minus ``offset``.
     Points whose rays no longer meet (NaN) are deleted.
+
+    Parameters
+    ----------
+    rec : pycolmap.Reconstruction
+        The model to update.
+    block : Block
+        The adjusted block.
+    index : ModelIndex
+        Ids that tie the block's rows to ``rec``.
+    offset : ndarray (3,)
+        Offset of the local frame (m); the block is already in that frame, so it is not applied.
+
+    Returns
+    -------
+    pycolmap.Reconstruction
+        ``rec`` itself, updated.
     """
     for k, c in enumerate(index.camera_ids):
         cam = rec.cameras[int(c)]

@@ -186,7 +186,22 @@ def tape_scale(model_xyz: dict[str, np.ndarray], edges: list[tuple[str, str, flo
 
 
 def tape_horn(model_xyz: dict[str, np.ndarray], gps_xyz: dict[str, np.ndarray], edges: list[tuple[str, str, float]]) -> Similarity:
-    """Paper 004's low-cost georeferencing: tape-distance scale, then Horn on GPS positions."""
+    """Paper 004's low-cost georeferencing: tape-distance scale, then Horn on GPS positions.
+
+    Parameters
+    ----------
+    model_xyz : dict of str to ndarray (3,)
+        Triangulated GCP positions in the model frame, by GCP id.
+    gps_xyz : dict of str to ndarray (3,)
+        GPS positions of the GCPs in the target frame (m), by GCP id.
+    edges : list of (str, str, float)
+        Taped distances ``(gcp_a, gcp_b, m)``.
+
+    Returns
+    -------
+    Similarity
+        The tape scale with Horn's rotation and translation, fitted on the GCPs in both mappings.
+    """
     s, _ = tape_scale(model_xyz, edges)
     ids = [k for k in model_xyz if k in gps_xyz]
     a = np.array([model_xyz[k] for k in ids]) * s
@@ -215,6 +230,22 @@ def robust_similarity(a: np.ndarray, b: np.ndarray, max_residual_m: float, min_p
     ``max_residual_m``, the point spoils the solution and is dropped. If no single point
     explains the misfit (the set is inconsistent as a whole) nothing is dropped; the
     caller reports the misfit. Stops at ``min_points``. O(n²) for n GCPs.
+
+    Parameters
+    ----------
+    a, b : ndarray (n, 3)
+        Corresponding model and world points (``b`` in m).
+    max_residual_m : float
+        Largest residual a point may keep (m).
+    min_points : int
+        No point is dropped once this many are left.
+
+    Returns
+    -------
+    sim : Similarity
+        The least-squares similarity of the kept points.
+    inliers : ndarray (n,) bool
+        True for the kept points.
     """
     inl = np.ones(len(a), bool)
     while inl.sum() > min_points:

@@ -93,6 +93,18 @@ def bundle_settings_from_config(cfg: Mapping[str, Any], sigma_gcp_xy_m: float, s
     Keys: ``sigma_tie_px``, ``sigma_gcp_px`` (image measurement SDs, px at SfM scale),
     ``refine_intrinsics`` (subset of f, cx, cy, k1, k2), ``loss`` (huber, linear),
     ``loss_scale`` (Huber threshold, SD units), ``max_iterations``, ``rel_tolerance``.
+
+    Parameters
+    ----------
+    cfg : mapping
+        The ``georef.bundle`` config section.
+    sigma_gcp_xy_m, sigma_gcp_z_m : float
+        Survey SD of the GCPs in plan and in height (m).
+
+    Returns
+    -------
+    BundleSettings
+        The checked settings.
     """
     config_section(cfg, "georef.bundle", ("sigma_tie_px", "sigma_gcp_px", "refine_intrinsics", "loss", "loss_scale",
                                           "max_iterations", "rel_tolerance"))

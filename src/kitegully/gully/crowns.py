@@ -136,6 +136,21 @@ def crown_mask(z: np.ndarray, exg: np.ndarray, ground: np.ndarray, height_thresh
     the ground; bare gully rims stand above the ground surface but are not green. O(n·k) for
     a disc of k cells.
 
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DSM (m), NaN nodata.
+    exg : ndarray (H, W)
+        Excess green of the orthophoto on the DSM grid (:func:`excess_green`), NaN unknown.
+    ground : ndarray (H, W)
+        Ground surface (m), NaN unknown.
+    height_threshold_m : float
+        Height above ``ground`` (m) a green cell must exceed to be a crown.
+    cell_m : float
+        Cell size (m).
+    params : CrownParams
+        ExG histogram tests and matching window.
+
     Returns
     -------
     mask : ndarray bool (H, W)

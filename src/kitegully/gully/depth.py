@@ -48,6 +48,20 @@ def depth_halo_cells(cell_m: float, sigma_m: float, truncate: float = 4.0) -> in
 
     The kernel radius ``ceil(truncate·σ/cell)`` plus one cell for the edge correction's
     gradient (:func:`kitegully.terrain.smoothing.gaussian_smooth_fft`, ``linear_edges``).
+
+    Parameters
+    ----------
+    cell_m : float
+        Cell size (m).
+    sigma_m : float
+        Standard deviation of the Gaussian (m).
+    truncate : float
+        Kernel radius in σ.
+
+    Returns
+    -------
+    int
+        Overlap (cells).
     """
     return int(np.ceil(truncate * sigma_m / cell_m)) + 1
 

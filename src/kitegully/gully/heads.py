@@ -199,6 +199,22 @@ def flow_accumulation(dirs: np.ndarray, cell_m: float, valid: np.ndarray | None 
     (outlets, undrained) receive flow but pass none on. Returns the area raster (float64) and the
     flat index of each cell's receiver (-1: none; int32 below 2³¹ cells, else int64). O(n) time;
     memory 8 bytes a cell for the area and 4 for the receivers, and 8 more while it runs.
+
+    Parameters
+    ----------
+    dirs : ndarray (H, W) uint8
+        D8 codes (255 = outlet/nodata/undrained).
+    cell_m : float
+        Cell size (m).
+    valid : ndarray (H, W) bool or None
+        Cells that hold area; None: every cell.
+
+    Returns
+    -------
+    area : ndarray (H, W) float64
+        Contributing area (m²); 0 on cells that are not valid.
+    recv : ndarray (H·W,) int32 or int64
+        Flat index of each cell's receiver, -1 where there is none.
     """
     if valid is None:
         valid = np.ones(dirs.shape, dtype=np.bool_)
@@ -487,6 +503,29 @@ def head_scale_relief(z: np.ndarray, cell_m: float, params: HeadDetectionParams,
     that the first surface is freed before the second is made (0.32 GB at 80 M cells, where
     the gully map's memory peaks).
     O(n log n): a second :func:`ground_surface`.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell_m : float
+        Cell size (m).
+    params : HeadDetectionParams
+        ``scale_m`` and ``slope_window_m`` are used; with ``tall_objects_out`` also ``tall_object_m``,
+        ``relief_k`` and ``dsm_sigma_z_m``.
+    workers : int
+        FFT threads.
+    tall_objects_out : bool
+        Leave tall objects out of the ground surface and the Gaussian.
+    reference : HeadScaleGround or None
+        :func:`head_scale_ground` of this ``z`` and ``params``; None: computed here.
+
+    Returns
+    -------
+    relief : ndarray (H, W) float32
+        Head-scale depth (m), NaN where ``z`` is NaN.
+    rough : float
+        ρ (m).
     """
     valid = np.isfinite(z)
     if reference is None:
@@ -551,6 +590,19 @@ def matched_cells(observed: np.ndarray, cell_m: float, window_m: float) -> np.nd
     within 1 m of nodata, against 5 % of the true ones (``benchmarks/gully_auto_fp_analysis.py``).
     The margin is the matching window (``slope_window_m``, 1 m: 5 × 5 cells at 0.2 m), the
     DSM's own resolution. O(n) (exact Euclidean distance transform).
+
+    Parameters
+    ----------
+    observed : ndarray (H, W) bool
+        Cells the DSM matched.
+    cell_m : float
+        Cell size (m).
+    window_m : float
+        The matching window (m).
+
+    Returns
+    -------
+    ndarray (H, W) bool
     """
     import cv2
 
@@ -567,6 +619,20 @@ def visible_incisions(incised: np.ndarray, cell_m: float, window_m: float) -> np
     ``survey.heads_visibility.min_run_cells`` 3); the DSM's resolution is its dense-matching
     window (``slope_window_m``, 1 m). A patch smaller than three windows is a dot: matching
     noise or a single plant gap, not the incision a head was digitised on. O(n).
+
+    Parameters
+    ----------
+    incised : ndarray (H, W) bool
+        Incised cells.
+    cell_m : float
+        Cell size (m).
+    window_m : float
+        The matching window (m).
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        The incised cells of the patches kept.
     """
     lab, n = ndi.label(incised, structure=np.ones((3, 3), bool))
     if n == 0:
@@ -609,6 +675,21 @@ def channel_entries(incised: np.ndarray, dirs: np.ndarray, cell_m: float, length
     but flow from it leaves the incision within a few metres; the test is the automatic
     detector's (step 4 above: ``min_channel_length_m``, 2 × the 5 m matching tolerance).
     O(m·L/cell) for m incised cells.
+
+    Parameters
+    ----------
+    incised : ndarray (H, W) bool
+        Incised cells.
+    dirs : ndarray (H, W) uint8
+        D8 codes (255 = outlet/nodata/undrained).
+    cell_m : float
+        Cell size (m).
+    length_m : float
+        Length of the path tested (m), taken as a whole number of D8 steps (at least one).
+
+    Returns
+    -------
+    ndarray (H, W) bool
     """
     n_steps = max(1, int(round(length_m / cell_m)))
     return _sustained(np.ascontiguousarray(incised, np.bool_), np.ascontiguousarray(dirs, np.uint8), D8_OFFSETS,
@@ -634,6 +715,24 @@ def ground_surface(z: np.ndarray, cell_m: float, scale_m: float, noise_window_m:
     the noise smoothing (σ = the matching window) keeps the opening from sinking the
     surface to the noise's lower envelope. O(n log n) for two FFT smoothings, O(n·k) for
     the separable min/max filters (k cells across the element).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell_m : float
+        Cell size (m).
+    scale_m : float
+        σh of the head-scale depth map (m).
+    noise_window_m : float
+        σ of the noise smoothing (m); 0: no noise smoothing.
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        The ground surface (m).
     """
     valid = np.isfinite(z)
     zn = gaussian_smooth_fft(z, noise_window_m / cell_m, workers=workers) if noise_window_m > 0 else np.asarray(z)

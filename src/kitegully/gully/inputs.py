@@ -31,7 +31,19 @@ def read_heads(path: str | Path, crs: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_dem(dem: np.ndarray, path: str | Path, crs: str | None = None, site_crs: str | None = None) -> None:
-    """Raise :class:`InputError` if the DEM has no valid cell or its CRS is not the site CRS."""
+    """Raise :class:`InputError` if the DEM has no valid cell or its CRS is not the site CRS.
+
+    Parameters
+    ----------
+    dem : ndarray (H, W)
+        The DEM (m), NaN nodata.
+    path : str or Path
+        The DEM file, named in the error.
+    crs : str or None
+        CRS of the DEM; None: not checked.
+    site_crs : str or None
+        The site CRS; None: not checked.
+    """
     if not np.isfinite(dem).any():
         raise InputError(f"{path}: the DEM is all nodata")
     if crs is not None and site_crs is not None and not CRS.from_user_input(crs).equals(CRS.from_user_input(site_crs)):

@@ -16,6 +16,20 @@ def buffer_mask(network: np.ndarray, cell_m: float, buffer_m: float) -> np.ndarr
     """Cells whose centre lies within ``buffer_m`` of a network cell centre (exact Euclidean distance transform).
 
     Complexity O(n) (OpenCV's exact distance transform on a byte image).
+
+    Parameters
+    ----------
+    network : ndarray (H, W) bool
+        Network cells.
+    cell_m : float
+        Cell size (m).
+    buffer_m : float
+        Buffer distance (m).
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        All False when the network is empty.
     """
     if not network.any():
         return np.zeros(network.shape, dtype=bool)
@@ -25,7 +39,22 @@ def buffer_mask(network: np.ndarray, cell_m: float, buffer_m: float) -> np.ndarr
 
 
 def final_map(patch_labels: np.ndarray, buffer: np.ndarray, whole_patches: bool = False) -> np.ndarray:
-    """Gully map: patch cells inside the buffer, or ([I] variant) whole patches touching it. O(n)."""
+    """Gully map: patch cells inside the buffer, or ([I] variant) whole patches touching it. O(n).
+
+    Parameters
+    ----------
+    patch_labels : ndarray (H, W) int
+        Depth patch labels, 0 = background.
+    buffer : ndarray (H, W) bool
+        The network buffer (:func:`buffer_mask`).
+    whole_patches : bool
+        Keep every patch with a cell inside the buffer whole.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        The gully map.
+    """
     inside = (patch_labels > 0) & buffer
     if not whole_patches:
         return inside
@@ -42,6 +71,22 @@ def gully_polygons(gully: np.ndarray, depth: np.ndarray, grid: GridSpec, connect
     ``mean_depth_m``, ``max_depth_m``.
 
     Complexity O(n) for the labels and the polygon tracing.
+
+    Parameters
+    ----------
+    gully : ndarray (H, W) bool
+        The gully map.
+    depth : ndarray (H, W)
+        Depth map (m); NaN counts as 0.
+    grid : GridSpec
+        The grid; its CRS is the polygons'.
+    connectivity : int
+        4 or 8: cell connectivity of a gully.
+
+    Returns
+    -------
+    GeoDataFrame
+        One row per gully, ``gully_id`` from 1.
     """
     labels, n = label_mask(gully, connectivity)
     cell2 = grid.cell**2

@@ -384,6 +384,20 @@ def trace_network(filled: np.ndarray, head_cells: np.ndarray, directions: np.nda
     Heads with index -1 are skipped. With ``directions`` (D8 codes, e.g. flats resolved by
     :func:`kitegully.terrain.flats.flow_directions`) the paths follow them instead of the
     steepest descent on ``filled``. Complexity O(L log L) in the number of traced cells.
+
+    Parameters
+    ----------
+    filled : ndarray (H, W)
+        Depression-free DEM (m).
+    head_cells : ndarray int64
+        Flat cell indices of the heads, -1 for heads to skip.
+    directions : ndarray (H, W) uint8 or None
+        D8 codes to follow; None: steepest descent on ``filled``.
+
+    Returns
+    -------
+    GullyNetwork
+        The traced network; ``ends`` is -1 for skipped heads.
     """
     head_cells = np.asarray(head_cells, dtype=np.int64)
     use = head_cells[head_cells >= 0]

@@ -537,6 +537,26 @@ def crowns_on(dem: np.ndarray, grid: GridSpec, params: GullyParams, incision: He
     Crowns are cells green in the orthophoto that stand more than ``relief_k``·max(σ_z, ρ)
     above the ground surface of the hole-filled DEM (the object threshold of
     :func:`remove_objects`: the incision threshold mirrored above the ground). O(n log n).
+
+    Parameters
+    ----------
+    dem : ndarray (H, W) float32
+        The DEM (m), NaN nodata.
+    grid : GridSpec
+        Grid of ``dem``.
+    params : GullyParams
+        ``water_min_area_m2`` and ``crowns`` are used.
+    incision : HeadDetectionParams
+        Ground surface and threshold of the crowns' height.
+    ortho : ndarray (3, H, W) float32
+        The orthophoto's R, G, B on the DEM grid (:func:`kitegully.gully.inputs.read_orthophoto_on_grid`).
+    workers : int
+        FFT threads.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        The crown mask.
     """
     zi, _ = hole_filled(dem, grid, params)
     ref = head_scale_ground(zi, grid.cell, incision, workers)
@@ -617,6 +637,19 @@ def remove_objects(z: np.ndarray, z_trace: np.ndarray, cell_m: float, params: He
     of 3 noise SDs, out of the furrows and crop rows). There the ground surface replaces it.
     O(n log n).
 
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        The hole-filled DEM (m), NaN nodata.
+    z_trace : ndarray (H, W)
+        The tracing surface (m) on the same grid.
+    cell_m : float
+        Cell size (m).
+    params : HeadDetectionParams
+        ``scale_m``, ``slope_window_m``, ``relief_k`` and ``dsm_sigma_z_m`` are used.
+    workers : int
+        FFT threads.
+
     Returns
     -------
     z_trace : ndarray (H, W) float64
@@ -644,6 +677,22 @@ def new_heads(auto_idx: np.ndarray, grid: GridSpec, heads_x: np.ndarray, heads_y
     digitised head snaps to (the same head, found twice), so only those beyond it are new
     heads the operator did not digitise. With no given heads every automatic head is kept.
     O((k + m) log m) for k automatic and m given heads.
+
+    Parameters
+    ----------
+    auto_idx : ndarray int64
+        Flat cell indices of the automatic heads.
+    grid : GridSpec
+        Their grid.
+    heads_x, heads_y : ndarray
+        Map coordinates of the given heads (m).
+    radius_m : float
+        Automatic heads this close to a given head or closer are dropped (m).
+
+    Returns
+    -------
+    ndarray int64
+        The kept automatic heads, in their order.
     """
     auto_idx = np.asarray(auto_idx, dtype=np.int64)
     if auto_idx.size == 0 or np.size(heads_x) == 0:

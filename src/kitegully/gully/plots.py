@@ -17,6 +17,24 @@ def pick_section(net: GullyNetwork, depth: np.ndarray, gully: np.ndarray, grid: 
 
     Falls back to a north-south transect through the grid centre when no network cell
     is mapped. Returns (x0, y0, x1, y1) in map units.
+
+    Parameters
+    ----------
+    net : GullyNetwork
+        The traced network.
+    depth : ndarray (H, W)
+        Depth map (m).
+    gully : ndarray (H, W) bool
+        The gully map.
+    grid : GridSpec
+        The grid.
+    half_length_m : float
+        Half the transect's length (m); only cells at least this far from the grid edge are picked.
+
+    Returns
+    -------
+    x0, y0, x1, y1 : float
+        Ends of the transect (m).
     """
     h, w = grid.height, grid.width
     rad = half_length_m / grid.cell
@@ -59,7 +77,28 @@ def section_figure(
     sigma_m: float,
     threshold_m: float,
 ):
-    """Four stacked panels along a transect: kernel, DEM vs smoothed, depth, detected cells."""
+    """Four stacked panels along a transect: kernel, DEM vs smoothed, depth, detected cells.
+
+    Parameters
+    ----------
+    dem, smoothed, depth : ndarray (H, W)
+        The DEM, its smoothed surface and the depth map (m), sampled bilinearly every half cell.
+    gully : ndarray (H, W) bool
+        The gully map, sampled at the nearest cell.
+    grid : GridSpec
+        The grid.
+    line : tuple of float
+        The transect ``(x0, y0, x1, y1)`` (m), e.g. from :func:`pick_section`.
+    sigma_m : float
+        σ of the Gaussian (m), drawn in the kernel panel.
+    threshold_m : float
+        Depth threshold (m), drawn in the depth panel.
+
+    Returns
+    -------
+    Figure
+        The matplotlib figure.
+    """
     x0, y0, x1, y1 = line
     length = float(np.hypot(x1 - x0, y1 - y0))
     s = np.arange(0.0, length + 1e-9, grid.cell / 2)
@@ -97,7 +136,23 @@ def section_figure(
 
 
 def hillshade(z: np.ndarray, cell: float, azimuth_deg: float = 315, altitude_deg: float = 45) -> np.ndarray:
-    """Lambertian hillshade in [0, 1] (NaN where ``z`` is NaN)."""
+    """Lambertian hillshade in [0, 1] (NaN where ``z`` is NaN).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Elevation (m).
+    cell : float
+        Cell size (m).
+    azimuth_deg : float
+        Azimuth of the light (degrees).
+    altitude_deg : float
+        Altitude of the light above the horizon (degrees).
+
+    Returns
+    -------
+    ndarray (H, W) float64
+    """
     gy, gx = np.gradient(np.asarray(z, dtype=np.float64), cell)
     slope = np.arctan(np.hypot(gx, gy))
     aspect = np.arctan2(-gx, gy)
@@ -119,6 +174,26 @@ def validation_map(
     Colours as in the paper's Fig. 9b: yellow good fit, thick black false positives, blue
     false negatives, green reference lines left out of the score (``pieces["not_scored"]``,
     outside the catchment or fed only by heads off the DEM).
+
+    Parameters
+    ----------
+    dem : ndarray (H, W)
+        The DEM (m), shown as a hillshade.
+    gully : ndarray (H, W) bool
+        The gully map.
+    grid : GridSpec
+        The grid.
+    pieces : dict of str to geometry
+        Lines by category (:func:`kitegully.evaluate.network.validation_geometries`); missing keys are not drawn.
+    tolerance_m : float
+        Matching tolerance (m), named in the title.
+    max_pixels : int
+        The rasters are decimated to at most this many pixels per side.
+
+    Returns
+    -------
+    Figure
+        The matplotlib figure.
     """
     step = max(1, int(np.ceil(max(grid.height, grid.width) / max_pixels)))
     z = dem[::step, ::step]

@@ -18,6 +18,24 @@ def noisy_dem(dtm: np.ndarray, cell_m: float, sd_m: float, correlation_m: float,
 
     The generator is ``rng_for(seed, "gully", "standin_dem")`` (master seed of the config).
     Complexity O(n) (separable Gaussian filter); NaN cells stay NaN.
+
+    Parameters
+    ----------
+    dtm : ndarray (H, W)
+        The twin's truth DTM (m).
+    cell_m : float
+        Cell size (m).
+    sd_m : float
+        Standard deviation of the noise (m).
+    correlation_m : float
+        σ of the Gaussian that smooths the noise (m); 0: white noise.
+    seed : int
+        Master seed of the config.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        The stand-in DSM (m).
     """
     rng = rng_for(seed, "gully", "standin_dem")
     noise = rng.standard_normal(dtm.shape, dtype=np.float32)

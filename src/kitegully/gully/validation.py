@@ -144,6 +144,23 @@ def tolerance_table(
     """Thommeret lengths of ``extracted`` for every tolerance and every named scorer.
 
     The extracted buffer is made once per tolerance and shared by the scorers.
+
+    Parameters
+    ----------
+    scorers : mapping of str to NetworkScorer
+        Name of the reference lines → their scorer.
+    extracted : lines
+        The extracted network.
+    tolerances_m : list of float
+        Matching tolerances τ (m).
+    clipped : geometry
+        ``extracted`` clipped to the domain (:meth:`NetworkScorer.clip`).
+
+    Returns
+    -------
+    DataFrame
+        Columns ``tolerance_m, reference_lines, category, length_m, percent``; four rows per
+        tolerance and scorer.
     """
     rows = []
     for t in tolerances_m:

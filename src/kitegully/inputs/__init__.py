@@ -153,6 +153,26 @@ def check_inputs(
     ``checkpoints`` to paths. The report is written in any case; the checked GCP and
     checkpoint copies (heights converted to metres) only when there is no error.
 
+    Parameters
+    ----------
+    settings : InputSettings
+        How to read the inputs.
+    images_dir : str or Path
+        Folder of the photographs.
+    gcp_file : str or Path
+        Ground-control file.
+    checkpoints : str or Path or None
+        Checkpoint CSV ``id,x,y,z``; None when there are none.
+    out : dict
+        Output name → path, as above.
+    site : str
+        Site name, in the report's title and in ``report.json``.
+
+    Returns
+    -------
+    Findings
+        What :func:`check_site_inputs` found (no error).
+
     Raises
     ------
     InputError

@@ -45,7 +45,20 @@ def site_crs(text: str, source: str = "site.crs") -> CRS:
 
 
 def to_lonlat(crs: CRS, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Longitude and latitude (degrees) of points given in ``crs`` (x = easting/longitude)."""
+    """Longitude and latitude (degrees) of points given in ``crs`` (x = easting/longitude).
+
+    Parameters
+    ----------
+    crs : CRS
+        CRS of the points.
+    x, y : ndarray
+        Coordinates of the points in ``crs``; returned as they are when ``crs`` is geographic.
+
+    Returns
+    -------
+    lon, lat : ndarray float
+        Degrees; not finite where the transformation fails.
+    """
     if crs.is_geographic:
         return np.asarray(x, float), np.asarray(y, float)
     tr = Transformer.from_crs(crs, CRS.from_epsg(4326), always_xy=True)
@@ -55,7 +68,23 @@ def to_lonlat(crs: CRS, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def inside_area_of_use(crs: CRS, x: np.ndarray, y: np.ndarray, margin_deg: float = AREA_MARGIN_DEG) -> np.ndarray:
-    """Boolean per point: inside the CRS's area of use (widened by ``margin_deg``). All True when pyproj has none."""
+    """Boolean per point: inside the CRS's area of use (widened by ``margin_deg``). All True when pyproj has none.
+
+    Parameters
+    ----------
+    crs : CRS
+        CRS of the points.
+    x, y : ndarray
+        Coordinates of the points in ``crs``.
+    margin_deg : float
+        Slack around the area of use (degrees).
+
+    Returns
+    -------
+    ndarray bool
+        True for each point inside whose longitude and latitude also transform back to it (within 1 m,
+        or 1e-6 under a geographic CRS), in the shape of ``x``.
+    """
     aou = crs.area_of_use
     x, y = np.asarray(x, float), np.asarray(y, float)
     if aou is None:
@@ -90,6 +119,22 @@ def check_coordinates(crs: CRS, x: np.ndarray, y: np.ndarray, lines: list[int], 
     Tests in order: degrees under a projected CRS, easting and northing swapped, points
     outside the CRS's area of use. ``lines`` are the file's line numbers of the points,
     ``what`` names them ("GCP", "checkpoint").
+
+    Parameters
+    ----------
+    crs : CRS
+        CRS the coordinates are declared in.
+    x, y : ndarray
+        Easting and northing (or longitude and latitude) of the points.
+    lines : list of int
+        Line number in the file of each point.
+    what : str
+        Name of the points in the sentence.
+
+    Returns
+    -------
+    str or None
+        The problem as a sentence; None when the coordinates are fine.
     """
     x, y = np.asarray(x, float), np.asarray(y, float)
     label = crs_label(crs)

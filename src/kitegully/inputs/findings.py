@@ -42,7 +42,17 @@ class Findings:
     facts: dict = field(default_factory=dict)
 
     def add(self, level: str, source: str, message: str) -> None:
-        """Append a finding; ``level`` must be one of :data:`LEVELS` (else ValueError)."""
+        """Append a finding; ``level`` must be one of :data:`LEVELS` (else ValueError).
+
+        Parameters
+        ----------
+        level : str
+            ``error``, ``warning`` or ``note``.
+        source : str
+            The file or config key the finding is about; stored as ``str(source)``.
+        message : str
+            One sentence, without the source.
+        """
         if level not in LEVELS:
             raise ValueError(f"unknown finding level {level!r}")
         self.items.append(Finding(level, str(source), message))

@@ -71,6 +71,32 @@ def check_gcp_file(
     """Check a GCP file against its CRS, the photographs and itself; record findings.
 
     Returns the rows as written (None when the file cannot be read).
+
+    Parameters
+    ----------
+    path : str or Path
+        The GCP file.
+    site_crs : CRS
+        The site CRS; the CRS of a CSV file unless ``csv_crs`` is given.
+    fmt : str
+        ``odm``, ``csv`` or ``auto`` (by suffix: ``.csv`` is CSV, anything else ODM).
+    csv_crs : str or None
+        CRS of a CSV file; None: the site CRS.
+    pixel_frame : str
+        ``stored`` or ``display``: the frame the file's pixels refer to.
+    pixel_scale : float
+        Pixels of the file per stored pixel.
+    z_units : str
+        Units of the heights: ``m``, ``ft`` or ``us_ft``.
+    photos : list of Photo
+        The photographs; image names and pixels are checked against them, heights against their
+        EXIF GPS altitude.
+    found : Findings
+        Collects the findings and facts.
+
+    Returns
+    -------
+    GcpRows or None
     """
     path = Path(path)
     src = str(path)
@@ -155,7 +181,19 @@ def _check_images(rows: GcpRows, photos: list[Photo], frame: str, scale: float, 
 
 
 def write_gcp_copy(path: str | Path, out: str | Path, fmt: str, z_units: str) -> None:
-    """Copy the GCP file to ``out`` with heights converted to metres (a plain copy when already in metres)."""
+    """Copy the GCP file to ``out`` with heights converted to metres (a plain copy when already in metres).
+
+    Parameters
+    ----------
+    path : str or Path
+        The GCP file.
+    out : str or Path
+        The copy.
+    fmt : str
+        ``odm``, ``csv`` or ``auto`` (by suffix).
+    z_units : str
+        Units of the heights in ``path``: ``m``, ``ft`` or ``us_ft``.
+    """
     path, out = Path(path), Path(out)
     factor = Z_UNITS[z_units]
     if factor == 1.0:
@@ -180,7 +218,26 @@ def write_gcp_copy(path: str | Path, out: str | Path, fmt: str, z_units: str) ->
 
 
 def check_checkpoints(path: str | Path, site_crs: CRS, z_units: str, photos: list[Photo], found: Findings) -> pd.DataFrame | None:
-    """Checkpoint CSV ``id,x,y,z`` in the site CRS: columns, numbers, coordinates, heights, duplicates."""
+    """Checkpoint CSV ``id,x,y,z`` in the site CRS: columns, numbers, coordinates, heights, duplicates.
+
+    Parameters
+    ----------
+    path : str or Path
+        The checkpoint CSV.
+    site_crs : CRS
+        The site CRS.
+    z_units : str
+        Units of the heights: ``m``, ``ft`` or ``us_ft``.
+    photos : list of Photo
+        The photographs; the points and heights are checked against their EXIF GPS.
+    found : Findings
+        Collects the findings and facts.
+
+    Returns
+    -------
+    DataFrame or None
+        The table as read; None when it is missing, unreadable, lacks a column or has a bad number.
+    """
     path = Path(path)
     src = str(path)
     if not path.is_file():
@@ -213,7 +270,17 @@ def check_checkpoints(path: str | Path, site_crs: CRS, z_units: str, photos: lis
 
 
 def write_checkpoint_copy(path: str | Path, out: str | Path, z_units: str) -> None:
-    """Copy the checkpoint CSV to ``out`` with heights converted to metres."""
+    """Copy the checkpoint CSV to ``out`` with heights converted to metres.
+
+    Parameters
+    ----------
+    path : str or Path
+        The checkpoint CSV.
+    out : str or Path
+        The copy.
+    z_units : str
+        Units of the heights in ``path``: ``m``, ``ft`` or ``us_ft``.
+    """
     df = pd.read_csv(path)
     df["z"] = pd.to_numeric(df["z"]) * Z_UNITS[z_units]
     df.to_csv(out, index=False)

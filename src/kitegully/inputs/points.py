@@ -23,7 +23,28 @@ ALTITUDE_SLACK_M = 100.0
 
 
 def check_heights(z: np.ndarray, units: str, photos: list[Photo], found: Findings, src: str, what: str) -> bool:
-    """Heights as written (in ``units``): feet that look like metres, placeholders. True when usable."""
+    """Heights as written (in ``units``): feet that look like metres, placeholders. True when usable.
+
+    Parameters
+    ----------
+    z : ndarray
+        Heights as written, one per row.
+    units : str
+        Their units: ``m``, ``ft`` or ``us_ft``.
+    photos : list of Photo
+        The photographs; the heights in metres must not lie more than ``ALTITUDE_SLACK_M`` above
+        the median EXIF GPS altitude.
+    found : Findings
+        Collects the findings.
+    src : str
+        The file, named in the findings.
+    what : str
+        Name of the points (``GCP``, ``checkpoint``).
+
+    Returns
+    -------
+    bool
+    """
     ok = True
     z_m = z * Z_UNITS[units]
     hint = "set inputs.z_units: ft (or us_ft) so they are converted" if units == "m" else "check inputs.z_units"
@@ -88,7 +109,29 @@ def units_name(units: str) -> str:
 def check_points(
     crs: CRS, x: np.ndarray, y: np.ndarray, lines: list[int], photos: list[Photo], found: Findings, src: str, what: str,
 ) -> bool:
-    """Planimetric checks: degrees, swapped axes, area of use, distance to the photos' GPS. True when fine."""
+    """Planimetric checks: degrees, swapped axes, area of use, distance to the photos' GPS. True when fine.
+
+    Parameters
+    ----------
+    crs : CRS
+        CRS of the points.
+    x, y : ndarray
+        Coordinates of the points in ``crs``.
+    lines : list of int
+        Line number in the file of each point.
+    photos : list of Photo
+        The photographs; each point must lie within ``MAX_DISTANCE_TO_PHOTOS_M`` of one's EXIF GPS position.
+    found : Findings
+        Collects the first error and, with GPS, the largest distance to the photos.
+    src : str
+        The file, named in the findings.
+    what : str
+        Name of the points (``GCP``, ``checkpoint``).
+
+    Returns
+    -------
+    bool
+    """
     problem = check_coordinates(crs, x, y, lines, what)
     if problem:
         found.error(src, problem)

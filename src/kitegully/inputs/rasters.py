@@ -39,6 +39,21 @@ def check_raster(path: str | Path, site_crs: CRS, declared_nodata: float | None,
     where the raster is named elsewhere); the file's own nodata tag counts as declared too. The data are read decimated to at most
     ``MAX_SAMPLE_SIDE`` cells a side (nearest neighbour keeps sentinel values intact), so
     the cost is O(MAX_SAMPLE_SIDE²) whatever the raster size.
+
+    Parameters
+    ----------
+    path : str or Path
+        The raster.
+    site_crs : CRS
+        The site CRS; the raster's CRS must equal it.
+    declared_nodata : float or None
+        Nodata value stated in the configuration.
+    found : Findings
+        Collects the first error, or the raster's cell size (m) and size when it passes.
+    key : str
+        Config key naming the raster, for the messages.
+    nodata_key : str or None
+        Config key of ``declared_nodata``, for the messages; None: ``<key>[].nodata``.
     """
     path = Path(path)
     src = str(path)

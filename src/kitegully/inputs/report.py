@@ -9,7 +9,19 @@ from kitegully.inputs.findings import Findings
 
 
 def write_report(found: Findings, json_path: str | Path, md_path: str | Path, site: str) -> None:
-    """Write the findings as ``report.json`` and ``report.md``."""
+    """Write the findings as ``report.json`` and ``report.md``.
+
+    Parameters
+    ----------
+    found : Findings
+        The findings and facts of the input checks.
+    json_path : str or Path
+        Output ``report.json``: :meth:`Findings.as_dict` plus ``site``.
+    md_path : str or Path
+        Output ``report.md``: verdict, findings by level and a table of the facts.
+    site : str
+        Site name.
+    """
     d = found.as_dict()
     Path(json_path).write_text(json.dumps(d | {"site": site}, indent=2, default=str) + "\n", encoding="utf-8")
     lines = [f"# Input check: {site}", "", f"**Verdict: {d['verdict']}** "

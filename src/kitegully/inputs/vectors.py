@@ -12,7 +12,19 @@ from kitegully.inputs.findings import Findings
 
 
 def check_vector(path: str | Path, key: str, site_crs: CRS, found: Findings) -> None:
-    """Check one vector file named by config key ``key``; record errors in ``found``. Reads the header only."""
+    """Check one vector file named by config key ``key``; record errors in ``found``. Reads the header only.
+
+    Parameters
+    ----------
+    path : str or Path
+        The vector file.
+    key : str
+        Config key naming the file, e.g. ``gully.heads_file``.
+    site_crs : CRS
+        The site CRS; the layer's CRS must equal it.
+    found : Findings
+        Collects the errors: missing or unreadable file, no CRS, another CRS, no features.
+    """
     path = Path(path)
     src = str(path)
     if not path.is_file():

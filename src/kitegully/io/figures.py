@@ -31,7 +31,17 @@ def new_figure(*args, **kwargs):
 
 
 def save_figure(fig, path: str | Path, attribution: str | None = None) -> None:
-    """Save ``fig`` as PNG at print resolution and close it; add an attribution line if given."""
+    """Save ``fig`` as PNG at print resolution and close it; add an attribution line if given.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure to save.
+    path : str or Path
+        Output PNG file; its folder is created.
+    attribution : str or None
+        Small grey line written below the figure, at the right.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if attribution:

@@ -135,7 +135,24 @@ def _raster_extent(path: Path) -> tuple[list[float], rasterio.DatasetReader]:
 
 
 def dsm_layers(path: Path, project_dir: Path, crs: str, azimuth_deg: float, altitude_deg: float) -> list[Layer]:
-    """DSM with a terrain colour ramp (2–98 % of its cells) and a hillshade of it (multiply)."""
+    """DSM with a terrain colour ramp (2–98 % of its cells) and a hillshade of it (multiply).
+
+    Parameters
+    ----------
+    path : Path
+        The DSM raster (m).
+    project_dir : Path
+        Folder of the project; the layer's path is written relative to it.
+    crs : str
+        Site CRS of the layer.
+    azimuth_deg, altitude_deg : float
+        Sun azimuth and altitude of the hillshade (degrees).
+
+    Returns
+    -------
+    list of Layer
+        The hillshade, then the DSM.
+    """
     extent, src = _raster_extent(path)
     with src:
         step = max(1, int(np.ceil(max(src.width, src.height) / 1000)))
@@ -172,7 +189,26 @@ def dsm_layers(path: Path, project_dir: Path, crs: str, azimuth_deg: float, alti
 
 
 def orthophoto_layer(path: Path, project_dir: Path, crs: str, key: str = "orthophoto", name: str = "Orthophoto") -> Layer:
-    """True-colour orthophoto (bands 1–3, 0–255); its mask band hides cells no image sees."""
+    """True-colour orthophoto (bands 1–3, 0–255); its mask band hides cells no image sees.
+
+    Parameters
+    ----------
+    path : Path
+        The orthophoto raster (at least 3 bands).
+    project_dir : Path
+        Folder of the project; the layer's path is written relative to it.
+    crs : str
+        Site CRS of the layer.
+    key : str
+        Layer identifier.
+    name : str
+        Name shown in the layer panel.
+
+    Returns
+    -------
+    Layer
+        The orthophoto layer.
+    """
     extent, src = _raster_extent(path)
     with src:
         count = src.count
@@ -192,7 +228,22 @@ def orthophoto_layer(path: Path, project_dir: Path, crs: str, key: str = "orthop
 
 
 def bare_soil_layer(path: Path, project_dir: Path, crs: str) -> Layer:
-    """Bare-soil map (0 grass, 1 bare, 255 no data): bare cells red, grass transparent."""
+    """Bare-soil map (0 grass, 1 bare, 255 no data): bare cells red, grass transparent.
+
+    Parameters
+    ----------
+    path : Path
+        The bare-soil raster.
+    project_dir : Path
+        Folder of the project; the layer's path is written relative to it.
+    crs : str
+        Site CRS of the layer.
+
+    Returns
+    -------
+    Layer
+        The bare-soil layer, unticked.
+    """
     extent, src = _raster_extent(path)
     src.close()
     ml = _maplayer("bare_soil", "Bare soil (OBIA)", _rel(path, project_dir), "raster", "gdal", crs, extent)
@@ -228,7 +279,22 @@ def _vector_layer(path: Path, project_dir: Path, crs: str, key: str, name: str, 
 
 
 def gully_network_layer(path: Path, project_dir: Path, crs: str) -> Layer:
-    """Mapped gully network: blue lines."""
+    """Mapped gully network: blue lines.
+
+    Parameters
+    ----------
+    path : Path
+        The gully network vector file (its first layer is shown).
+    project_dir : Path
+        Folder of the project; the layer's path is written relative to it.
+    crs : str
+        Site CRS of the layer.
+
+    Returns
+    -------
+    Layer
+        The gully network layer.
+    """
     ml, _ = _vector_layer(path, project_dir, crs, "gully_network", "Gully network", "Line")
     rend = _sub(ml, "renderer-v2", type="singleSymbol", symbollevels="0", enableorderby="0", forceraster="0")
     _symbol(_sub(rend, "symbols"), "line", "0", {"line_color": "8,81,156,255", "line_width": "0.6",
@@ -237,7 +303,22 @@ def gully_network_layer(path: Path, project_dir: Path, crs: str) -> Layer:
 
 
 def gully_polygons_layer(path: Path, project_dir: Path, crs: str) -> Layer:
-    """Gully polygons: translucent blue fill, dark outline."""
+    """Gully polygons: translucent blue fill, dark outline.
+
+    Parameters
+    ----------
+    path : Path
+        The gully polygons vector file (its first layer is shown).
+    project_dir : Path
+        Folder of the project; the layer's path is written relative to it.
+    crs : str
+        Site CRS of the layer.
+
+    Returns
+    -------
+    Layer
+        The gully polygons layer.
+    """
     ml, _ = _vector_layer(path, project_dir, crs, "gully_polygons", "Gully polygons", "Polygon")
     rend = _sub(ml, "renderer-v2", type="singleSymbol", symbollevels="0", enableorderby="0", forceraster="0")
     _symbol(_sub(rend, "symbols"), "fill", "0", {"color": "107,174,214,90", "style": "solid",
@@ -251,6 +332,22 @@ def checkpoint_errors_layer(path: Path, project_dir: Path, crs: str, limit_m: fl
 
     Six classes with edges at ±limit/2 and ±limit (the validate figures' colour limit);
     points without a DSM value are grey.
+
+    Parameters
+    ----------
+    path : Path
+        The checkpoint points with an ``error_m`` attribute (its first layer is shown).
+    project_dir : Path
+        Folder of the project; the layer's path is written relative to it.
+    crs : str
+        Site CRS of the layer.
+    limit_m : float
+        Colour limit of the errors (m).
+
+    Returns
+    -------
+    Layer
+        The checkpoint errors layer.
     """
     ml, _ = _vector_layer(path, project_dir, crs, "checkpoint_errors", "Checkpoint errors (DSM − checkpoint, m)", "Point")
     L = float(limit_m)
@@ -330,7 +427,24 @@ FURTHER_PRODUCTS: dict[str, ProductStyle] = {
 
 
 def further_layer(key: str, path: Path, project_dir: Path, crs: str) -> Layer:
-    """A layer of a further product, styled as :func:`product_style` says (unticked)."""
+    """A layer of a further product, styled as :func:`product_style` says (unticked).
+
+    Parameters
+    ----------
+    key : str
+        Further product key (see :data:`FURTHER_PRODUCTS`), also the layer identifier.
+    path : Path
+        The product's file.
+    project_dir : Path
+        Folder of the project; the layer's path is written relative to it.
+    crs : str
+        Site CRS of the layer.
+
+    Returns
+    -------
+    Layer
+        The product's layer, unticked.
+    """
     st = product_style(key)
     if st.style in ("ramp", "diverging"):
         return _ramp_raster_layer(path, project_dir, crs, key, st.name, st.colour, st.style == "diverging")
@@ -406,7 +520,22 @@ def _ramp_raster_layer(path: Path, project_dir: Path, crs: str, key: str, name: 
 
 
 def checkpoint_points(errors_csv: str | Path, crs: str, out_gpkg: str | Path) -> Path:
-    """Checkpoint error table (``id, x_m, y_m, z_ref_m, z_model_m, error_m``) as a GeoPackage of points."""
+    """Checkpoint error table (``id, x_m, y_m, z_ref_m, z_model_m, error_m``) as a GeoPackage of points.
+
+    Parameters
+    ----------
+    errors_csv : str or Path
+        The checkpoint error table (CSV); it needs ``x_m``, ``y_m`` and ``error_m``.
+    crs : str
+        CRS of the table's coordinates.
+    out_gpkg : str or Path
+        Output GeoPackage (layer ``checkpoint_errors``), overwritten.
+
+    Returns
+    -------
+    Path
+        ``out_gpkg``.
+    """
     import geopandas as gpd
 
     path = Path(errors_csv)

@@ -60,13 +60,43 @@ class GridSpec:
 
     @classmethod
     def from_transform(cls, transform: Affine, width: int, height: int, crs: str) -> "GridSpec":
-        """The grid of a north-up ``transform`` (as rasterio reports it); no checks here."""
+        """The grid of a north-up ``transform`` (as rasterio reports it); no checks here.
+
+        Parameters
+        ----------
+        transform : Affine
+            North-up transform; its ``a`` is taken as the cell size (m) and ``(c, f)`` as the origin.
+        width, height : int
+            Number of columns and rows.
+        crs : str
+            CRS understood by rasterio.
+
+        Returns
+        -------
+        GridSpec
+            The grid.
+        """
         return cls(transform.c, transform.f, transform.a, width, height, crs)
 
     @classmethod
     def covering(cls, bounds: tuple[float, float, float, float], cell: float, crs: str) -> "GridSpec":
         """The smallest grid covering ``bounds = (xmin, ymin, xmax, ymax)`` whose origin
-        is a whole multiple of ``cell`` (so it aligns with any such grid)."""
+        is a whole multiple of ``cell`` (so it aligns with any such grid).
+
+        Parameters
+        ----------
+        bounds : (float, float, float, float)
+            ``(xmin, ymin, xmax, ymax)`` to cover (m).
+        cell : float
+            Cell size (m).
+        crs : str
+            CRS understood by rasterio.
+
+        Returns
+        -------
+        GridSpec
+            The covering grid.
+        """
         xmin, ymin, xmax, ymax = bounds
         x0 = np.floor(xmin / cell) * cell
         y0 = np.ceil(ymax / cell) * cell
@@ -86,6 +116,20 @@ class GridSpec:
         By default the whole grid; ``row0, col0, nrows, ncols`` select a block of rows
         and columns of this grid's lattice, which may extend outside it (negative
         ``row0``/``col0`` or beyond the last row/column), e.g. a tile with a margin.
+
+        Parameters
+        ----------
+        row0, col0 : int
+            First row and column of the block.
+        nrows, ncols : int or None
+            Number of rows and columns; None = up to the last row or column of the grid.
+
+        Returns
+        -------
+        xs : ndarray (ncols,)
+            Column-centre x coordinates (m).
+        ys : ndarray (nrows,)
+            Row-centre y coordinates (m), north to south.
         """
         nrows = self.height - row0 if nrows is None else nrows
         ncols = self.width - col0 if ncols is None else ncols
@@ -136,7 +180,20 @@ class GridSpec:
         return (row >= 0) & (col >= 0) & (row < self.height) & (col < self.width)
 
     def window(self, row0: int, col0: int, nrows: int, ncols: int) -> "GridSpec":
-        """The grid of a block of rows and columns (may extend outside this grid)."""
+        """The grid of a block of rows and columns (may extend outside this grid).
+
+        Parameters
+        ----------
+        row0, col0 : int
+            First row and column of the block in this grid.
+        nrows, ncols : int
+            Number of rows and columns of the block.
+
+        Returns
+        -------
+        GridSpec
+            The block's grid, same cell size and CRS.
+        """
         return GridSpec(self.x0 + col0 * self.cell, self.y0 - row0 * self.cell, self.cell, ncols, nrows, self.crs)
 
     def refined(self, factor: int) -> "GridSpec":
@@ -196,7 +253,19 @@ class Raster:
 
     def write(self, path: str | Path, band_names: list[str] | None = None, tags: dict[str, str] | None = None,
               mask: np.ndarray | None = None) -> None:
-        """Write as a Cloud-Optimised GeoTIFF (see :func:`write_raster`)."""
+        """Write as a Cloud-Optimised GeoTIFF (see :func:`write_raster`).
+
+        Parameters
+        ----------
+        path : str or Path
+            Output file (parent folders are created).
+        band_names : list of str or None
+            Band descriptions.
+        tags : dict of str to str or None
+            Dataset metadata.
+        mask : ndarray (H, W) bool or None
+            True where the cell has data; written as the internal mask band.
+        """
         write_raster(path, self.data, self.grid, nodata=self.nodata, band_names=band_names, tags=tags, mask=mask)
 
     @property
@@ -409,6 +478,22 @@ def iter_tiles(grid: GridSpec, tile: int, overlap: int) -> Iterator[tuple[Window
 
     The core windows tile the grid without gaps or overlap; each read window extends
     its core by ``overlap`` cells on every side, clipped to the grid.
+
+    Parameters
+    ----------
+    grid : GridSpec
+        The grid to tile.
+    tile : int
+        Side of a core window (cells); the last row and column of tiles may be smaller.
+    overlap : int
+        Margin added to each core window on every side (cells).
+
+    Yields
+    ------
+    read : Window
+        The core window with its margin, clipped to the grid.
+    core : Window
+        The core window.
     """
     for r0 in range(0, grid.height, tile):
         for c0 in range(0, grid.width, tile):

@@ -10,7 +10,17 @@ from kitegully import InputError
 
 
 def write_vector(gdf: gpd.GeoDataFrame, path: str | Path, layer: str | None = None) -> None:
-    """Write a GeoDataFrame to a GeoPackage (overwriting), creating the folder."""
+    """Write a GeoDataFrame to a GeoPackage (overwriting), creating the folder.
+
+    Parameters
+    ----------
+    gdf : GeoDataFrame
+        The layer; it must have a CRS (ValueError otherwise).
+    path : str or Path
+        Output GeoPackage; an existing file is deleted first.
+    layer : str or None
+        Layer name; None = the file name without its suffix.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if gdf.crs is None:

@@ -73,7 +73,22 @@ def read_points(path: str | Path, what: str) -> dict[str, np.ndarray]:
 
 def ray(img: OrientedImage, u: float, v: float) -> tuple[np.ndarray, np.ndarray]:
     """Centre and unit direction (model frame) of the ray through pixel ``(u, v)``
-    (COLMAP pixel convention), undistorting the RADIAL model by fixed-point iteration."""
+    (COLMAP pixel convention), undistorting the RADIAL model by fixed-point iteration.
+
+    Parameters
+    ----------
+    img : OrientedImage
+        Registered image: pose, focal length and principal point (px), radial terms ``k1, k2``.
+    u, v : float
+        Pixel column and row (px).
+
+    Returns
+    -------
+    centre : ndarray (3,)
+        Projection centre of the image (model frame).
+    direction : ndarray (3,)
+        Unit direction of the ray (model frame).
+    """
     xd, yd = (u - img.cx) / img.f, (v - img.cy) / img.f
     x, y = xd, yd
     for _ in range(20):
@@ -87,7 +102,22 @@ def ray(img: OrientedImage, u: float, v: float) -> tuple[np.ndarray, np.ndarray]
 def triangulate(clicks: pd.DataFrame, images: Mapping[str, OrientedImage], min_views: int = 2) -> dict[str, np.ndarray]:
     """Least-squares intersection of the rays of each clicked point (columns ``image, point,
     u_px, v_px``); points seen in fewer than ``min_views`` registered images are dropped.
-    O(clicks)."""
+    O(clicks).
+
+    Parameters
+    ----------
+    clicks : DataFrame
+        One row per click: image name, point id and pixel position ``u_px, v_px`` (px).
+    images : mapping
+        Registered images (:class:`OrientedImage`) by name; clicks on other images are skipped.
+    min_views : int
+        Fewest registered images a point needs to be kept.
+
+    Returns
+    -------
+    dict
+        Model coordinates (ndarray (3,)) of each kept point, keyed by point id as a string.
+    """
     out = {}
     for pid, grp in clicks.groupby("point"):
         A, b, n = np.zeros((3, 3)), np.zeros(3), 0
@@ -110,7 +140,34 @@ def georeference_tape_horn(model_t: Mapping[str, np.ndarray], gps: Mapping[str, 
                            level: bool = False, min_spread_m: float = 1.0) -> tuple[Similarity, float, pd.DataFrame]:
     """Tape scale, Horn on GPS, tide shift (and with ``level`` the waterline levelled first,
     :func:`level_to_water`). Returns the similarity (shift included in its translation),
-    the shift (m) and the residual table of Horn's fit (global, local, per target/edge)."""
+    the shift (m) and the residual table of Horn's fit (global, local, per target/edge).
+
+    Parameters
+    ----------
+    model_t : mapping
+        Triangulated target coordinates (ndarray (3,), model frame) by target name.
+    gps : mapping
+        Handheld GPS positions of the targets (ndarray (3,), m) by target name.
+    edges : list of (str, str, float)
+        Taped edges ``(from, to, length_m)`` as :func:`read_tape` gives them.
+    model_water : ndarray (n, 3)
+        Triangulated waterline points (model frame).
+    water_level_m : float
+        Tide height of the water surface (m).
+    level : bool
+        Level the waterline with :func:`level_to_water` before the shift.
+    min_spread_m : float
+        Across spread (SD, m) the waterline needs for its across slope to be levelled.
+
+    Returns
+    -------
+    sim : Similarity
+        Model to GPS frame, tide shift included in the translation.
+    shift : float
+        Vertical shift (m) that puts the mean waterline at ``water_level_m``.
+    residuals : DataFrame
+        :func:`residual_rows` of Horn's fit, before levelling and shift.
+    """
     s, ratios = tape_scale(dict(model_t), edges)
     ids = [k for k in model_t if k in gps]
     if len(ids) < 3:
@@ -139,6 +196,20 @@ def level_to_water(sim: Similarity, model_water: np.ndarray, min_spread_m: float
     when the points spread at least ``min_spread_m`` (SD) across, else it is unobserved
     and left as Horn gave it. The model is then rotated about the points' centroid so the
     fitted plane becomes horizontal. O(points).
+
+    Parameters
+    ----------
+    sim : Similarity
+        Model to site similarity from Horn's fit.
+    model_water : ndarray (n, 3)
+        Waterline points (model frame).
+    min_spread_m : float
+        Least across spread (SD, m) for the across slope to be fitted.
+
+    Returns
+    -------
+    Similarity
+        The levelled similarity; ``sim`` itself with fewer than 3 points or a plane already level.
     """
     W = sim.apply(model_water)
     if len(W) < 3:
@@ -171,7 +242,24 @@ def level_to_water(sim: Similarity, model_water: np.ndarray, min_spread_m: float
 def georeference_rtk(model_t: Mapping[str, np.ndarray], rtk: Mapping[str, np.ndarray],
                      edges: list[tuple[str, str, float]]) -> tuple[Similarity, pd.DataFrame]:
     """Comparison block: 7-parameter similarity (scale from the coordinates) on RTK-grade
-    target coordinates."""
+    target coordinates.
+
+    Parameters
+    ----------
+    model_t : mapping
+        Triangulated target coordinates (ndarray (3,), model frame) by target name.
+    rtk : mapping
+        RTK-grade target coordinates (ndarray (3,), m) by target name.
+    edges : list of (str, str, float)
+        Taped edges ``(from, to, length_m)``; used only for the edge rows of the residual table.
+
+    Returns
+    -------
+    sim : Similarity
+        Model to RTK frame, fitted on the targets in both mappings.
+    residuals : DataFrame
+        :func:`residual_rows` of the fit.
+    """
     ids = [k for k in model_t if k in rtk]
     a = np.array([model_t[k] for k in ids])
     b = np.array([rtk[k] for k in ids])
@@ -181,7 +269,31 @@ def georeference_rtk(model_t: Mapping[str, np.ndarray], rtk: Mapping[str, np.nda
 
 
 def residual_rows(method: str, sim: Similarity, model_t, ref, ids, edges, res) -> pd.DataFrame:
-    """Residual table rows: global mean 3-D, local mean edge-length, each target and edge."""
+    """Residual table rows: global mean 3-D, local mean edge-length, each target and edge.
+
+    Parameters
+    ----------
+    method : str
+        Method label of every row; a label starting with ``tape`` gets the paper's values in ``paper_m``.
+    sim : Similarity
+        Fitted similarity; only its scale is used, for the edge lengths.
+    model_t : mapping
+        Target coordinates (ndarray (3,), model frame) by target name.
+    ref : mapping
+        Reference target coordinates (m); not read.
+    ids : list of str
+        Targets of the fit, in the order of ``res``.
+    edges : list of (str, str, float)
+        Taped edges ``(from, to, length_m)``; those with both targets in ``model_t`` give edge rows.
+    res : ndarray (n,)
+        3-D residual (m) of each target in ``ids``.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``method, scope, item, residual_m, paper_m``; an edge residual is the scaled
+        model length minus the tape (m).
+    """
     edge_res = []
     for a, b, d in edges:
         if a in model_t and b in model_t:

@@ -173,6 +173,22 @@ def nir_converted_response(wavelengths: np.ndarray, cut_on_nm: float = 720.0, ed
     falls roughly exponentially with a scale of ``qe_fall_nm`` beyond 700 nm (the red
     dye is transparent there). Its peak lies a little above the cut-on (≈ 740 nm, the
     paper's recovered NIR peak).
+
+    Parameters
+    ----------
+    wavelengths : ndarray (n_wl,)
+        Wavelength grid (nm).
+    cut_on_nm : float
+        50 % point of the long-pass filter (nm).
+    edge_nm : float
+        Width scale of the filter's logistic edge (nm).
+    qe_fall_nm : float
+        Scale of the exponential fall of the quantum efficiency beyond 700 nm (nm).
+
+    Returns
+    -------
+    ndarray (n_wl,)
+        Response on ``wavelengths``, normalised to a maximum of 1.
     """
     lp = 1.0 / (1.0 + np.exp(-(wavelengths - cut_on_nm) / edge_nm))
     qe = np.exp(-np.clip(wavelengths - 700.0, 0, None) / qe_fall_nm)
@@ -181,14 +197,46 @@ def nir_converted_response(wavelengths: np.ndarray, cut_on_nm: float = 720.0, ed
 
 
 def chart_design(reflectance: np.ndarray, light: np.ndarray, step_nm: float) -> np.ndarray:
-    """Design matrix A (panels × wavelengths): ``A_pλ = E(λ) ρ_p(λ) Δλ``."""
+    """Design matrix A (panels × wavelengths): ``A_pλ = E(λ) ρ_p(λ) Δλ``.
+
+    Parameters
+    ----------
+    reflectance : ndarray (panels, n_wl)
+        Panel reflectances ``ρ_p(λ)`` (:func:`chart_reflectance`).
+    light : ndarray (n_wl,)
+        Relative spectral power of the illuminant ``E(λ)`` (:func:`illuminant`).
+    step_nm : float
+        Wavelength step ``Δλ`` (nm).
+
+    Returns
+    -------
+    ndarray (panels, n_wl)
+        The design matrix A.
+    """
     return reflectance * light[None, :] * step_nm
 
 
 def simulate_chart_shot(design: np.ndarray, response: np.ndarray, relative_noise: float,
                         rng: np.random.Generator) -> np.ndarray:
     """Raw channel values of every panel (panels × channels) with Gaussian noise whose SD is
-    ``relative_noise`` × the brightest panel's value of that channel."""
+    ``relative_noise`` × the brightest panel's value of that channel.
+
+    Parameters
+    ----------
+    design : ndarray (panels, n_wl)
+        Design matrix of the shot (:func:`chart_design`).
+    response : ndarray (n_wl, channels)
+        True channel responses.
+    relative_noise : float
+        Noise SD as a fraction of each channel's brightest panel value.
+    rng : Generator
+        Random stream of the noise.
+
+    Returns
+    -------
+    ndarray (panels, channels)
+        Noisy raw values.
+    """
     v = design @ response
     sd = relative_noise * v.max(axis=0, keepdims=True)
     return v + rng.normal(0.0, 1.0, v.shape) * sd
@@ -196,7 +244,26 @@ def simulate_chart_shot(design: np.ndarray, response: np.ndarray, relative_noise
 
 def simulate_averaged_shot(design: np.ndarray, response: np.ndarray, relative_noise: float, frames: int,
                            rng: np.random.Generator) -> np.ndarray:
-    """Mean of ``frames`` noisy frames of one chart shot (:func:`simulate_chart_shot` each)."""
+    """Mean of ``frames`` noisy frames of one chart shot (:func:`simulate_chart_shot` each).
+
+    Parameters
+    ----------
+    design : ndarray (panels, n_wl)
+        Design matrix of the shot (:func:`chart_design`).
+    response : ndarray (n_wl, channels)
+        True channel responses.
+    relative_noise : float
+        Noise SD of one frame as a fraction of each channel's brightest panel value.
+    frames : int
+        Number of frames averaged.
+    rng : Generator
+        Random stream of the noise.
+
+    Returns
+    -------
+    ndarray (panels, channels)
+        Mean raw values of the frames.
+    """
     return np.mean([simulate_chart_shot(design, response, relative_noise, rng) for _ in range(int(frames))], axis=0)
 
 

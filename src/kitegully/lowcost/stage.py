@@ -128,6 +128,25 @@ def measure_spectral_response(cfg: Mapping[str, Any], seed: int, csv_path: str |
     Writes the curves of the first draw with the truth (``csv_path``), the peak statistics
     over all draws (``peaks_path``) and a figure. Returns the peak table. O(draws x
     lambdas x n_wl^3), a few seconds.
+
+    Parameters
+    ----------
+    cfg : mapping
+        The ``lowcost.spectral`` section: the :class:`spectral.SpectralParams` keys and ``draws``.
+    seed : int
+        The run's seed (one noise stream per draw and illuminant).
+    csv_path : path
+        Table of the true and first draw's recovered curves.
+    peaks_path : path
+        Table of the peak statistics.
+    png_path : path
+        Figure of the curves.
+
+    Returns
+    -------
+    DataFrame
+        One row per channel (red, green, blue, nir): true, recovered and paper peaks (nm),
+        peak errors (nm) and mean RMS curve error.
     """
     config_section(cfg, "lowcost.spectral", ["wl_min_nm", "wl_max_nm", "wl_step_nm", "illuminants", "relative_noise",
                                              "frames_per_shot", "draws"])
@@ -180,6 +199,21 @@ def matches_by_pair_type(database: str | Path, sfm_to_name: Mapping[str, str], m
 
     The paper's table counts pairs that matched and their mean matches; pairs with at least
     ``min_num_matches`` inliers are counted here. O(pairs).
+
+    Parameters
+    ----------
+    database : path
+        COLMAP database of the SfM run.
+    sfm_to_name : mapping
+        SfM image name to original image name; a name starting with ``nir`` marks a NIR photo.
+    min_num_matches : int
+        Fewest inlier matches for a pair to count as matched.
+
+    Returns
+    -------
+    DataFrame
+        One row per pair type (RGB-RGB, RGB-NIR, NIR-NIR): pairs tested, pairs matched, mean
+        matches per matched pair and the paper's values.
     """
     con = sqlite3.connect(str(database))
     try:
@@ -234,7 +268,24 @@ def _transform_views(views, sim, offset):
 
 def tin_dsm(points: np.ndarray, cell: float, crs: str) -> tuple[np.ndarray, GridSpec]:
     """DSM sampled from the 2-D Delaunay TIN of ``points`` (x, y, z) at ``cell`` (paper 004
-    sect. 2.5, [I] Delaunay on x, y); NaN outside the hull. O(n log n + cells)."""
+    sect. 2.5, [I] Delaunay on x, y); NaN outside the hull. O(n log n + cells).
+
+    Parameters
+    ----------
+    points : ndarray (n, 3)
+        Points x, y, z in the site CRS (m).
+    cell : float
+        DSM cell size (m).
+    crs : str
+        Site CRS.
+
+    Returns
+    -------
+    dsm : ndarray (H, W) float32
+        Heights (m) of the TIN at the cell centres.
+    grid : GridSpec
+        Grid covering the 0.5–99.5 percentile range of the points' x and y.
+    """
     lo = np.percentile(points[:, :2], 0.5, axis=0)
     hi = np.percentile(points[:, :2], 99.5, axis=0)
     grid = GridSpec.covering((lo[0], lo[1], hi[0], hi[1]), cell, crs)
@@ -246,7 +297,24 @@ def tin_dsm(points: np.ndarray, cell: float, crs: str) -> tuple[np.ndarray, Grid
 
 def white_balance(dn: np.ndarray, panel_dn: np.ndarray, panel_reflectance: float, gamma: float) -> np.ndarray:
     """Reflectance of each channel: linearised DN over the linearised Spectralon DN shot at
-    the same settings, times the panel's reflectance; DN 0 (no data) becomes NaN."""
+    the same settings, times the panel's reflectance; DN 0 (no data) becomes NaN.
+
+    Parameters
+    ----------
+    dn : ndarray (B, H, W) uint8
+        Mosaic digital numbers, 0 = no data.
+    panel_dn : ndarray (B,)
+        Mean DN of the Spectralon panel in each channel.
+    panel_reflectance : float
+        Reflectance of the panel (0–1).
+    gamma : float
+        Tone curve exponent of the JPEGs, ``DN = 255 signal^(1/gamma)``.
+
+    Returns
+    -------
+    ndarray (B, H, W) float32
+        Reflectance of each channel, NaN where ``dn`` is 0.
+    """
     lin = (dn.astype(np.float32) / 255.0) ** gamma
     ref = (np.asarray(panel_dn, np.float32) / 255.0) ** gamma
     out = lin / ref.reshape(-1, *([1] * (dn.ndim - 1))) * panel_reflectance
@@ -266,6 +334,29 @@ def survey_lowcost(observed_dir: str | Path, sfm_cfg: Mapping[str, Any], survey_
     ``slope.tif``, ``aspect.tif``. Returns the summary written to ``survey.json``.
 
     Cost: SfM dominates (exhaustive matching, O(images²)); mosaics O(cells x views).
+
+    Parameters
+    ----------
+    observed_dir : path
+        Folder of the observed files listed above.
+    sfm_cfg : mapping
+        The ``sfm`` section (:class:`kitegully.sfm.SfmParams`).
+    survey_cfg : mapping
+        The ``lowcost.survey`` section (:class:`SurveyParams`).
+    seed : int
+        The run's seed (SfM stream ``rng_for(seed, "lowcost", "sfm")``).
+    crs : str
+        Site CRS.
+    out_dir : path
+        Output folder, created if missing.
+    threads : int
+        Threads of the SfM.
+
+    Returns
+    -------
+    dict
+        Image, registration, point and target counts, reprojection error (px), timings (s),
+        cell sizes (m) and the DSM method.
     """
     import pycolmap
 
@@ -430,6 +521,25 @@ def map_bare_soil(rgb_path: str | Path, nir_path: str | Path, dsm_path: str | Pa
     each index's own histogram (valley, Otsu alongside), never from the truth. Cells darker
     than ``min_reflectance`` in R, G and B are no data in both. Writes
     ``bare_soil_thresholds.csv`` and returns it. Cost: two OBIA runs, O(N log N) in cells.
+
+    Parameters
+    ----------
+    rgb_path : path
+        White-balanced RGB mosaic (3 bands, reflectance).
+    nir_path : path
+        NIR mosaic on the same grid.
+    dsm_path : path
+        DSM of the survey.
+    cfg : mapping
+        The ``lowcost.bare_soil`` section (:class:`BareSoilParams`).
+    out_dir : path
+        Output folder, created if missing.
+
+    Returns
+    -------
+    DataFrame
+        One row per index (ndvi, exg): thresholds, water, dark and mapped cells, bare share
+        and seconds.
     """
     import tempfile
 
@@ -524,6 +634,23 @@ def score_bare_soil_maps(survey_dir: str | Path, cls: np.ndarray, grid: GridSpec
     Per map: overall accuracy, kappa, bare producer's and user's accuracy, the land cells
     the map left unmapped (NDVI: masked as water), and the share of each cover class
     mapped bare. O(cells).
+
+    Parameters
+    ----------
+    survey_dir : path
+        Folder holding ``bare_soil_ndvi.tif`` and ``bare_soil_exg.tif``.
+    cls : ndarray (H, W) uint8
+        Truth class code under each mosaic cell.
+    grid : GridSpec
+        Mosaic grid; both maps must lie on it.
+    bare_classes : iterable of str
+        Cover classes that count as bare.
+
+    Returns
+    -------
+    DataFrame
+        One row per map (ndvi, exg): accuracies, kappa, scored and unmapped land cells and
+        the percentage of each class mapped bare.
     """
     from kitegully.lowcost.twin_site import CLASS_CODES
     sv = Path(survey_dir)
@@ -560,6 +687,25 @@ def evaluate_lowcost(survey_dir: str | Path, truth_dir: str | Path, cfg: Mapping
     observed NDVI < 0), ``bare_soil_obia.csv`` (the OBIA maps by NDVI and ExG),
     ``georef_truth.csv`` (target and DSM errors) and ``dsm_truth.csv`` (each DSM written:
     products, TIN, dense). O(mosaic cells).
+
+    Parameters
+    ----------
+    survey_dir : path
+        Output folder of :func:`survey_lowcost` with the bare-soil maps of :func:`map_bare_soil`.
+    truth_dir : path
+        The twin's truth: ``classes.tif``, ``classes.csv``, ``targets.csv``, ``dsm.tif``.
+    cfg : mapping
+        The ``lowcost.evaluation`` section: ``patch_px``, ``patches_per_class``, ``bare_classes``.
+    seed : int
+        The run's seed (patch stream ``rng_for(seed, "lowcost", "patches")``).
+    out_dir : path
+        Output folder, created if missing.
+
+    Returns
+    -------
+    dict
+        Largest absolute NDVI error, median and NMAD of the product DSM's error (m) and
+        overall accuracy of each OBIA map; also written to ``evaluation.json``.
     """
     config_section(cfg, "lowcost.evaluation", ["patch_px", "patches_per_class", "bare_classes"])
     from kitegully.lowcost.twin_site import CLASS_CODES
@@ -678,6 +824,26 @@ def adjust_rtk_bundle(observed_dir: str | Path, sfm_dir: str | Path, georef_cfg:
     Returns the georef stage's summary; its products go to ``out_dir`` (model, transform,
     ``gcp_residuals.csv``, ``loo_checkpoints.csv``, ``summary.json``...). Cost: the georef
     stage's bundle adjustment, seconds for 56 photos.
+
+    Parameters
+    ----------
+    observed_dir : path
+        Folder holding ``image_clicks.csv`` and ``targets_rtk.csv``.
+    sfm_dir : path
+        SfM folder of :func:`survey_lowcost` (``model``, ``image_info.json``).
+    georef_cfg : mapping
+        The georef stage's section (:class:`kitegully.georef.stage.GeorefParams`).
+    crs : str
+        Site CRS.
+    seed : int
+        Seed of the georef stage's tie-point choice.
+    out_dir : path
+        Output folder, created if missing.
+
+    Returns
+    -------
+    dict
+        The georef stage's summary.
     """
     from kitegully.georef.stage import GeorefParams, georeference
     from kitegully.twin.flight_gcps import write_odm_gcp_list

@@ -144,7 +144,22 @@ class LowcostTwinParams:
 def band_weights(response: np.ndarray, wavelengths: np.ndarray, light: np.ndarray) -> np.ndarray:
     """``W`` (channels, 4 bands in texture order R, G, B, NIR): channel value of unit
     reflectance in one anchor band, the spectrum linearly interpolated between anchors and
-    held flat beyond them."""
+    held flat beyond them.
+
+    Parameters
+    ----------
+    response : ndarray (n_wl, channels) or (n_wl,)
+        Spectral response of each camera channel.
+    wavelengths : ndarray (n_wl,)
+        Wavelength grid (nm).
+    light : ndarray (n_wl,)
+        Relative spectral power of the illuminant.
+
+    Returns
+    -------
+    ndarray (channels, 4)
+        Band weights ``W``, columns in texture order R, G, B, NIR.
+    """
     order = ["B", "G", "R", "NIR"]
     xs = np.array([ANCHORS_NM[b] for b in order])
     R = np.atleast_2d(np.asarray(response, float).T).T if np.ndim(response) == 1 else np.asarray(response, float)
@@ -240,6 +255,28 @@ def make_texture(p: LowcostTwinParams, grid: GridSpec, cls: np.ndarray, targets:
     scaled in place, summed into one float64 brightness field); the bands are quantised
     ``chunk_rows`` rows at a time (the result does not depend on it). 2.3 GB at the
     5 mm site's 2.5 mm texture over 40 x 14 m (N = 89.6 M).
+
+    Parameters
+    ----------
+    p : LowcostTwinParams
+        The twin's parameters (texture cell, class anchors, target panel size).
+    grid : GridSpec
+        DSM grid; the texture cell is its cell divided by a whole number.
+    cls : ndarray (H, W) uint8
+        Cover class codes on ``grid``.
+    targets : mapping
+        Horizontal target positions (ndarray (2,), m) by name.
+    seed : int
+        The run's seed (texture stream ``rng_for(seed, "lowcost", "texture")``).
+    chunk_rows : int
+        Texture rows quantised at a time.
+
+    Returns
+    -------
+    texture : ndarray (4, rows, cols) uint8
+        Reflectance x 255 in band order R, G, B, NIR.
+    cell : float
+        Texture cell size (m).
     """
     k = max(1, int(round(grid.cell / p.texture_cell_m)))
     tc = grid.cell / k
@@ -315,7 +352,24 @@ def make_camera(cam: Mapping[str, Any], model: str) -> Camera:
 
 def flight_poses(p: LowcostTwinParams, sensor: str, seed: int, ground_z: float) -> list[Pose]:
     """Zig-zag of a kite rig: lines along the strip, jittered position, height and attitude;
-    image "up" to the north, so the long image side lies along the strip."""
+    image "up" to the north, so the long image side lies along the strip.
+
+    Parameters
+    ----------
+    p : LowcostTwinParams
+        The twin's parameters; ``flight`` gives the lines, spacing, height range and jitter.
+    sensor : str
+        Camera name (``rgb`` or ``nir``); picks the flight's random stream.
+    seed : int
+        The run's seed.
+    ground_z : float
+        Ground height (m) the flight heights are drawn above.
+
+    Returns
+    -------
+    list of Pose
+        Camera poses in flight order.
+    """
     f = p.flight
     rng = rng_for(seed, "lowcost", "flight", sensor)
     poses = []
@@ -351,6 +405,28 @@ def render_photo(scene, camera: Camera, pose: Pose, weights: np.ndarray, effects
 
     O(pixels x supersampling²) time; memory about 40 bytes per pixel (the 4-band float32
     reflectance, its channel mix and the effects' float32 arrays): 0.7 GB for a 16 MP photo.
+
+    Parameters
+    ----------
+    scene : Scene
+        Surface and texture prepared by :func:`~kitegully.twin.render.make_scene`.
+    camera : Camera
+        The kite camera.
+    pose : Pose
+        Camera pose.
+    weights : ndarray (channels, 4)
+        Band weights of the camera (texture bands R, G, B, NIR).
+    effects : Photographic
+        Exposure, vignetting, tone curve and noise settings.
+    rng : Generator
+        Random stream of the exposure and noise.
+    supersampling : int
+        Rays per pixel side.
+
+    Returns
+    -------
+    ndarray (height, width, channels) uint8
+        The photo.
     """
     refl, _ = render_reflectance(scene, camera, pose, channels=(0, 1, 2, 3), supersampling=supersampling)
     chans = refl @ weights.T.astype(np.float32)

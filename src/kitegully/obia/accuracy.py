@@ -74,7 +74,22 @@ def accuracies(conf: np.ndarray) -> dict:
 
 
 def accuracy_rows(scene: str, conf: np.ndarray, class_names: dict[int, str] = CLASS_NAMES) -> list[dict]:
-    """Rows ``scene, class, users_accuracy, producers_accuracy, overall_accuracy`` in %."""
+    """Rows ``scene, class, users_accuracy, producers_accuracy, overall_accuracy`` in %.
+
+    Parameters
+    ----------
+    scene : str
+        Scene name written in every row.
+    conf : ndarray (n_classes, n_classes)
+        Confusion matrix ``C[mapped, reference]`` (:func:`confusion_matrix`).
+    class_names : dict
+        Class code to name; one row per code, in code order.
+
+    Returns
+    -------
+    list of dict
+        One row per class; the overall accuracy is repeated in each.
+    """
     acc = accuracies(conf)
     return [
         {

@@ -19,7 +19,22 @@ CLASS_NAMES = {GRASS: "grass", ERODED: "eroded"}
 
 
 def segment_means(values: np.ndarray, segments: np.ndarray, n_segments: int) -> np.ndarray:
-    """Mean of the finite ``values`` in each segment 1..n (index 0 unused, NaN if empty). O(N)."""
+    """Mean of the finite ``values`` in each segment 1..n (index 0 unused, NaN if empty). O(N).
+
+    Parameters
+    ----------
+    values : ndarray (H, W)
+        Values to average, e.g. ExG; NaN cells are left out.
+    segments : ndarray (H, W) int
+        Segment labels, 0 = no segment.
+    n_segments : int
+        Highest segment label.
+
+    Returns
+    -------
+    ndarray (n_segments + 1,) float64
+        Mean of each segment, indexed by label.
+    """
     lab = segments.ravel()
     v = values.ravel().astype(np.float64)
     ok = (lab > 0) & np.isfinite(v)
@@ -36,6 +51,22 @@ def classify_segments(means: np.ndarray, segments: np.ndarray, threshold: float 
 
     With ``threshold`` None (histogram not bimodal) every segment gets ``unimodal_class``.
     Cells outside all segments (label 0) are NODATA.
+
+    Parameters
+    ----------
+    means : ndarray (n_segments + 1,)
+        Segment mean ExG indexed by label (:func:`segment_means`); NaN segments become NODATA.
+    segments : ndarray (H, W) int
+        Segment labels, 0 = no segment.
+    threshold : float or None
+        ExG threshold between eroded and grass.
+    unimodal_class : int
+        Class of every segment when ``threshold`` is None.
+
+    Returns
+    -------
+    ndarray (H, W) uint8
+        Class codes (GRASS, ERODED, NODATA).
     """
     if threshold is None:
         seg_class = np.full(means.shape, unimodal_class, dtype=np.uint8)
@@ -47,7 +78,22 @@ def classify_segments(means: np.ndarray, segments: np.ndarray, threshold: float 
 
 
 def remove_small_eroded(classes: np.ndarray, cell: float, min_area_m2: float) -> np.ndarray:
-    """Turn 8-connected eroded pieces smaller than ``min_area_m2`` into grass (0 = off)."""
+    """Turn 8-connected eroded pieces smaller than ``min_area_m2`` into grass (0 = off).
+
+    Parameters
+    ----------
+    classes : ndarray (H, W) uint8
+        Class codes.
+    cell : float
+        Cell size (m).
+    min_area_m2 : float
+        Smallest eroded piece kept (m²).
+
+    Returns
+    -------
+    ndarray (H, W) uint8
+        Class codes; ``classes`` itself when ``min_area_m2`` is 0 or less or no cell is eroded, else a copy.
+    """
     if min_area_m2 <= 0:
         return classes
     eroded = classes == ERODED
@@ -66,6 +112,22 @@ def eroded_polygons(classes: np.ndarray, transform: Affine, crs: str, scene: str
     """Polygons of the eroded class with area (m²); one row per connected piece.
 
     Columns: ``scene`` (if given), ``piece_id``, ``class``, ``area_m2``, geometry.
+
+    Parameters
+    ----------
+    classes : ndarray (H, W) uint8
+        Class codes.
+    transform : Affine
+        Georeferencing of the class raster.
+    crs : str
+        CRS of the polygons.
+    scene : str or None
+        Scene name for the ``scene`` column.
+
+    Returns
+    -------
+    GeoDataFrame
+        Eroded pieces, 8-connected.
     """
     mask = classes == ERODED
     geoms = [shape(g) for g, v in rasterio.features.shapes(mask.astype(np.uint8), mask=mask, transform=transform, connectivity=8) if v == 1]

@@ -49,6 +49,16 @@ def blue_dominant(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.nd
     and on some painted roofs.  Such cells form their own ExG mode (open water sits
     between bare soil and vegetation) and are left out of the threshold histogram.
     O(N).
+
+    Parameters
+    ----------
+    red, green, blue : ndarray
+        Bands of equal shape, any scale (DN or reflectance).
+
+    Returns
+    -------
+    ndarray bool
+        True where blue exceeds both red and green; False where any band is NaN.
     """
     r = np.asarray(red, dtype=np.float32)
     g = np.asarray(green, dtype=np.float32)
@@ -73,6 +83,20 @@ def gaussian_blur(values: np.ndarray, sigma_cells: float, radius_cells: int) -> 
     Mayr et al. blur ExG with sigma = 1 and search radius r = 2 (a 5x5 kernel).
     Cells that are NaN stay NaN; valid cells next to NaN are averaged over their
     valid neighbours only.  O(N * radius) (separable filter).
+
+    Parameters
+    ----------
+    values : ndarray (H, W)
+        Values to blur; NaN = no data.
+    sigma_cells : float
+        Standard deviation of the Gaussian (cells); 0 or less returns an unblurred copy.
+    radius_cells : int
+        Kernel radius (cells).
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        Blurred values, NaN where ``values`` is NaN.
     """
     v = np.asarray(values, dtype=np.float32)
     valid = np.isfinite(v)

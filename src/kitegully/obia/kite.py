@@ -114,6 +114,30 @@ def open_kite_inputs(ortho_path: str | Path, dsm_path: str | Path, nir_path: str
 
     ``halo`` is the cells each block reads beyond its core (index blur plus slope window).
 
+    Parameters
+    ----------
+    ortho_path : path
+        RGB orthophoto (bands 1-3).
+    dsm_path : path
+        DSM in the orthophoto's CRS, covering the orthophoto.
+    nir_path : path or None
+        NIR orthophoto (band 1) on the RGB orthophoto's grid.
+    params : ObiaParams
+        Method parameters; ``index: ndvi`` needs ``nir_path``.
+    tile_cells : int
+        Tile side (cells); at least 4 seed band widths, else ValueError.
+
+    Yields
+    ------
+    ortho, dsm : DatasetReader
+        The open orthophoto and DSM.
+    nir : DatasetReader or None
+        The open NIR orthophoto.
+    grid : GridSpec
+        The orthophoto's grid.
+    halo : int
+        Cells each block reads beyond its core.
+
     Raises
     ------
     InputError
@@ -166,6 +190,28 @@ def block_histogram(ortho, dsm, nir, read, core, params: ObiaParams, src: str, e
     Open datasets ``ortho``, ``dsm`` (and ``nir`` or None); cells whose blue band is the
     brightest are left out (:func:`kitegully.obia.indices.blue_dominant`). The counts of all
     blocks sum to the global histogram whatever the order (integers). O(block cells).
+
+    Parameters
+    ----------
+    ortho, dsm : DatasetReader
+        The open orthophoto and DSM.
+    nir : DatasetReader or None
+        The open NIR orthophoto.
+    read : Window
+        The block's read window (core plus halo).
+    core : Window
+        The block's core window.
+    params : ObiaParams
+        Method parameters.
+    src : str
+        Orthophoto name for error messages.
+    edges : ndarray
+        Bin edges of the fine histogram (:func:`histogram_edges`).
+
+    Returns
+    -------
+    ndarray int64 (len(edges) - 1,)
+        Cell counts per fine bin.
     """
     rgb, dem, valid = _read_tile(ortho, dsm, read)
     nir_band = _read_nir(nir, read, valid)
@@ -183,6 +229,34 @@ def classify_block(ortho, dsm, nir, read, core, params: ObiaParams, src: str, ce
     Segments do not cross the block's read window [I]; the result depends only on the block
     and the global threshold ``valley``, so any grouping of blocks into jobs gives the same map.
     O(block cells · log).
+
+    Parameters
+    ----------
+    ortho, dsm : DatasetReader
+        The open orthophoto and DSM.
+    nir : DatasetReader or None
+        The open NIR orthophoto.
+    read : Window
+        The block's read window (core plus halo).
+    core : Window
+        The block's core window.
+    params : ObiaParams
+        Method parameters.
+    src : str
+        Orthophoto name for error messages.
+    cell : float
+        Cell size (m).
+    valley : float or None
+        Global threshold of the index; None when the histogram is not bimodal.
+    unimodal : int
+        Class of every segment when ``valley`` is None (:func:`unimodal_code`).
+
+    Returns
+    -------
+    classes : ndarray (core rows, core cols) uint8
+        0 vegetated, 1 bare, 255 no data.
+    water_cells : int
+        Core cells masked as open water.
     """
     rgb, dem, valid = _read_tile(ortho, dsm, read)
     nir_band = _read_nir(nir, read, valid)

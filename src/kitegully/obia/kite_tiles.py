@@ -48,6 +48,20 @@ def kite_tiles(shape: tuple[int, int], tile_cells: int, tiling: TilingParams) ->
     The ``ceil(H/T) x ceil(W/T)`` blocks of the untiled map are split into the tiling's
     ``n_rows x n_cols`` near-equal rectangles of blocks; names as :meth:`TilingParams.names`.
 
+    Parameters
+    ----------
+    shape : tuple of int
+        Orthophoto size (rows, cols).
+    tile_cells : int
+        Block side (cells).
+    tiling : TilingParams
+        The site's tiling.
+
+    Returns
+    -------
+    list of Tile
+        Tile windows in row-major order.
+
     Raises
     ------
     InputError
@@ -82,6 +96,30 @@ def kite_histogram_tile(ortho_path: str | Path, dsm_path: str | Path, out_npz: s
     """Fine-histogram counts of tile ``name``'s blocks, saved as ``counts`` in ``out_npz``; returns the cells counted.
 
     O(tile cells).
+
+    Parameters
+    ----------
+    ortho_path : path
+        RGB orthophoto (bands 1-3).
+    dsm_path : path
+        DSM covering the orthophoto.
+    out_npz : path
+        Output file; also holds the tile window ``r0, c0, h, w`` (cells).
+    params : ObiaParams
+        Method parameters.
+    tile_cells : int
+        Block side (cells).
+    tiling : TilingParams
+        The site's tiling.
+    name : str
+        Tile name.
+    nir_path : path or None
+        NIR orthophoto on the RGB orthophoto's grid.
+
+    Returns
+    -------
+    int
+        Cells counted in the histogram.
     """
     with open_kite_inputs(ortho_path, dsm_path, nir_path, params, tile_cells) as (ortho, dsm, nir, grid, halo):
         shape = (grid.height, grid.width)
@@ -113,6 +151,32 @@ def kite_map_tile(ortho_path: str | Path, dsm_path: str | Path, hist_files: Sequ
     """Classes (0 vegetated, 1 bare, 255 no data) of tile ``name``, saved with its window and water cells.
 
     Returns the water cells of the tile. O(tile cells · log).
+
+    Parameters
+    ----------
+    ortho_path : path
+        RGB orthophoto (bands 1-3).
+    dsm_path : path
+        DSM covering the orthophoto.
+    hist_files : sequence of path
+        Every tile's histogram file (:func:`kite_histogram_tile`).
+    out_npz : path
+        Output file: ``classes``, the tile origin ``r0, c0`` (cells) and ``water_cells``.
+    params : ObiaParams
+        Method parameters.
+    tile_cells : int
+        Block side (cells).
+    tiling : TilingParams
+        The site's tiling.
+    name : str
+        Tile name.
+    nir_path : path or None
+        NIR orthophoto on the RGB orthophoto's grid.
+
+    Returns
+    -------
+    int
+        Cells of the tile masked as open water.
     """
     thr = merged_threshold(hist_files, params)
     unimodal = unimodal_code(params)
@@ -136,6 +200,24 @@ def kite_map_tile(ortho_path: str | Path, dsm_path: str | Path, hist_files: Sequ
 def merge_kite_tiles(tile_files: Sequence[str | Path], hist_files: Sequence[str | Path], ortho_path: str | Path,
                      out_tif: str | Path, params: ObiaParams) -> ThresholdResult:
     """Write the bare-soil map from the tiles' cores; returns the global threshold (with ``water_cells``).
+
+    Parameters
+    ----------
+    tile_files : sequence of path
+        Every tile's class file (:func:`kite_map_tile`).
+    hist_files : sequence of path
+        Every tile's histogram file (:func:`kite_histogram_tile`).
+    ortho_path : path
+        RGB orthophoto; its grid is the map's.
+    out_tif : path
+        The bare-soil GeoTIFF (0 vegetated, 1 bare, 255 no data).
+    params : ObiaParams
+        Method parameters.
+
+    Returns
+    -------
+    ThresholdResult
+        The global threshold; ``water_cells`` is set only with ``water_ndvi_below``.
 
     Raises
     ------
@@ -180,6 +262,28 @@ def finish_kite_map(tile_files: Sequence[str | Path], hist_files: Sequence[str |
 
     ``out`` holds the paths ``bare_soil``, ``polygons``, ``info`` and ``figure`` (the
     untiled rule's products, written the same way).
+
+    Parameters
+    ----------
+    tile_files : sequence of path
+        Every tile's class file (:func:`kite_map_tile`).
+    hist_files : sequence of path
+        Every tile's histogram file (:func:`kite_histogram_tile`).
+    ortho_path : path
+        RGB orthophoto.
+    params : ObiaParams
+        Method parameters.
+    out : dict
+        Product paths, keys as above.
+    figure_max_px : float
+        Largest side of the orthophoto in the figure (px).
+    attribution : str or None
+        Attribution line written below the figure.
+
+    Returns
+    -------
+    ThresholdResult
+        The global threshold (:func:`merge_kite_tiles`).
     """
     from kitegully.io.figures import save_figure
     from kitegully.io.raster import read_raster

@@ -141,7 +141,24 @@ class SceneResult:
 
 
 def marker_mask(shape: tuple[int, int], grid, markers, factor: float) -> np.ndarray:
-    """Cells within ``factor`` x radius of any surveyed marker centre (``x, y, radius_m``)."""
+    """Cells within ``factor`` x radius of any surveyed marker centre (``x, y, radius_m``).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Raster shape (rows, cols).
+    grid : GridSpec
+        Grid of the raster.
+    markers : DataFrame or None
+        Marker centres ``x, y`` and radii ``radius_m`` (m); None or empty gives an empty mask.
+    factor : float
+        Multiple of each marker's radius that is masked.
+
+    Returns
+    -------
+    ndarray bool (H, W)
+        True within the masked discs.
+    """
     mask = np.zeros(shape, dtype=bool)
     if markers is None or len(markers) == 0:
         return mask
@@ -188,6 +205,28 @@ def segment(
     the survey has one, joins the features (R, G, B, NIR, slope) [I]: plants and bare
     ground differ most in the NIR, so segment edges follow them there too.
     O(N log N) for N cells.
+
+    Parameters
+    ----------
+    red, green, blue : ndarray (H, W)
+        Colour bands, any scale.
+    dem : ndarray (H, W)
+        Surface heights (m).
+    cell : float
+        Cell size (m).
+    valid : ndarray bool (H, W)
+        Cells to segment.
+    params : ObiaParams
+        Method parameters (slope window, seed band width, growing).
+    t_start : float or None
+        Start time of the ``features`` timing (s, ``time.perf_counter()``); None starts it here.
+    nir : ndarray (H, W) or None
+        NIR band, where the survey has one.
+
+    Returns
+    -------
+    Segmentation
+        Slope (degrees), features, seeds, segment labels, segment count and timings (s).
     """
     t = {}
     t0 = time.perf_counter() if t_start is None else t_start
@@ -205,7 +244,24 @@ def segment(
 
 
 def blurred_exg(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.ndarray, params: ObiaParams):
-    """ExG (NaN off ``valid``) and its Gaussian blur (``exg_blur`` parameters). O(N)."""
+    """ExG (NaN off ``valid``) and its Gaussian blur (``exg_blur`` parameters). O(N).
+
+    Parameters
+    ----------
+    red, green, blue : ndarray (H, W)
+        Colour bands, any scale.
+    valid : ndarray bool (H, W)
+        Cells with data.
+    params : ObiaParams
+        Method parameters (blur sigma and radius).
+
+    Returns
+    -------
+    exg : ndarray (H, W) float32
+        ExG, NaN off ``valid``.
+    exg_blur : ndarray (H, W) float32
+        Its Gaussian blur, NaN off ``valid``.
+    """
     exg = excess_green(red, green, blue)
     exg[~valid] = np.nan
     return exg, gaussian_blur(exg, params.blur_sigma_cells, params.blur_radius_cells)
@@ -215,6 +271,26 @@ def blurred_index(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: n
                   nir: np.ndarray | None = None, source: str = "orthophoto"):
     """The thresholded index (``params.index``: ExG, or NDVI from ``nir`` and red; NaN off
     ``valid``) and its Gaussian blur (``exg_blur`` parameters, used for either index). O(N).
+
+    Parameters
+    ----------
+    red, green, blue : ndarray (H, W)
+        Colour bands, any scale; NDVI uses red only.
+    valid : ndarray bool (H, W)
+        Cells with data.
+    params : ObiaParams
+        Method parameters (index, blur sigma and radius).
+    nir : ndarray (H, W) or None
+        NIR band; needed by ``index: ndvi``.
+    source : str
+        Name used in error messages.
+
+    Returns
+    -------
+    index : ndarray (H, W) float32
+        ExG or NDVI, NaN off ``valid``.
+    blur : ndarray (H, W) float32
+        Its Gaussian blur, NaN off ``valid``.
 
     Raises
     ------

@@ -37,6 +37,20 @@ def wood_slope(dem: np.ndarray, cell: float, window: int = 5) -> np.ndarray:
 
     NaN cells are filled with their nearest valid value before fitting and are NaN
     again in the output; the grid border is extended by odd reflection.
+
+    Parameters
+    ----------
+    dem : ndarray (H, W)
+        Heights (m), NaN = no data.
+    cell : float
+        Cell size (m).
+    window : int
+        Side of the fitting window (cells), odd and at least 3.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        Slope (degrees), NaN where ``dem`` is NaN.
     """
     z = np.asarray(dem, dtype=np.float64)
     valid = np.isfinite(z)

@@ -113,6 +113,24 @@ def evaluate_scene(
     Returns the ``confusion.json`` record: ``scene, confusion, confusion_otsu, area_auto_m2,
     area_auto_otsu_m2, area_ref_m2, eroded_fraction_ref, threshold``. Cells with class 255
     (masked markers) are left out.
+
+    Parameters
+    ----------
+    classes, classes_otsu : ndarray (H, W) uint8
+        Maps by the valley and by Otsu's threshold (0 grass, 1 eroded, 255 masked).
+    truth : ndarray (H, W) uint8
+        Reference mask (0 grass, 1 eroded).
+    cell : float
+        Cell size (m).
+    info : dict
+        The scene's ``threshold.json`` facts; reads ``valley, otsu, bimodal, reason``.
+    scene : str
+        Scene name.
+
+    Returns
+    -------
+    dict
+        The ``confusion.json`` record; areas in m².
     """
     valid = classes != 255
     conf = confusion_matrix(classes, truth, valid=valid)
@@ -144,7 +162,34 @@ def scene_figure(
     scene: str,
     overall_accuracy: float,
 ):
-    """Scene figure (001 Figs 3-4): RGB, segments, ExG histogram with both thresholds, classification vs reference."""
+    """Scene figure (001 Figs 3-4): RGB, segments, ExG histogram with both thresholds, classification vs reference.
+
+    Parameters
+    ----------
+    rgb : ndarray (3, H, W)
+        Orthophoto, shown as uint8.
+    segments : ndarray (H, W) int
+        Segment labels.
+    classes : ndarray (H, W) uint8
+        Class codes (0 grass, 1 eroded, 255 masked).
+    truth : ndarray (H, W) uint8
+        Reference mask (0 grass, 1 eroded).
+    histogram : DataFrame
+        ExG histogram, columns ``exg`` and ``count``.
+    info : dict
+        The scene's ``threshold.json`` facts; reads ``n_segments, valley, otsu, bimodal, reason``.
+    grid : GridSpec
+        Scene grid; axes are in m from its corner.
+    scene : str
+        Scene name for the titles.
+    overall_accuracy : float
+        Overall accuracy as a fraction, shown in %.
+
+    Returns
+    -------
+    Figure
+        The 2 x 2 figure.
+    """
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
     from skimage.segmentation import find_boundaries
@@ -290,6 +335,26 @@ def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: T
 
     The orthophoto is read averaged down to at most ``figure_max_px`` pixels a side;
     ``index`` ("exg" or "ndvi", ``obia.classification.index``) names the thresholded index.
+
+    Parameters
+    ----------
+    ortho_path : str
+        RGB orthophoto (bands 1-3).
+    classes : ndarray (H, W) uint8
+        Bare-soil map on ``grid`` (1 bare).
+    grid : GridSpec
+        Grid of the map and the orthophoto.
+    thr : ThresholdResult
+        Global threshold with its histogram.
+    figure_max_px : float
+        Largest side of the shown orthophoto (px).
+    index : str
+        ``exg`` or ``ndvi``.
+
+    Returns
+    -------
+    Figure
+        The three-panel figure.
     """
     name = {"exg": "ExG", "ndvi": "NDVI"}[index]
     import rasterio
@@ -363,6 +428,31 @@ def kite_accuracy(
     would mask before mapping (water, roofs: ``excluded_classes``) are left out of the
     confusion matrix. ``per_class`` gives, per land-cover class, the share of its cells
     mapped as bare. The land cover is resampled (nearest) onto the map's grid.
+
+    Parameters
+    ----------
+    bare : ndarray (H, W) uint8
+        Bare-soil map (0 vegetated, 1 bare, 255 no data).
+    grid : GridSpec
+        Grid of the map.
+    landcover_path : str
+        Land-cover truth raster of class codes.
+    classes : DataFrame
+        Land-cover classes, columns ``code`` and ``name``.
+    classes_path : str
+        File of ``classes``, for messages.
+    bare_classes : sequence of str
+        Land-cover classes without plant cover (reference bare).
+    excluded_classes : sequence of str
+        Land-cover classes left out of the confusion matrix.
+    site : str
+        Site name for the ``scene`` column.
+
+    Returns
+    -------
+    KiteAccuracy
+        Accuracy rows (vegetated, bare) in %, mapped and reference bare areas (m²) and
+        the per-class shares mapped bare.
     """
     import rasterio
     from rasterio.enums import Resampling

@@ -112,7 +112,25 @@ def _finite_with_range(values: np.ndarray, value_range: tuple[float, float] | No
 
 
 def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Histogram of the finite values: (counts, bin centres)."""
+    """Histogram of the finite values: (counts, bin centres).
+
+    Parameters
+    ----------
+    values : ndarray
+        Values of any shape; NaN and infinite values are left out.
+    bins : int
+        Number of equal bins.
+    value_range : tuple of float or None
+        (min, max) of the bins; None takes the data's own range, widened by 0.5 either
+        side when all values are equal.
+
+    Returns
+    -------
+    counts : ndarray int64 (bins,)
+        Cells per bin.
+    centres : ndarray (bins,)
+        Bin centres.
+    """
     v, value_range = _finite_with_range(values, value_range)
     counts, edges = np.histogram(v, bins=bins, range=value_range)
     return counts.astype(np.int64), (0.5 * (edges[:-1] + edges[1:]))
@@ -290,6 +308,22 @@ def fine_histogram(values: np.ndarray, bins: int, value_range: tuple[float, floa
     The range is ``value_range`` or the data's own (min, max), as :func:`histogram` takes it;
     grouping every :data:`FINE_BINS_PER_BIN` fine bins gives exactly :func:`histogram`'s
     ``bins`` bins.
+
+    Parameters
+    ----------
+    values : ndarray
+        Values of any shape; NaN and infinite values are left out.
+    bins : int
+        Number of histogram bins; the fine histogram has :data:`FINE_BINS_PER_BIN` times as many.
+    value_range : tuple of float or None
+        (min, max) of the bins; None takes the data's own range.
+
+    Returns
+    -------
+    counts : ndarray int64 (bins x FINE_BINS_PER_BIN,)
+        Cells per fine bin.
+    edges : ndarray (bins x FINE_BINS_PER_BIN + 1,)
+        Fine bin edges.
     """
     v, value_range = _finite_with_range(values, value_range)
     counts, edges = np.histogram(v, bins=bins * FINE_BINS_PER_BIN, range=value_range)

@@ -82,6 +82,20 @@ def quadratic_coefficients(z: np.ndarray, cell: float, window: int) -> tuple[np.
 
     NaN cells are filled with the nearest valid value for the fit and every coefficient
     is NaN where the window holds a NaN cell. O(H·W·window·rank).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell : float
+        Cell size (m).
+    window : int
+        Odd window side in cells (≥ 3).
+
+    Returns
+    -------
+    a, b, c, d, e : ndarray (H, W) float64
+        Coefficients at every cell (x east, y north): ``a, b, c`` in 1/m, ``d, e`` the slopes (m/m).
     """
     z = np.asarray(z, dtype=np.float64)
     nan = ~np.isfinite(z)
@@ -110,6 +124,20 @@ def ground_opening(z: np.ndarray, cell: float, segment_m: float) -> np.ndarray:
     concave forms (gullies) and planes; at a convex edge it bevels the corner (by up to
     the along-edge gradient × the disc radius), so it is used for the *direction* across
     an edge only (:func:`_edge_profiles`). O(n · k²) for k cells across the disc.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell : float
+        Cell size (m).
+    segment_m : float
+        Diameter of the disc (m).
+
+    Returns
+    -------
+    ndarray (H, W) float64
+        The opened DEM (m), without NaN.
     """
     k = max(3, 2 * int(round(0.5 * segment_m / cell)) + 1)
     h = k // 2
@@ -191,6 +219,26 @@ def upper_edge_mask(z: np.ndarray, cell: float, window: int, threshold: float, c
     on both sides and is dropped as before; wider crowns stay ridges.
 
     Returns a boolean mask (subset of ``candidates``). O(candidates).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell : float
+        Cell size (m).
+    window : int
+        Odd window side (cells).
+    threshold : float
+        Curvature threshold (1/m).
+    candidates : ndarray (H, W) bool
+        Cells to test.
+    ground_m : float
+        Width of the widest plants to look under (m); 0 = test on the DEM.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        The candidate cells that are upper edges.
     """
     rr, cc = np.nonzero(candidates)
     _, _, z0, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc, ground_m)
@@ -212,6 +260,26 @@ def low_sides(z: np.ndarray, cell: float, window: int, edges: np.ndarray,
     Returns (rows, cols, d_row, d_col): for each cell of ``edges``, the direction across
     the edge in which the DEM (with ``ground_m`` > 0: the ground, as in :func:`upper_edge_mask`) falls
     (the incision side of an upper edge).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell : float
+        Cell size (m).
+    window : int
+        Odd window side (cells).
+    edges : ndarray (H, W) bool
+        Breakline cells.
+    ground_m : float
+        Width of the widest plants to look under (m); 0 = on the DEM.
+
+    Returns
+    -------
+    rows, cols : ndarray int
+        Row and column of each breakline cell.
+    d_row, d_col : ndarray float
+        Unit step (rows, cols) towards the lower side.
     """
     rr, cc = np.nonzero(edges)
     vx, vy, _, near_p, far_p, near_m, far_m = _edge_profiles(z, cell, window, rr, cc, ground_m)

@@ -84,6 +84,22 @@ def bank_held_depth(lines: list[shapely.LineString], dem: np.ndarray, grid: Grid
     """Water depth (m) the DEM holds with every dam only as high as its lower bank (:func:`bank_high_dams`).
 
     Returns float32, NaN on nodata. O(n log n) (one priority flood).
+
+    Parameters
+    ----------
+    lines : list of LineString
+        Dam lines (the clipped transects) in the grid's CRS.
+    dem : ndarray (H, W)
+        Elevations (m) on ``grid``; NaN = no data.
+    grid : GridSpec
+        The stage grid.
+    grow_cells : int
+        Dilation of each dam (cells).
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        Water depth (m).
     """
     dammed = bank_high_dams(lines, dem, grid, grow_cells)
     filled, _ = priority_flood_fill(dammed, epsilon=0.0)
@@ -91,7 +107,20 @@ def bank_held_depth(lines: list[shapely.LineString], dem: np.ndarray, grid: Grid
 
 
 def barrier_mask(breaklines: np.ndarray, transects: np.ndarray, grow_cells: int = 1) -> np.ndarray:
-    """Breakline and transect cells grown by ``grow_cells`` in all 8 directions."""
+    """Breakline and transect cells grown by ``grow_cells`` in all 8 directions.
+
+    Parameters
+    ----------
+    breaklines, transects : ndarray (H, W) bool
+        Breakline cells and transect cells.
+    grow_cells : int
+        Number of 8-connected dilation steps (cells); 0 = no growth.
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        Barrier cells.
+    """
     m = breaklines | transects
     if grow_cells > 0:
         m = ndi.binary_dilation(m, structure=np.ones((3, 3), bool), iterations=grow_cells)
@@ -102,6 +131,22 @@ def fill_depth(dem: np.ndarray, barriers: np.ndarray, raise_m: float) -> tuple[n
     """Raise the barriers by ``raise_m``, sink-fill (priority flood, level pools), FD = filled − conditioned.
 
     Returns (fill depth ≥ 0, NaN on nodata; conditioned DEM). O(n log n).
+
+    Parameters
+    ----------
+    dem : ndarray (H, W)
+        DEM (m), NaN nodata.
+    barriers : ndarray (H, W) bool
+        Cells to raise.
+    raise_m : float
+        Height added to the barrier cells (m).
+
+    Returns
+    -------
+    fd : ndarray (H, W) float32
+        Fill depth (m).
+    conditioned : ndarray (H, W) float32
+        The DEM with the barriers raised (m).
     """
     cond = np.asarray(dem, np.float64).copy()
     cond[barriers] += raise_m
@@ -139,6 +184,40 @@ def gully_mask(fd: np.ndarray, threshold: float, closing_cells: int, min_area_m2
     gully's outline is the breakline itself.
 
     Returns int32 labels (0 = not gully), numbered 1..n.
+
+    Parameters
+    ----------
+    fd : ndarray (H, W)
+        Fill depth (m), NaN read as 0.
+    threshold : float
+        Fill-depth threshold (m).
+    closing_cells : int
+        Side of the square closing element (cells); 1 or less = no closing.
+    min_area_m2 : float
+        Smallest component kept (m²).
+    cell : float
+        Cell size (m).
+    seeds : ndarray (H, W) bool or None
+        Seed cells (the thalweg) a component must touch.
+    bridgeable : ndarray (H, W) bool or None
+        The only cells the closing may add.
+    edge_band : ndarray (H, W) bool or None
+        Cells the mask may grow into (the grown breakline cells).
+    edge_cells : int
+        Growth into ``edge_band`` (cells); the rim test looks ``edge_cells + 2`` cells to each side.
+    held : ndarray (H, W) or None
+        Fill depth (m) of the DEM with the dams alone.
+    rims : tuple or None
+        ``(rows, cols, d_row, d_col)`` of the breakline cells (:func:`kitegully.polygons.breaklines.low_sides`).
+    held_cells : bool
+        Test ``held`` per cell instead of per pool.
+    bank_held : ndarray (H, W) or None
+        Water depth (m) held by dams no higher than their lower banks.
+
+    Returns
+    -------
+    ndarray (H, W) int32
+        Gully labels, 0 = not gully.
     """
     m = np.nan_to_num(fd, nan=0.0) >= threshold
     if held is not None and held_cells:
@@ -208,7 +287,26 @@ def _pools_below_rims(m: np.ndarray, rims: tuple[np.ndarray, np.ndarray, np.ndar
 
 def polygons_from_labels(labels: np.ndarray, grid: GridSpec, threshold: float, dem: np.ndarray | None = None,
                          fd: np.ndarray | None = None) -> gpd.GeoDataFrame:
-    """Vectorise a label raster: one polygon per label with area (m²) and mean fill depth (m)."""
+    """Vectorise a label raster: one polygon per label with area (m²) and mean fill depth (m).
+
+    Parameters
+    ----------
+    labels : ndarray (H, W) int32
+        Label raster, 0 = background.
+    grid : GridSpec
+        Grid of ``labels``.
+    threshold : float
+        Fill-depth threshold (m) written to each row.
+    dem : ndarray (H, W) or None
+        Not used.
+    fd : ndarray (H, W) or None
+        Fill depth (m), NaN read as 0; without it there is no ``mean_fill_depth_m`` column.
+
+    Returns
+    -------
+    GeoDataFrame
+        ``polygon_id, threshold_m, area_m2`` (and ``mean_fill_depth_m``) and the polygon, in the grid's CRS.
+    """
     geoms: dict[int, list] = {}
     for geom, val in features.shapes(labels, mask=labels > 0, transform=grid.transform, connectivity=8):
         geoms.setdefault(int(val), []).append(shapely.geometry.shape(geom))

@@ -71,7 +71,24 @@ class EvaluationParams:
 
 
 def rasterize(geoms, grid: GridSpec, values=None, dtype=np.uint8) -> np.ndarray:
-    """Burn geometries (cell centres inside) on ``grid``; ``values`` default 1."""
+    """Burn geometries (cell centres inside) on ``grid``; ``values`` default 1.
+
+    Parameters
+    ----------
+    geoms : iterable of shapely geometry
+        Geometries in the grid's CRS; None and empty ones are skipped.
+    grid : GridSpec
+        Grid to burn on.
+    values : sequence or None
+        Value burnt for each geometry; None = 1.
+    dtype : dtype
+        Type of the raster.
+
+    Returns
+    -------
+    ndarray (H, W)
+        The burnt raster, 0 outside the geometries.
+    """
     geoms = [g for g in geoms if g is not None and not g.is_empty]
     shape = (grid.height, grid.width)
     if not geoms:
@@ -134,6 +151,20 @@ def truth_table(centrelines: gpd.GeoDataFrame, truth_polys: gpd.GeoDataFrame, u_
 
     The twin carves ``D (1 − |d/h|^p)`` across a half-width h (p = 1 for V, ``u_exponent``
     for U sections), so a reach's true section area is ``W D p / (p + 1)``.
+
+    Parameters
+    ----------
+    centrelines : GeoDataFrame
+        True centreline reaches: ``gully_id, shape, width_m, depth_m, depth_max_m, length_m``.
+    truth_polys : GeoDataFrame
+        True gully polygons: ``gully_id, kind, area_m2``.
+    u_exponent : float
+        Exponent p of the U sections.
+
+    Returns
+    -------
+    DataFrame
+        ``gully_id, kind, area_m2, length_m, max_depth_m, volume_true_m3, mean_width_m``; one row per polygon.
     """
     c = centrelines.copy()
     p = np.where(c["shape"] == "U", u_exponent, 1.0)
@@ -154,6 +185,25 @@ def polygon_scores(auto: gpd.GeoDataFrame, truth_polys: gpd.GeoDataFrame, truth:
     true cells T_g and mapped cells A_g in its zone: precision = |A_g∩T_g|/|A_g|, recall =
     |A_g∩T_g|/|T_g|, IoU = |A_g∩T_g|/|A_g∪T_g|. Rows ``all`` (every mapped cell) and
     ``wide`` (gullies wider than ``wide_gully_m``, their zones) close the table.
+
+    Parameters
+    ----------
+    auto : GeoDataFrame
+        The mapped polygons.
+    truth_polys : GeoDataFrame
+        True gully polygons with ``gully_id``.
+    truth : DataFrame
+        :func:`truth_table` of the true gullies.
+    grid : GridSpec
+        Stage grid the cells are counted on.
+    params : EvaluationParams
+        Scoring settings; reads ``zone_m`` and ``wide_gully_m``.
+
+    Returns
+    -------
+    DataFrame
+        ``gully_id, kind, mean_width_m, true_area_m2, mapped_area_m2, overlap_m2, precision, recall, iou``;
+        rows ``all`` and ``wide`` have ``gully_id`` -1.
     """
     ids = truth_polys["gully_id"].to_numpy()
     lab = rasterize(truth_polys.geometry, grid, values=(ids + 1).tolist(), dtype=np.int32)
@@ -189,6 +239,28 @@ def morphometry_errors(sections: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame
 
     Returns (per-section errors, summary with median and P90 absolute errors and the
     volume totals, per-gully volumes).
+
+    Parameters
+    ----------
+    sections : GeoDataFrame
+        Measured cross-sections: ``polygon_id, station_m, width_m, depth_m, area_m2, slab_m``.
+    centrelines : GeoDataFrame
+        True centreline reaches: ``gully_id, shape, width_m, depth_m``.
+    truth : DataFrame
+        :func:`truth_table` of the true gullies.
+    u_exponent : float
+        Exponent p of the U sections.
+    params : EvaluationParams
+        Scoring settings; reads ``match_distance_m``.
+
+    Returns
+    -------
+    errors : DataFrame
+        One row per section matched to a true reach, with its errors (m, m²).
+    summary : DataFrame
+        Median, P90 and median signed errors of width, depth and area, and the volume totals (m³).
+    volumes : DataFrame
+        Measured and true volume (m³) and the volume error (%) per true gully.
     """
     c = centrelines.reset_index(drop=True)
     p = np.where(c["shape"] == "U", u_exponent, 1.0)
@@ -269,6 +341,20 @@ def observable_region_from_files(grid: GridSpec, landcover_path=None, classes_pa
     """:func:`observable_region` from a twin's ``truth/landcover.tif`` and ``truth/landcover_classes.csv``.
 
     Without the files (a DEM twin has no land cover) the region is the grid's extent.
+
+    Parameters
+    ----------
+    grid : GridSpec
+        The stage grid.
+    landcover_path : str or Path or None
+        The twin's true land-cover raster.
+    classes_path : str or Path or None
+        CSV with ``code, name`` of its classes.
+
+    Returns
+    -------
+    shapely geometry
+        The observable region.
     """
     if landcover_path is None or classes_path is None:
         return observable_region(grid)
@@ -315,6 +401,36 @@ def regenerate_table1(auto: Mapping[float, gpd.GeoDataFrame], truth_polys: gpd.G
 
     Returns (Table 1 statistics beside the paper, t = ``auto_threshold`` comparison with
     the manual union and intersection, the operators' outlines with their habits).
+
+    Parameters
+    ----------
+    auto : mapping
+        Automatic polygon set (GeoDataFrame) of each fill-depth threshold (m).
+    truth_polys : GeoDataFrame
+        True gully polygons (``gully_id, kind, area_m2``).
+    centrelines : GeoDataFrame
+        True centreline reaches.
+    grid : GridSpec
+        Stage grid the areas are counted on.
+    operators_cfg : mapping
+        Config of the simulated operators (:class:`kitegully.polygons.manual.OperatorParams`).
+    seed : int
+        Master seed.
+    u_exponent : float
+        Exponent p of the U sections.
+    auto_threshold : float
+        Threshold (m) of the set compared with the manual union and intersection.
+    region : shapely geometry or None
+        Observable region; None = the truth unclipped.
+
+    Returns
+    -------
+    stats : DataFrame
+        ``statistic, auto, manual, paper_auto, paper_manual``.
+    comparison : DataFrame
+        ``statistic, value, paper``.
+    operators : GeoDataFrame
+        One outline per operator, with its habits.
     """
     from kitegully.polygons.manual import OperatorParams, operator_outlines
 
@@ -339,6 +455,30 @@ def evaluate_against_truth(auto: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, t
     Returns a dict of tables: ``scores`` (per gully, ``all``, ``wide``), ``errors``
     (median / P90 absolute errors, volume totals), ``sections`` (per cross-section) and
     ``volumes`` (per gully, with ``volume_not_observable_m3``).
+
+    Parameters
+    ----------
+    auto : GeoDataFrame
+        The mapped polygons.
+    sections : GeoDataFrame
+        Measured cross-sections (:func:`morphometry_errors`).
+    truth_polys : GeoDataFrame
+        True gully polygons.
+    centrelines : GeoDataFrame
+        True centreline reaches.
+    grid : GridSpec
+        Stage grid the cells are counted on.
+    cfg : mapping
+        The ``polygons.evaluation`` section (:class:`EvaluationParams`).
+    u_exponent : float
+        Exponent p of the U sections.
+    region : shapely geometry or None
+        Observable region; None = the whole truth.
+
+    Returns
+    -------
+    dict of str to DataFrame
+        ``scores``, ``errors``, ``sections`` and ``volumes``.
     """
     params = EvaluationParams.from_config(cfg)
     whole = truth_table(centrelines, truth_polys, u_exponent)

@@ -66,7 +66,26 @@ def _smooth_path(rr: np.ndarray, cc: np.ndarray, grid: GridSpec, r0: int, c0: in
 
 
 def medial_axis(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_step: float, alpha: float, beta: float) -> shapely.LineString | None:
-    """Smoothed longest path of the thinned mask (sub-array whose top-left cell is (r0, c0))."""
+    """Smoothed longest path of the thinned mask (sub-array whose top-left cell is (r0, c0)).
+
+    Parameters
+    ----------
+    mask : ndarray (h, w) bool
+        The polygon's mask; its holes are filled before thinning.
+    grid : GridSpec
+        The stage grid.
+    r0, c0 : int
+        Top-left cell of ``mask`` in the grid.
+    smooth_step : float
+        Vertex spacing of the smoothed line (m).
+    alpha, beta : float
+        Snakes weights (:func:`kitegully.polygons.thalweg.snakes_smooth`).
+
+    Returns
+    -------
+    LineString or None
+        The medial axis in map coordinates; None when the skeleton has no path of two cells.
+    """
     skel = thin(ndi.binary_fill_holes(mask))
     rr, cc = longest_path(skel)
     if rr.size < 2:
@@ -82,6 +101,26 @@ def medial_network(mask: np.ndarray, grid: GridSpec, r0: int, c0: int, smooth_st
     tributary reaching at least ``min_extension_m`` beyond its parent's edge, and its first
     ``trim`` metres (the parent's inscribed radius at the junction) lie inside the parent
     (:func:`kitegully.polygons.skeleton.branch_paths`).
+
+    Parameters
+    ----------
+    mask : ndarray (h, w) bool
+        The polygon's mask; its holes are filled before thinning.
+    grid : GridSpec
+        The stage grid.
+    r0, c0 : int
+        Top-left cell of ``mask`` in the grid.
+    smooth_step : float
+        Vertex spacing of the smoothed lines (m).
+    alpha, beta : float
+        Snakes weights (:func:`kitegully.polygons.thalweg.snakes_smooth`).
+    min_extension_m : float
+        Least reach of a tributary beyond its parent's edge (m).
+
+    Returns
+    -------
+    list of (LineString, float)
+        Each branch in map coordinates and its trim (m), the longest path first.
     """
     filled = ndi.binary_fill_holes(mask)
     skel = thin(filled)
@@ -162,6 +201,22 @@ def prolong_to_outline(axis: shapely.LineString, poly, start: bool, end: bool, l
     width short of the polygon's end; prolonged, the slabs of its sections tile the polygon's
     whole length. The direction is that of the last ``look_m`` of the axis, and a prolongation
     is at most twice the end's distance to the outline plus 1 m (a rounded or square end).
+
+    Parameters
+    ----------
+    axis : LineString
+        The medial axis.
+    poly : Polygon or MultiPolygon
+        The polygon whose outline the ends are prolonged to.
+    start, end : bool
+        Prolong the axis' first and last end.
+    look_m : float
+        Length of the axis' end piece that gives the direction (m).
+
+    Returns
+    -------
+    LineString
+        The prolonged axis; an end whose ray meets no outline stays as it is.
     """
     xy = np.asarray(axis.coords)[:, :2]
     if len(xy) < 2 or axis.length == 0:
@@ -220,7 +275,24 @@ def _section_piece(poly, px: float, py: float, nx: float, ny: float, half: float
 
 
 def drape(line: shapely.LineString, surface: np.ndarray, grid: GridSpec, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Points every ``step`` m along ``line`` (ends included): s, x, y and bilinear z."""
+    """Points every ``step`` m along ``line`` (ends included): s, x, y and bilinear z.
+
+    Parameters
+    ----------
+    line : LineString
+        Line in map coordinates.
+    surface : ndarray (H, W)
+        Surface to sample (m).
+    grid : GridSpec
+        Grid of ``surface``.
+    step : float
+        Largest sample spacing (m); the samples are spread evenly over the line.
+
+    Returns
+    -------
+    s, x, y, z : ndarray (n,)
+        Distance along the line (m), map coordinates and the surface's elevation (m).
+    """
     n = max(int(np.ceil(line.length / step)), 1)
     s = np.linspace(0.0, line.length, n + 1)
     pts = shapely.line_interpolate_point(line, s)
@@ -237,6 +309,26 @@ def axis_gradient(axis: shapely.LineString, s0: float, dem: np.ndarray, grid: Gr
     draped along the axis from ``s0 − 2·segment_m`` to ``s0 + 2·segment_m``, opened with
     ``segment_m`` as :func:`ground_profile`, so that a clump in the channel does not tilt it)
     over ``s0 ± segment_m``. 0 where the axis is too short for two samples. O(segment / step).
+
+    Parameters
+    ----------
+    axis : LineString
+        The medial axis.
+    s0 : float
+        Position along the axis (m).
+    dem : ndarray (H, W)
+        DEM (m).
+    grid : GridSpec
+        Grid of ``dem``.
+    step : float
+        Sample spacing along the axis (m).
+    segment_m : float
+        Half-length of the fitted stretch and length of the opening segment (m).
+
+    Returns
+    -------
+    float
+        Gradient (m/m).
     """
     a, b = max(s0 - 2.0 * segment_m, 0.0), min(s0 + 2.0 * segment_m, axis.length)
     if b - a < 2.0 * step:
@@ -264,6 +356,23 @@ def drape_opened_along(line: shapely.LineString, surface: np.ndarray, grid: Grid
     shows beside it along the gully; a clump the opening across the section cannot see past
     (its gap to the next clump across is filled by the matching window) is seen past along it.
     Never above :func:`drape`'s z (the opening is anti-extensive and τ = 0 is not detrended).
+
+    Parameters
+    ----------
+    line : LineString
+        The section in map coordinates.
+    surface : ndarray (H, W)
+        Surface to sample (m).
+    grid : GridSpec
+        Grid of ``surface``.
+    step : float
+        Sample spacing along the line and along the axis (m).
+    along : ndarray (2,)
+        Unit vector of the gully axis (x east, y north).
+    gradient : float
+        Floor gradient along ``along`` (m/m).
+    segment_m : float
+        Length of the opening segment along the axis (m); 0 = :func:`drape` unchanged.
 
     Returns
     -------
@@ -293,6 +402,24 @@ def section_profile(s: np.ndarray, z: np.ndarray, reference: str, level: np.ndar
 
     ``level`` is the reference surface itself along ``s`` for ``spill`` (the pool level),
     ``banks`` and ``bank_lines`` (:func:`bank_reference`).
+
+    Parameters
+    ----------
+    s : ndarray (n,)
+        Distance along the section (m).
+    z : ndarray (n,)
+        Elevations at ``s`` (m).
+    reference : str
+        Depth reference (:data:`REFERENCES`).
+    level : ndarray (n,) or None
+        Reference surface at ``s`` (m) for ``spill``, ``banks`` and ``bank_lines``.
+
+    Returns
+    -------
+    depth : float
+        Largest depth below the reference (m).
+    area : float
+        Cross-sectional area below the reference (m²).
     """
     if reference == "lower_end":
         zr = np.full_like(z, min(z[0], z[-1]))
@@ -464,6 +591,28 @@ def extend_to_rims(piece: shapely.LineString, rims: np.ndarray, grid: GridSpec, 
     adds no depth or area).
 
     Returns the prolonged line and the offset (m) of the clipped section's start along it.
+
+    Parameters
+    ----------
+    piece : LineString
+        The section clipped to the polygon.
+    rims : ndarray (H, W) bool
+        Rim cells.
+    grid : GridSpec
+        Grid of ``rims`` and ``dem``.
+    search : float
+        Farthest prolongation of each end (m).
+    dem : ndarray (H, W) or None
+        DEM (m) for ends without a rim; None = such ends stay.
+    segment_m : float
+        Opening segment of the ground profile searched with ``dem`` (m); 0 = the DEM as it is.
+
+    Returns
+    -------
+    line : LineString
+        The prolonged section.
+    offset : float
+        Distance from its start to the clipped section's start (m).
     """
     a, b = np.asarray(piece.coords[0])[:2], np.asarray(piece.coords[-1])[:2]
     L = float(np.hypot(*(b - a)))

@@ -14,7 +14,24 @@ from kitegully.io.raster import GridSpec
 
 
 def hillshade(z: np.ndarray, cell: float, azimuth_deg: float = 315.0, altitude_deg: float = 45.0) -> np.ndarray:
-    """Lambertian hillshade in [0, 1] (NaN where ``z`` is NaN)."""
+    """Lambertian hillshade in [0, 1] (NaN where ``z`` is NaN).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell : float
+        Cell size (m).
+    azimuth_deg : float
+        Direction the light comes from, clockwise from north (degrees).
+    altitude_deg : float
+        Elevation of the light above the horizon (degrees).
+
+    Returns
+    -------
+    ndarray (H, W) float
+        Hillshade.
+    """
     zf = np.where(np.isfinite(z), z, np.nanmean(z))
     dzdy, dzdx = np.gradient(zf, cell)
     dzdy = -dzdy  # rows go south
@@ -39,7 +56,35 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
                 morph: pd.DataFrame, path: str, max_px: int = 2000, attribution: str | None = None) -> None:
     """Three panels: (a) TCI with thalweg and dams (Fig. 8), (b) polygons at every fill-depth
     threshold over the hillshade with medial axes (Figs 9-10), (c) width, depth and
-    cross-sectional area along the medial axis of the largest polygon (Fig. 11)."""
+    cross-sectional area along the main medial axis of the polygon with the longest axes (Fig. 11).
+
+    Parameters
+    ----------
+    dem : ndarray (H, W)
+        DEM (m) for the hillshade.
+    grid : GridSpec
+        Grid of ``dem`` and ``tci``.
+    tci : ndarray (H, W)
+        Topographic convergence index.
+    tci_threshold : float
+        TCI threshold of the thalweg, for the legend.
+    polys : mapping
+        Polygon set (GeoDataFrame) of each fill-depth threshold (m).
+    thalweg, transects : GeoDataFrame
+        Thalweg lines and transects (dams).
+    axes : GeoDataFrame
+        Medial axes (``polygon_id``, optional ``branch``).
+    sections : GeoDataFrame
+        Cross-sections (``polygon_id, station_m, width_m, depth_m, area_m2, slab_m``, optional ``branch``).
+    morph : DataFrame
+        Per-polygon morphometry (``polygon_id, length_m``); the polygon with the longest axes is drawn in (c).
+    path : str
+        Output PNG file.
+    max_px : int
+        Rasters are thinned to at most this many cells along each side.
+    attribution : str or None
+        Line written below the figure.
+    """
     fig, ax = new_figure(3, 1, figsize=(8.0, 15.0), gridspec_kw={"height_ratios": [1, 1, 0.6]})
     ext = _extent(grid)
     hs, _ = _thin(hillshade(dem, grid.cell), max_px)
@@ -109,7 +154,27 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
 
 def comparison_map(dem: np.ndarray, grid: GridSpec, auto: gpd.GeoDataFrame, manual: gpd.GeoDataFrame, truth: gpd.GeoDataFrame,
                    path: str, max_px: int = 2000, attribution: str | None = None) -> None:
-    """Fig. 12 analogue: the t = 0.5 m polygons, the manual union and intersection, the true outlines."""
+    """Fig. 12 analogue: the t = 0.5 m polygons, the manual union and intersection, the true outlines.
+
+    Parameters
+    ----------
+    dem : ndarray (H, W)
+        DEM (m) for the hillshade.
+    grid : GridSpec
+        Grid of ``dem``.
+    auto : GeoDataFrame
+        Automatic polygons.
+    manual : GeoDataFrame
+        One outline per simulated operator.
+    truth : GeoDataFrame
+        True gully polygons.
+    path : str
+        Output PNG file.
+    max_px : int
+        The hillshade is thinned to at most this many cells along each side.
+    attribution : str or None
+        Line written below the figure.
+    """
     import shapely
 
     fig, ax = new_figure(figsize=(9.0, 6.5))

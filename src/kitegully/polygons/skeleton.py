@@ -185,6 +185,15 @@ def prune_network(G, radius: np.ndarray, min_extension: float) -> None:
     tributary only if ``L − r ≥ min_extension``; otherwise it is the spur the thinning draws
     into a bump of the outline. Repeated until no branch is dropped (a junction left with two
     branches becomes part of a longer chain).
+
+    Parameters
+    ----------
+    G : networkx.MultiGraph
+        Skeleton graph: nodes are (row, col) end and junction pixels, edges carry their ``length`` (cells).
+    radius : ndarray (H, W) float
+        Inscribed radius per cell (cells).
+    min_extension : float
+        Least reach of a branch beyond its parent's edge (cells).
     """
     changed = True
     while changed:

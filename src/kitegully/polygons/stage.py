@@ -332,7 +332,24 @@ def measure_morphometry(labels: np.ndarray, polygons: gpd.GeoDataFrame, dem: np.
 
 
 def morphometry_rows(axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: pd.DataFrame, params: PolygonParams) -> list[tuple]:
-    """Rows of the summary table that describe the morphometry."""
+    """Rows of the summary table that describe the morphometry.
+
+    Parameters
+    ----------
+    axes : GeoDataFrame
+        Medial axes.
+    sections : GeoDataFrame
+        Cross-sections.
+    morph : DataFrame
+        Per-polygon morphometry with ``volume_m3``.
+    params : PolygonParams
+        Method parameters; the morphometry settings are listed.
+
+    Returns
+    -------
+    list of tuple
+        ``(label, value)`` rows.
+    """
     p = params
     return [("medial axes", len(axes)), ("cross-sections", len(sections)), ("volume (m3)", round(float(morph["volume_m3"].sum()), 1)),
             ("depth reference", p.reference), ("section branches", p.branches),

@@ -114,6 +114,24 @@ def topographic_convergence_index(z: np.ndarray, cell: float, exponent: float, m
     """TCI = ln(a / tan β), with a = MFD area / cell width (m²/m) and tan β ≥ ``min_tan_slope``.
 
     Returns (tci, specific catchment area).
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        DEM (m), NaN nodata.
+    cell : float
+        Cell size (m).
+    exponent : float
+        Slope exponent of the flow partition (:func:`mfd_catchment_area`).
+    min_tan_slope : float
+        Smallest tan β used.
+
+    Returns
+    -------
+    tci : ndarray (H, W) float32
+        Topographic convergence index.
+    sca : ndarray (H, W) float32
+        Specific catchment area (m²/m).
     """
     area = mfd_catchment_area(z, cell, exponent)
     sca = area / cell
@@ -128,6 +146,18 @@ def snakes_smooth(xy: np.ndarray, alpha: float = 1.0, beta: float = 1.0) -> np.n
 
     Minimises ``Σ |x_i - x⁰_i|² + α |x''_i|² + β |x''''_i|²`` (second and fourth
     differences of the vertex sequence): ``(I + α D2ᵀD2 + β D4ᵀD4) x = x⁰``.
+
+    Parameters
+    ----------
+    xy : ndarray (n, 2)
+        Vertices of the line.
+    alpha, beta : float
+        Weights of the second and fourth differences.
+
+    Returns
+    -------
+    ndarray (n, 2)
+        Smoothed vertices; a copy of ``xy`` for fewer than 5 vertices.
     """
     n = len(xy)
     if n < 5:
@@ -286,6 +316,40 @@ def thalweg_lines(
 
     Returns the smoothed lines (map coordinates) and the raster of their skeleton cells.
     Raises :class:`InputError` when no line is left.
+
+    Parameters
+    ----------
+    tci : ndarray (H, W)
+        Topographic convergence index, NaN read as below the threshold.
+    grid : GridSpec
+        Grid of ``tci``.
+    threshold : float
+        TCI threshold.
+    min_length_m : float
+        Shortest line kept (m).
+    smooth_step_m : float
+        Vertex spacing before smoothing (m).
+    alpha, beta : float
+        Snakes weights (:func:`snakes_smooth`).
+    dem : ndarray (H, W) or None
+        DEM (m) for the incision test.
+    min_incision_m : float or None
+        Least depth below the window's mean (m); None = no incision test.
+    incision_window_m : float
+        Side of the square window (m).
+    closing_cells : int
+        Side of the closing square (cells), also the longest gap bridged when following the flow.
+    follow_flow_downstream : bool
+        Extend the mask down the flow paths through incised cells.
+    ground_window_m : float or None
+        Side of the grey opening for the ground surface (m); None = the DEM as it is.
+
+    Returns
+    -------
+    lines : list of LineString
+        Smoothed thalweg lines (map coordinates).
+    cells : ndarray (H, W) bool
+        Skeleton cells of the kept lines.
     """
     mask = np.nan_to_num(tci, nan=-np.inf) > threshold
     if min_incision_m is not None and dem is not None:

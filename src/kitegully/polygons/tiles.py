@@ -65,7 +65,21 @@ class WindowGrid(GridSpec):
 
     @classmethod
     def of(cls, grid: GridSpec, r0: int, c0: int, h: int, w: int) -> "WindowGrid":
-        """The window ``rows r0:r0+h, cols c0:c0+w`` of ``grid``."""
+        """The window ``rows r0:r0+h, cols c0:c0+w`` of ``grid``.
+
+        Parameters
+        ----------
+        grid : GridSpec
+            The parent grid.
+        r0, c0 : int
+            Top-left cell of the window in ``grid``.
+        h, w : int
+            Rows and columns of the window.
+
+        Returns
+        -------
+        WindowGrid
+        """
         g = grid.window(r0, c0, h, w)
         return cls(g.x0, g.y0, g.cell, g.width, g.height, g.crs, grid.x0, grid.y0, int(r0), int(c0))
 
@@ -132,6 +146,20 @@ def polygons_window(polygons: gpd.GeoDataFrame, grid: GridSpec, margin: int) -> 
     """(row0, col0, rows, cols) of the union of the polygons' bounds plus ``margin`` cells, clipped to the grid.
 
     ``row0`` and ``col0`` are even (see the code).
+
+    Parameters
+    ----------
+    polygons : GeoDataFrame
+        Polygons on ``grid``.
+    grid : GridSpec
+        Stage grid.
+    margin : int
+        Cells added on every side.
+
+    Returns
+    -------
+    tuple of int or None
+        ``(row0, col0, rows, cols)``; None when there are no polygons.
     """
     if not len(polygons):
         return None
@@ -148,7 +176,22 @@ def polygons_window(polygons: gpd.GeoDataFrame, grid: GridSpec, margin: int) -> 
 
 
 def read_window(path: str | Path, r0: int, c0: int, h: int, w: int) -> np.ndarray:
-    """One window of band 1 of a raster (inside the raster; float nodata as NaN)."""
+    """One window of band 1 of a raster (inside the raster; float nodata as NaN).
+
+    Parameters
+    ----------
+    path : str or Path
+        The raster.
+    r0, c0 : int
+        Top-left cell of the window.
+    h, w : int
+        Rows and columns of the window.
+
+    Returns
+    -------
+    ndarray (h, w)
+        The window's values in the raster's type.
+    """
     import rasterio
     from rasterio.windows import Window
 
@@ -218,7 +261,30 @@ def merge_morphometry(parts: Iterable[tuple[gpd.GeoDataFrame, gpd.GeoDataFrame, 
 
 def merged_summary(summary_map: pd.DataFrame, axes: gpd.GeoDataFrame, sections: gpd.GeoDataFrame, morph: pd.DataFrame,
                    params: PolygonParams, tile_seconds: float, n_tiles: int) -> pd.DataFrame:
-    """The stage summary of a tiled site: ``polygons_map``'s rows, the morphometry rows, then the times."""
+    """The stage summary of a tiled site: ``polygons_map``'s rows, the morphometry rows, then the times.
+
+    Parameters
+    ----------
+    summary_map : DataFrame
+        ``polygons_map``'s summary (``quantity, value``); its ``time morphometry (s)`` row is dropped.
+    axes : GeoDataFrame
+        Merged medial axes.
+    sections : GeoDataFrame
+        Merged cross-sections.
+    morph : DataFrame
+        Merged per-polygon morphometry.
+    params : PolygonParams
+        Method parameters.
+    tile_seconds : float
+        Time of the tile jobs (s).
+    n_tiles : int
+        Number of tile jobs.
+
+    Returns
+    -------
+    DataFrame
+        ``quantity, value`` with the values as str.
+    """
     is_time = summary_map["quantity"].str.startswith("time ")
     timing = summary_map[is_time & (summary_map["quantity"] != "time morphometry (s)")]
     rows = list(summary_map[~is_time].itertuples(index=False, name=None)) + morphometry_rows(axes, sections, morph, params)

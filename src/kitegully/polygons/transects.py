@@ -38,6 +38,28 @@ def transect_stations(line: shapely.LineString, spacing: float, dem: np.ndarray 
     ``max_drop`` since the previous station, but never closer than ``min_spacing``. A line
     too short for any station gets one at its middle (a thalweg fragment still dams its
     reach). ``floor``: :func:`station_floor` of ``dem`` when already computed.
+
+    Parameters
+    ----------
+    line : LineString
+        Thalweg line, from its upper end.
+    spacing : float
+        Transect spacing (m).
+    dem : ndarray (H, W) or None
+        DEM (m) for the drop rule; None = regular spacing only.
+    grid : GridSpec or None
+        Grid of ``dem``; needed with ``max_drop``.
+    max_drop : float or None
+        Drop of the floor that sets a station early (m); None = regular spacing only.
+    min_spacing : float
+        Shortest distance between stations with ``max_drop`` (m).
+    floor : ndarray (H, W) or None
+        :func:`station_floor` of ``dem``; None = computed here.
+
+    Returns
+    -------
+    ndarray
+        Station distances along ``line`` (m).
     """
     L = line.length
     if max_drop is None or dem is None:
@@ -66,7 +88,24 @@ def transect_stations(line: shapely.LineString, spacing: float, dem: np.ndarray 
 
 def make_transects(line: shapely.LineString, stations: np.ndarray, half_length: float, tangent_half_window: float) -> list[shapely.LineString]:
     """Straight transects through the stations, orthogonal to the line's mean direction
-    within ``± tangent_half_window`` m of each station."""
+    within ``± tangent_half_window`` m of each station.
+
+    Parameters
+    ----------
+    line : LineString
+        Thalweg line.
+    stations : ndarray
+        Distances along ``line`` (m).
+    half_length : float
+        Transect length on each side of the line (m).
+    tangent_half_window : float
+        Half-length of the stretch that gives the line's direction (m).
+
+    Returns
+    -------
+    list of LineString
+        Two-point transects, one per station; a station whose stretch has no length gets none.
+    """
     out = []
     L = line.length
     for s in stations:
@@ -132,6 +171,22 @@ def outlet_ends(lines: list[shapely.LineString], dem: np.ndarray, grid: GridSpec
     Ends are compared on the 3 × 3 minimum of the DEM (:func:`station_floor`), the floor
     the transects follow (``floor``: that raster when already computed); a line whose ends
     stand equally high gives both.
+
+    Parameters
+    ----------
+    lines : list of LineString
+        Thalweg lines.
+    dem : ndarray (H, W)
+        DEM (m); used only when ``floor`` is None.
+    grid : GridSpec
+        Grid of ``dem``.
+    floor : ndarray (H, W) or None
+        :func:`station_floor` of ``dem``; None = computed here.
+
+    Returns
+    -------
+    ndarray (k, 2)
+        Map coordinates of the outlet ends, in line order.
     """
     if not lines:
         return np.zeros((0, 2))

@@ -114,6 +114,18 @@ def focal_length_px(exif: dict, stored_width: int, stored_height: int) -> float:
 
     Uses FocalLength with FocalPlaneXResolution (and its unit) when present, otherwise
     the 35 mm equivalent focal length against a 36 mm wide frame.
+
+    Parameters
+    ----------
+    exif : dict
+        The image's EXIF as :func:`piexif.load` returns it.
+    stored_width, stored_height : int
+        Size of the stored pixel array (px); the longer side is the 36 mm frame width.
+
+    Returns
+    -------
+    float
+        Focal length (stored px), NaN when EXIF lacks it.
     """
     ex = exif.get("Exif", {})
     f_mm = _rational(ex.get(piexif.ExifIFD.FocalLength))
@@ -169,7 +181,20 @@ def read_image(path: str | Path, frame: str = "stored") -> np.ndarray:
 
 
 def display_size(orientation: int, width: int, height: int) -> tuple[int, int]:
-    """(width, height) of the display frame for a stored size and orientation tag."""
+    """(width, height) of the display frame for a stored size and orientation tag.
+
+    Parameters
+    ----------
+    orientation : int
+        EXIF orientation tag (1–8).
+    width, height : int
+        Stored size (px).
+
+    Returns
+    -------
+    width, height : int
+        Display size (px): swapped for tags 5–8.
+    """
     return (height, width) if orientation in (5, 6, 7, 8) else (width, height)
 
 
@@ -178,6 +203,20 @@ def display_to_stored(xy: np.ndarray, orientation: int, width: int, height: int)
 
     Coordinates are continuous pixel positions (0 at the left/top edge of the first
     pixel). ``width``, ``height`` are the stored size. O(n).
+
+    Parameters
+    ----------
+    xy : ndarray (n, 2)
+        Display-frame pixel coordinates (px).
+    orientation : int
+        EXIF orientation tag (1–8).
+    width, height : int
+        Stored size (px).
+
+    Returns
+    -------
+    ndarray (n, 2) float
+        Stored-frame pixel coordinates (px).
     """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     x, y = xy[:, 0], xy[:, 1]
@@ -198,7 +237,22 @@ def display_to_stored(xy: np.ndarray, orientation: int, width: int, height: int)
 
 
 def stored_to_display(xy: np.ndarray, orientation: int, width: int, height: int) -> np.ndarray:
-    """Inverse of :func:`display_to_stored` (``width``, ``height`` are the stored size). O(n)."""
+    """Inverse of :func:`display_to_stored` (``width``, ``height`` are the stored size). O(n).
+
+    Parameters
+    ----------
+    xy : ndarray (n, 2)
+        Stored-frame pixel coordinates (px).
+    orientation : int
+        EXIF orientation tag (1–8).
+    width, height : int
+        Stored size (px).
+
+    Returns
+    -------
+    ndarray (n, 2) float
+        Display-frame pixel coordinates (px).
+    """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     x, y = xy[:, 0], xy[:, 1]
     W, H = width, height
@@ -256,6 +310,26 @@ def prepare_images(
     ``<index>_<stem>.jpg`` so COLMAP's name order is the capture order (what sequential
     matching needs). Copies carry no orientation tag: their pixels are already in the
     SfM frame. Time O(total pixels); memory one image at a time.
+
+    Parameters
+    ----------
+    files : list of Path
+        The input images.
+    out_dir : path
+        Folder of the prepared copies (created if needed).
+    max_image_size : int
+        Longest side of a copy (px); larger images are downscaled, none is enlarged; 0 or less = full size.
+    frame : str
+        ``"stored"`` (the sensor's pixels) or ``"display"`` (turned upright by the EXIF tag).
+    skip_unreadable : bool
+        Skip unreadable files with a warning instead of raising.
+    jpeg_quality : int
+        JPEG quality of the copies (0–100).
+
+    Returns
+    -------
+    list of ImageInfo
+        One per prepared image, in capture order.
 
     Raises
     ------

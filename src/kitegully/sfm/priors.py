@@ -71,6 +71,20 @@ def write_position_priors(database: str | Path, positions: dict[str, np.ndarray]
     """Write ``positions`` as COLMAP pose priors (Cartesian, centred) into the database.
 
     Returns the number of priors written.
+
+    Parameters
+    ----------
+    database : path
+        The COLMAP database; its existing pose priors are cleared first.
+    positions : mapping
+        Camera position (site CRS, m) keyed by image name; the priors are these minus their mean.
+    sigma_m : float
+        Standard deviation of each position coordinate (m).
+
+    Returns
+    -------
+    int
+        Number of priors written (images of the database with a position).
     """
     centre = np.mean(np.stack(list(positions.values())), axis=0)
     db = pycolmap.Database.open(str(database))

@@ -31,7 +31,27 @@ CAMERA_MODELS = ("SIMPLE_RADIAL", "RADIAL")
 
 
 def camera_params(model: str, focal_px: float, width: int, height: int) -> str:
-    """Starting parameters of a COLMAP camera as its comma-separated string."""
+    """Starting parameters of a COLMAP camera as its comma-separated string.
+
+    Parameters
+    ----------
+    model : str
+        COLMAP camera model: ``SIMPLE_RADIAL`` or ``RADIAL``.
+    focal_px : float
+        Focal length prior (px).
+    width, height : int
+        Image size (px); the principal point starts at the image centre.
+
+    Returns
+    -------
+    str
+        ``f,cx,cy`` followed by one zero radial term (``SIMPLE_RADIAL``) or two (``RADIAL``).
+
+    Raises
+    ------
+    InputError
+        ``model`` is not one of :data:`CAMERA_MODELS`.
+    """
     cx, cy = width / 2.0, height / 2.0
     if model == "SIMPLE_RADIAL":
         return f"{focal_px},{cx},{cy},0"
@@ -69,6 +89,29 @@ def extract_features(
 
     The focal-length prior is the median EXIF focal length of the group (in SfM pixels),
     or ``default_focal_factor`` × the larger image side when EXIF lacks it.
+
+    Parameters
+    ----------
+    database : Path
+        The COLMAP database the features and cameras are written to.
+    image_dir : Path
+        Folder of the prepared images.
+    infos : list of ImageInfo
+        The prepared images (SfM names, sizes, camera, EXIF focal length).
+    camera_model : str
+        COLMAP camera model: ``SIMPLE_RADIAL`` or ``RADIAL``.
+    default_focal_factor : float
+        Focal length prior as a multiple of the larger image side, where EXIF gives none.
+    max_num_features : int
+        Most SIFT features per image.
+    num_threads : int
+        CPU threads of the extraction.
+    first_octave : int
+        First SIFT octave: -1 or 0.
+    estimate_affine_shape : bool
+        Fit each keypoint's affine shape.
+    domain_size_pooling : bool
+        Pool each descriptor over a range of patch sizes.
     """
     groups: dict[tuple[int, int, str], list[ImageInfo]] = defaultdict(list)
     for info in infos:
@@ -101,7 +144,29 @@ def extract_features(
 
 
 def choose_matching_method(method: str, n_images: int, exhaustive_max_images: int, n_priors: int) -> str:
-    """Resolve ``auto``: exhaustive for small sets, spatial with GPS priors, else sequential."""
+    """Resolve ``auto``: exhaustive for small sets, spatial with GPS priors, else sequential.
+
+    Parameters
+    ----------
+    method : str
+        ``auto``, ``exhaustive``, ``sequential`` or ``spatial``.
+    n_images : int
+        Number of images.
+    exhaustive_max_images : int
+        Largest image count ``auto`` matches exhaustively.
+    n_priors : int
+        Number of images with a position prior.
+
+    Returns
+    -------
+    str
+        ``exhaustive``, ``sequential`` or ``spatial``.
+
+    Raises
+    ------
+    InputError
+        An unknown method, or ``spatial`` with fewer than two position priors.
+    """
     if method == "auto":
         if n_images <= exhaustive_max_images:
             return "exhaustive"
@@ -145,6 +210,41 @@ def match_features(
     ``guided_matching`` matches each verified pair a second time, constrained by its
     estimated two-view geometry (epipolar distance), which recovers matches the ratio test
     dropped between views of very different tilt.
+
+    Parameters
+    ----------
+    database : Path
+        The COLMAP database with the features; the verified matches are written to it.
+    n_images : int
+        Number of images.
+    method : str
+        ``auto``, ``exhaustive``, ``sequential`` or ``spatial`` (:func:`choose_matching_method`).
+    overlap : int
+        Neighbours in capture order matched with each image (sequential).
+    exhaustive_max_images : int
+        Largest image count ``auto`` matches exhaustively.
+    num_threads : int
+        CPU threads of the matching.
+    n_priors : int
+        Number of images with a position prior in the database.
+    spatial_max_distance_m : float
+        Largest horizontal distance between the positions of a spatial pair (m).
+    spatial_max_neighbors : int
+        Most neighbours matched with each image (spatial).
+    seed : int or None
+        Seed of the verification's RANSAC, run on one thread; None = COLMAP's own seeds.
+    guided_matching : bool
+        Match each verified pair again, guided by its two-view geometry.
+
+    Returns
+    -------
+    str
+        The method used.
+
+    Raises
+    ------
+    InputError
+        An unknown method, or ``spatial`` with fewer than two position priors.
     """
     method = choose_matching_method(method, n_images, exhaustive_max_images, n_priors)
     mopt = pycolmap.FeatureMatchingOptions()
@@ -272,6 +372,15 @@ def final_bundle_adjustment(rec: pycolmap.Reconstruction, refine_principal_point
     The hierarchical mapper merges its clusters' models by similarity transforms and ends
     there; this adjustment gives the merged model the same final self-calibrating BA as the
     incremental and global mappers. O(iterations × (observations + images³)) with Schur.
+
+    Parameters
+    ----------
+    rec : pycolmap.Reconstruction
+        The model; adjusted in place.
+    refine_principal_point : bool
+        Refine the principal point too.
+    num_threads : int
+        CPU threads of the solver.
     """
     opts = pycolmap.BundleAdjustmentOptions()
     opts.refine_focal_length = True
@@ -308,6 +417,35 @@ def map_model(
 
     ``source_dir`` is the photo folder the user gave (named in errors instead of the
     prepared copies' work folder).
+
+    Parameters
+    ----------
+    database : Path
+        The COLMAP database with the verified matches.
+    image_dir : Path
+        Folder of the prepared images.
+    out_dir : Path
+        Folder the chosen model is written to (replaced if it exists); every model is first written to a
+        sibling folder ``<out_dir>_all``, removed at the end.
+    refine_principal_point : bool
+        Refine the principal point in the bundle adjustments.
+    min_num_matches : int
+        Fewest verified matches for an image pair to be used.
+    seed : int
+        Seed of the mapper's random choices.
+    num_threads : int
+        CPU threads of the mapper.
+    source_dir : path or None
+        The user's photo folder, for error messages; None = ``image_dir``.
+    mapper : str
+        ``incremental``, ``global`` or ``hierarchical``.
+    global_ba_growth : float
+        Growth factor of the model between the incremental mapper's global adjustments.
+
+    Returns
+    -------
+    pycolmap.Reconstruction
+        The model with the most registered images.
 
     Raises
     ------
@@ -367,6 +505,35 @@ def run_sfm(
     registration, triangulation) takes ``seed``: the same images and config then give
     the same model, bit for bit. COLMAP's worker threads otherwise draw their own seeds
     and finish in varying order, so a multi-threaded rerun differs slightly.
+
+    Parameters
+    ----------
+    infos : list of ImageInfo
+        The prepared images.
+    image_dir : path
+        Folder of the prepared images.
+    work_dir : path
+        Work folder; holds ``database.db``, which is recreated.
+    model_dir : path
+        Folder the model is written to.
+    params : SfmParams
+        The stage's parameters.
+    seed : int
+        Seed of COLMAP's random choices.
+    num_threads : int
+        CPU threads (1 with ``params.deterministic``).
+    positions : mapping or None
+        Approximate camera position (m) keyed by SfM file name; None = no position priors.
+    source_dir : path or None
+        The user's photo folder, for error messages.
+
+    Returns
+    -------
+    rec : pycolmap.Reconstruction
+        The model with the most registered images.
+    timings : dict
+        Time of each step (s), the matching method and mapper used, the number of position priors and the
+        keypoint counts.
     """
     image_dir, work_dir, model_dir = Path(image_dir), Path(work_dir), Path(model_dir)
     deterministic = bool(params.deterministic)

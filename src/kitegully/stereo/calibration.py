@@ -110,6 +110,26 @@ def convergent_poses(H_m: float = 3.0, offset_m: float = 1.5, n: int = 8, aim_z_
     of* the aimed images lowers the standard error of the corner displacement by a quarter but
     costs f precision; *beside* them (stations ``paper+convergent+corners``, the stage's setting
     since session 26) it brings K1 within 10 % on every seed and keeps f.
+
+    Parameters
+    ----------
+    H_m : float
+        Height of the stations (world z, m).
+    offset_m : float
+        Radius of the circle of stations about the field's centre (m).
+    n : int
+        Number of stations, evenly spaced round the circle.
+    aim_z_m : float
+        Height of the aim point above the field's centre (m).
+    corner_fraction : float
+        Fraction of the way from the frame centre to a frame corner at which the field's centre is imaged; 0 aims at it.
+    frame_px : (int, int, float)
+        Frame width, height and f (px); used only when ``corner_fraction`` > 0.
+
+    Returns
+    -------
+    list[Pose]
+        One pose per station (world → camera), station k at the angle 2πk/n.
     """
     from kitegully.stereo.rig import look_at_pose
 
@@ -142,7 +162,28 @@ class Observation:
 
 def simulate_observations(camera: Camera, field: ControlField, poses: list[Pose], sigma_px: float = 0.0,
                           rng: np.random.Generator | None = None, margin_px: float = 5.0) -> list[Observation]:
-    """Project the targets into each image (targets outside the frame are not seen), plus Gaussian noise ``sigma_px``."""
+    """Project the targets into each image (targets outside the frame are not seen), plus Gaussian noise ``sigma_px``.
+
+    Parameters
+    ----------
+    camera : Camera
+        Camera the targets are projected through (distortion included).
+    field : ControlField
+        Target ids and world coordinates (m).
+    poses : list[Pose]
+        One pose per image.
+    sigma_px : float
+        Standard deviation of the noise added to each pixel coordinate (px); 0 adds none.
+    rng : Generator or None
+        Noise generator; ``None`` uses ``default_rng(0)``.
+    margin_px : float
+        A target is seen only if it projects at least this far inside the frame's border (px).
+
+    Returns
+    -------
+    list[Observation]
+        One observation per pose, holding only the targets seen.
+    """
     obs = []
     for pose in poses:
         uv = camera.project(field.xyz, pose)
@@ -488,6 +529,24 @@ def render_calibration_image(camera: Camera, pose: Pose, targets, noise_dn: floa
     [I] The table's texture is irrelevant to a target: each disc is measured against its own black plate.
     The table top is 1 mm below the table targets' print (a card on the table), so the ray hits the plate first.
     Cost: O(pixels · targets) for the exact ray–plate intersections (:meth:`PrintedMarks.intersect`).
+
+    Parameters
+    ----------
+    camera, pose : Camera, Pose
+        Inner and exterior orientation of the station.
+    targets : PrintedMarks
+        The printed targets (:func:`calibration_targets`).
+    noise_dn : float
+        Standard deviation of the Gaussian image noise (digital numbers).
+    rng : Generator
+        Noise generator.
+    window : (x0, y0, x1, y1) or None
+        Render only this pixel window (end exclusive); the rest of the frame is NaN. ``None`` renders the whole frame.
+
+    Returns
+    -------
+    ndarray (height, width) float32
+        The photograph, 0–255 plus noise; NaN outside ``window``.
     """
     from kitegully.stereo.synth import Texture, render_heightfield
 
@@ -505,6 +564,22 @@ def projected_disc_offset_px(camera: Camera, pose: Pose, xyz: np.ndarray, radius
     disc. Computed exactly here: the disc's rim (``n`` points, horizontal plate) is projected
     through ``camera`` (distortion included) and the centroid of the polygon it bounds taken
     (shoelace formula). O(N · n).
+
+    Parameters
+    ----------
+    camera, pose : Camera, Pose
+        Inner and exterior orientation.
+    xyz : ndarray (N, 3)
+        Disc centres, world coordinates (m).
+    radius_m : float
+        Disc radius (m).
+    n : int
+        Number of rim points per disc.
+
+    Returns
+    -------
+    ndarray (N, 2)
+        Centroid of each imaged disc minus the image of its centre (px).
     """
     a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
     X = np.asarray(xyz, float)
@@ -619,6 +694,36 @@ def measure_calibration_images(camera: Camera, predict_camera: Camera, field_tru
     Only the part of each frame around a target is rendered (a 241 px window per target, the plates within
     200 px of it): identical pixels there, a fraction of a full frame's cost. Returns the observations and the
     median centroid σ from the image noise (px). Cost: ≈ 0.4 s CPU per image.
+
+    Parameters
+    ----------
+    camera : Camera
+        The true camera the photographs are rendered with.
+    predict_camera : Camera
+        Camera used to predict where each target is (the nominal lens); it also places the render windows.
+    field_true : ControlField
+        Targets at their true places (m), as rendered.
+    stated : ControlField
+        Targets at their stated coordinates (m), as measured against.
+    poses : list[Pose]
+        One station per photograph.
+    diameter_m : float
+        Printed disc diameter (m).
+    noise_dn : float
+        Standard deviation of the Gaussian image noise (digital numbers).
+    rng : Generator
+        Noise generator.
+    allowance_px : float
+        Bound on the prediction error (px), as in :func:`measure_targets`.
+    name : str
+        Camera name for messages; each image is named ``"{name} image {k}"``, k counted from 1.
+
+    Returns
+    -------
+    observations : list[Observation]
+        Targets located in each photograph, one per pose.
+    sigma_px : float
+        Median centroid σ from the image noise over all targets (px).
     """
     obs, sig = [], []
     for k, pose in enumerate(poses):

@@ -39,7 +39,22 @@ def _cv2():
 
 
 def band_filter(image: np.ndarray, kind: str = "log", sigma_px: float = 1.0) -> np.ndarray:
-    """Filter one pyramid level: ``"log"`` (−Laplacian of Gaussian), ``"gauss"`` or ``"none"``; NaNs stay NaN."""
+    """Filter one pyramid level: ``"log"`` (−Laplacian of Gaussian), ``"gauss"`` or ``"none"``; NaNs stay NaN.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        One pyramid level (NaN = no data).
+    kind : str
+        ``"log"``, ``"gauss"`` or ``"none"``.
+    sigma_px : float
+        Gaussian σ of the filter (px).
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        The filtered level; NaN within ⌈3·sigma_px⌉ px (square neighbourhood) of any NaN of ``image``.
+    """
     cv2 = _cv2()
     img = np.asarray(image, np.float32)
     bad = ~np.isfinite(img)
@@ -273,7 +288,22 @@ def match_epipolar(left: np.ndarray, right: np.ndarray, d_range: tuple[float, fl
 
 
 def rectified_to_world(X_rect: np.ndarray, rect: Rectification, pose_left: Pose) -> np.ndarray:
-    """Points in the left rectified frame (N × 3) to world: ``X_w = R_lᵀ R1ᵀ X_rect + C_l``."""
+    """Points in the left rectified frame (N × 3) to world: ``X_w = R_lᵀ R1ᵀ X_rect + C_l``.
+
+    Parameters
+    ----------
+    X_rect : ndarray (N, 3)
+        Points in the left rectified frame (m).
+    rect : Rectification
+        The pair's rectification; gives ``R1``.
+    pose_left : Pose
+        World pose of the left camera.
+
+    Returns
+    -------
+    ndarray (N, 3)
+        World points (m).
+    """
     X = np.ascontiguousarray(X_rect, dtype=float)  # a strided slice would make matmul fall off BLAS (seconds per Mpt)
     return (X @ rect.R1) @ pose_left.R + pose_left.C
 
@@ -282,6 +312,22 @@ def disparity_to_points(disp: Disparity, rect: Rectification, pose_left: Pose, s
     """World points (N × 3, m) of every ``step``-th valid disparity pixel via the Q matrix.
 
     Cost: O(valid pixels).
+
+    Parameters
+    ----------
+    disp : Disparity
+        Dense disparity of the left rectified image (px, NaN = no match).
+    rect : Rectification
+        The pair's rectification; gives ``Q`` and ``R1``.
+    pose_left : Pose
+        World pose of the left camera.
+    step : int
+        Take every ``step``-th row and column.
+
+    Returns
+    -------
+    ndarray (N, 3)
+        World points (m), one per valid sampled pixel, in row-major order.
     """
     d = disp.d[::step, ::step]
     yy, xx = np.mgrid[0:disp.d.shape[0]:step, 0:disp.d.shape[1]:step]
@@ -292,7 +338,22 @@ def disparity_to_points(disp: Disparity, rect: Rectification, pose_left: Pose, s
 
 
 def triangulate_points(rect: Rectification, uv_left_rect: np.ndarray, uv_right_rect: np.ndarray, pose_left: Pose) -> np.ndarray:
-    """World points (N × 3) of matched rectified pixel pairs (point measurement), ``cv2.triangulatePoints``."""
+    """World points (N × 3) of matched rectified pixel pairs (point measurement), ``cv2.triangulatePoints``.
+
+    Parameters
+    ----------
+    rect : Rectification
+        The pair's rectification; gives ``P1``, ``P2`` and ``R1``.
+    uv_left_rect, uv_right_rect : ndarray (N, 2)
+        Matched pixel positions in the left and right rectified images (px).
+    pose_left : Pose
+        World pose of the left camera.
+
+    Returns
+    -------
+    ndarray (N, 3)
+        World points (m).
+    """
     cv2 = _cv2()
     a = np.asarray(uv_left_rect, float).T
     b = np.asarray(uv_right_rect, float).T
@@ -304,6 +365,20 @@ def grid_dem(points: np.ndarray, grid: GridSpec, min_count: int = 1) -> Raster:
     """Mean elevation of the points in each cell of ``grid`` (float32, NaN where fewer than ``min_count``).
 
     Cost: O(points + cells).
+
+    Parameters
+    ----------
+    points : ndarray (N, 3)
+        World points x, y, z (m); points outside ``grid`` or with a non-finite z are ignored.
+    grid : GridSpec
+        The DEM grid.
+    min_count : int
+        Fewest points a cell needs for a value (below 1 counts as 1).
+
+    Returns
+    -------
+    Raster
+        Mean elevation per cell (m, float32) on ``grid``.
     """
     P = np.asarray(points, float)
     if P.ndim != 2 or P.shape[1] != 3:

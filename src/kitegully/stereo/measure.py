@@ -96,6 +96,15 @@ class PrintedMarks:
         slope ``dz_dy``; its top is intersected exactly (no fixed-point iteration, which fails at the
         plate's 1 cm step when the step shifts the ray by more than the plate's margin around the disc).
 
+        Parameters
+        ----------
+        C : ndarray (3,)
+            Origin of the rays, the camera centre (world, m).
+        d : ndarray (..., 3)
+            World directions of the rays.
+        t : ndarray (...)
+            Ray parameter of the current hit (the surface); a plate hit replaces it only where nearer.
+
         Returns
         -------
         (ndarray, ndarray)
@@ -119,6 +128,22 @@ class PrintedMarks:
 
         The disc edge is a linear ramp one ground pixel wide: the area integral of a box pixel over a
         straight edge, so the image of the disc is anti-aliased as a sensor's would be.
+
+        Parameters
+        ----------
+        image : ndarray
+            Image to paint (0–255); changed in place.
+        x, y : ndarray
+            World x and y (m) of each pixel's ray hit, the shape of ``image``.
+        ground_px_m : ndarray
+            Ground pixel size at each pixel (m): the width of the disc edge's ramp.
+        idx : ndarray of int
+            Index of the plate each pixel's ray hits (−1: none), from :meth:`intersect`.
+
+        Returns
+        -------
+        ndarray
+            ``image``, with the print on the pixels that see a plate.
         """
         on = idx >= 0
         if on.any():
@@ -147,7 +172,26 @@ class MarkMeasurement:
 
 
 def predict_marks(camera: Camera, pose: Pose, marks_xyz: np.ndarray, diameter_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Predicted image positions (N × 2) and disc radii (px) of the marks at a nominal pose."""
+    """Predicted image positions (N × 2) and disc radii (px) of the marks at a nominal pose.
+
+    Parameters
+    ----------
+    camera : Camera
+        Calibrated camera (distortion included in the projection).
+    pose : Pose
+        The nominal pose.
+    marks_xyz : ndarray (N, 3)
+        Mark centres (world, m).
+    diameter_m : float
+        Disc diameter (m).
+
+    Returns
+    -------
+    uv : ndarray (N, 2)
+        Predicted positions (px).
+    radius_px : ndarray (N,)
+        Disc radii (px): ``diameter_m / 2 · f`` over each mark's distance from the camera centre.
+    """
     uv = camera.project(np.asarray(marks_xyz, float), pose)
     dist = np.linalg.norm(np.asarray(marks_xyz, float) - pose.C, axis=1)
     return uv, 0.5 * diameter_m * camera.f / dist
@@ -329,6 +373,20 @@ def coplanarity_residuals_px(cam_left: Camera, cam_right: Camera, R: np.ndarray,
 
     The Sampson distance is the first-order distance of the 4-vector (x_l, y_l, x_r, y_r) to the
     epipolar variety; with σ per coordinate its RMS over many points is σ (one constrained direction).
+
+    Parameters
+    ----------
+    cam_left, cam_right : Camera
+        Calibrated cameras.
+    R, T : ndarray
+        Relative orientation, ``x_right = R x_left + T`` (only the direction of T counts).
+    uv_left, uv_right : ndarray (N, 2)
+        Tie points, distorted pixel positions (px).
+
+    Returns
+    -------
+    ndarray (N,)
+        Signed Sampson distance of each tie point (px), scaled by the mean f of the two cameras.
     """
     from kitegully.stereo.rectify import _normalised, _sampson
 

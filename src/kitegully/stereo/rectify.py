@@ -195,6 +195,20 @@ class Rectification:
         """Resample one image into the rectified geometry (bilinear); pixels outside get ``border_value``.
 
         Cost: O(pixels).
+
+        Parameters
+        ----------
+        image : ndarray (H, W)
+            Photograph of one camera (distorted).
+        side : str
+            ``"left"``; any other value means the right camera.
+        border_value : float
+            Value of rectified pixels that map outside ``image``.
+
+        Returns
+        -------
+        ndarray (height, width) float32
+            The rectified image, of size :attr:`size`.
         """
         import cv2
 
@@ -268,5 +282,17 @@ def vertical_disparity(rect: Rectification, uv_left: np.ndarray, uv_right: np.nd
     """Residual vertical disparity ``y_left − y_right`` (px) of matched points after rectification.
 
     Zero for a perfect relative orientation and calibration; the check of the rectification.
+
+    Parameters
+    ----------
+    rect : Rectification
+        The pair's rectification.
+    uv_left, uv_right : ndarray (N, 2)
+        Matched pixel positions in the left and right photographs (distorted, px).
+
+    Returns
+    -------
+    ndarray (N,)
+        ``y_left − y_right`` of each pair in the rectified images (px).
     """
     return rect.rectify_points(uv_left, "left")[:, 1] - rect.rectify_points(uv_right, "right")[:, 1]

@@ -40,12 +40,42 @@ PAPER_TABLE1 = {
 
 
 def radial_mm_to_normalised(K1: float, K2: float, f_mm: float) -> tuple[float, float]:
-    """Convert ``Δr = K1 r³ + K2 r⁵`` (r in mm) to normalised ``(k1, k2)``: ``k1 = K1 f²``, ``k2 = K2 f⁴``."""
+    """Convert ``Δr = K1 r³ + K2 r⁵`` (r in mm) to normalised ``(k1, k2)``: ``k1 = K1 f²``, ``k2 = K2 f⁴``.
+
+    Parameters
+    ----------
+    K1, K2 : float
+        Radial distortion coefficients (mm⁻², mm⁻⁴).
+    f_mm : float
+        Focal length (mm).
+
+    Returns
+    -------
+    k1 : float
+        Normalised coefficient of r_n².
+    k2 : float
+        Normalised coefficient of r_n⁴.
+    """
     return K1 * f_mm**2, K2 * f_mm**4
 
 
 def radial_normalised_to_mm(k1: float, k2: float, f_mm: float) -> tuple[float, float]:
-    """Inverse of :func:`radial_mm_to_normalised`: ``K1 = k1/f²``, ``K2 = k2/f⁴`` (mm⁻², mm⁻⁴)."""
+    """Inverse of :func:`radial_mm_to_normalised`: ``K1 = k1/f²``, ``K2 = k2/f⁴`` (mm⁻², mm⁻⁴).
+
+    Parameters
+    ----------
+    k1, k2 : float
+        Normalised radial distortion coefficients.
+    f_mm : float
+        Focal length (mm).
+
+    Returns
+    -------
+    K1 : float
+        Coefficient of r³ (mm⁻²).
+    K2 : float
+        Coefficient of r⁵ (mm⁻⁴).
+    """
     return k1 / f_mm**2, k2 / f_mm**4
 
 
@@ -104,6 +134,17 @@ def nadir_pose(centre: np.ndarray, omega_deg: float = 0.0, phi_deg: float = 0.0,
     """Pose of a camera looking straight down (image x = world x, image y = −world y), tilted by small angles.
 
     The rotation is ``R = R_κ R_φ R_ω R_nadir`` (world → camera), angles about the camera's x, y, z axes.
+
+    Parameters
+    ----------
+    centre : ndarray (3,)
+        Projection centre (world, m).
+    omega_deg, phi_deg, kappa_deg : float
+        Small rotations about the camera's x, y and z axes (degrees).
+
+    Returns
+    -------
+    Pose
     """
     import cv2
 
@@ -141,7 +182,21 @@ class StereoRig:
 
 
 def look_at_pose(centre: np.ndarray, target: np.ndarray, omega_deg: float = 0.0, phi_deg: float = 0.0, kappa_deg: float = 0.0) -> Pose:
-    """Pose whose optical axis passes through ``target`` (image x along world x), then tilted by small angles."""
+    """Pose whose optical axis passes through ``target`` (image x along world x), then tilted by small angles.
+
+    Parameters
+    ----------
+    centre : ndarray (3,)
+        Projection centre (world, m).
+    target : ndarray (3,)
+        Point the optical axis passes through before the tilts (world, m).
+    omega_deg, phi_deg, kappa_deg : float
+        Small rotations about the camera's x, y and z axes, applied after aiming (degrees).
+
+    Returns
+    -------
+    Pose
+    """
     import cv2
 
     C = np.asarray(centre, float)
@@ -200,6 +255,22 @@ def delta_z_m(H_m: float, B_m: float, camera: Camera, matching_px: float = 1.0) 
     Reuses :func:`kitegully.tether.planning.stereo_precision_m` with the camera's principal
     distance ``f·pitch`` (the calibrated one, not the nominal 50 mm); ``matching_px`` is the
     matching precision in pixels (1 px gives the paper's formula).
+
+    Parameters
+    ----------
+    H_m : float
+        Camera height above the object (m).
+    B_m : float
+        Base length (m).
+    camera : Camera
+        Gives the principal distance ``f·pitch`` and the pixel pitch.
+    matching_px : float
+        Matching precision (px).
+
+    Returns
+    -------
+    float
+        δz (m); infinite when ``B_m`` ≤ 0.
     """
     pc = PlanningCamera(
         sensor_width_mm=camera.sensor_width_mm, sensor_height_mm=camera.sensor_height_mm,

@@ -405,7 +405,28 @@ class PairProcessor:
     @staticmethod
     def measure_marks(cams: Mapping[str, Camera], img_l, img_r, marks_xyz, diameter_m: float, B_m: float, H_m: float,
                       centre=(0.0, 0.0)):
-        """Locate the printed marks in both photographs, predicted from the rig's nominal pose (H, B, aimed at ``centre``)."""
+        """Locate the printed marks in both photographs, predicted from the rig's nominal pose (H, B, aimed at ``centre``).
+
+        Parameters
+        ----------
+        cams : mapping
+            Calibrated ``left`` and ``right`` cameras.
+        img_l, img_r : ndarray
+            The photographs (0–255, NaN = no data).
+        marks_xyz : ndarray (N, 3)
+            Surveyed coordinates of the marks (m).
+        diameter_m : float
+            Printed disc diameter (m).
+        B_m, H_m : float
+            Nominal base and height of the rig (m).
+        centre : (float, float)
+            Point the rig is aimed at (m).
+
+        Returns
+        -------
+        list of MarkMeasurement
+            The marks in the left image, then in the right image.
+        """
         cx, cy = centre
         out = []
         for side, img, sx in (("left", img_l, -0.5 * B_m), ("right", img_r, 0.5 * B_m)):
@@ -473,6 +494,26 @@ class PairProcessor:
         Only the part of the left rectified image that sees the grid (between ``z_range``, world m)
         is matched: the frame and the walls are not part of the DEM. Returns ``(dem, matched pixels)``,
         and the :class:`Disparity` as a third item with ``return_disparity``.
+
+        Parameters
+        ----------
+        img_l, img_r : ndarray
+            The photographs (0–255, NaN = no data).
+        grid : GridSpec
+            The DEM grid.
+        z_range : (float, float)
+            Lowest and highest elevation the grid's surface may have (world, m); sets the matched part of the image.
+        return_disparity : bool
+            Also return the disparity.
+
+        Returns
+        -------
+        dem : Raster
+            Mean elevation per cell (m), NaN where fewer than 3 points fall.
+        matched : int
+            Number of matched pixels.
+        disparity : Disparity
+            Only with ``return_disparity``.
         """
         Lr, Rr = self.rect.remap(img_l, "left"), self.rect.remap(img_r, "right")
         x0, y0, x1, y1 = self._roi(grid, z_range, Lr.shape)
@@ -508,7 +549,22 @@ def _survey(marks_xyz: np.ndarray, rng, proc: Mapping[str, Any]) -> np.ndarray:
 
 
 def mark_error_px(pp: "PairProcessor", truth: StereoRig, marks_xyz: np.ndarray) -> float:
-    """Evaluation: RMS (px, per coordinate, both images) of the located marks minus their true projections."""
+    """Evaluation: RMS (px, per coordinate, both images) of the located marks minus their true projections.
+
+    Parameters
+    ----------
+    pp : PairProcessor
+        Pair built from images; ``info["marks_uv"]`` holds the located marks.
+    truth : StereoRig
+        The true cameras and poses.
+    marks_xyz : ndarray (N, 3)
+        True coordinates of the marks (m).
+
+    Returns
+    -------
+    float
+        RMS error (px).
+    """
     ml, mr = pp.info["marks_uv"]
     e = np.r_[ml - truth.left.project(marks_xyz, truth.pose_left), mr - truth.right.project(marks_xyz, truth.pose_right)]
     return float(np.sqrt(np.mean(e ** 2)))
@@ -952,12 +1008,42 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
 
 # ----------------------------------------------------------------------------- rule: rain
 def settlement_mm(rho_b: float, seal_depth_mm: float, seal_density: float) -> float:
-    """Final settlement of loose soil compacted by rain: ``s = d·(1 − ρ_b/ρ_seal)`` (mm); 0 if ρ_b ≥ ρ_seal."""
+    """Final settlement of loose soil compacted by rain: ``s = d·(1 − ρ_b/ρ_seal)`` (mm); 0 if ρ_b ≥ ρ_seal.
+
+    Parameters
+    ----------
+    rho_b : float
+        Bulk density of the loose soil (g/cm³).
+    seal_depth_mm : float
+        Depth the rain compacts (mm).
+    seal_density : float
+        Density the compacted layer reaches (g/cm³).
+
+    Returns
+    -------
+    float
+        Settlement s (mm).
+    """
     return float(seal_depth_mm * max(0.0, 1.0 - rho_b / seal_density))
 
 
 def interrill_rate_kg_m2_h(K_i: float, intensity_mm_h: float, slope_deg: float) -> float:
-    """WEPP interrill detachment ``D_i = K_i·I²·S_f`` with ``S_f = 1.05 − 0.85·exp(−4·sin θ)`` (kg/m²/h)."""
+    """WEPP interrill detachment ``D_i = K_i·I²·S_f`` with ``S_f = 1.05 − 0.85·exp(−4·sin θ)`` (kg/m²/h).
+
+    Parameters
+    ----------
+    K_i : float
+        Interrill erodibility (kg·s/m⁴).
+    intensity_mm_h : float
+        Rain intensity I (mm/h).
+    slope_deg : float
+        Slope θ (degrees).
+
+    Returns
+    -------
+    float
+        Detachment rate D_i (kg/m²/h).
+    """
     I = intensity_mm_h * 1e-3 / 3600.0
     Sf = 1.05 - 0.85 * np.exp(-4 * np.sin(np.radians(slope_deg)))
     return float(K_i * I * I * Sf * 3600.0)

@@ -33,6 +33,22 @@ def soil_texture(rng: np.random.Generator, extent_m: tuple[float, float, float, 
     """Multi-scale random soil-like texture (reflectance 0.05–0.6) covering ``extent_m`` = (xmin, ymin, xmax, ymax).
 
     Cost: O(cells · len(scales_m)) Gaussian filtering.
+
+    Parameters
+    ----------
+    rng : Generator
+        Draws the white noise each scale is filtered from.
+    extent_m : (float, float, float, float)
+        Area to cover, (xmin, ymin, xmax, ymax) (m).
+    cell_m : float
+        Texture cell size (m).
+    scales_m : tuple of float
+        Gaussian σ of each noise layer (m); every layer is scaled to unit SD before the layers are summed.
+
+    Returns
+    -------
+    Texture
+        Reflectance grid (float32) whose top-left corner is (xmin, ymax).
     """
     import cv2
 

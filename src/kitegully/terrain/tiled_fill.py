@@ -137,6 +137,20 @@ def read_tile_with_halo(path: str | Path, tile: Tile, halo: int = 1) -> np.ndarr
     """Read one tile plus a halo of ``halo`` cells from a raster file (NaN outside / at nodata).
 
     Only the window is read, so a per-tile job never holds the whole DEM.
+
+    Parameters
+    ----------
+    path : str or Path
+        The raster file (band 1 is read).
+    tile : Tile
+        The tile's window.
+    halo : int
+        Width of the halo (cells).
+
+    Returns
+    -------
+    ndarray (h + 2·halo, w + 2·halo) float64
+        The tile with its halo; NaN outside the raster and at nodata.
     """
     import rasterio
     from rasterio.windows import Window

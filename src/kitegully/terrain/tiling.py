@@ -90,7 +90,20 @@ def split_grid(shape: tuple[int, int], n_rows: int, n_cols: int) -> list[Tile]:
     Tile ``(i, j)`` covers rows ``floor(i H / n_rows) .. floor((i+1) H / n_rows)`` and the
     same for columns, so the tiles partition the grid exactly. Raises ``ValueError`` when
     a tile would be empty (more tiles than cells).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Grid shape ``(H, W)`` (cells).
+    n_rows, n_cols : int
+        Number of tiles along the rows and the columns.
+
+    Returns
+    -------
+    list of Tile
+        The tiles in row-major order.
     """
+
     h, w = int(shape[0]), int(shape[1])
     if n_rows < 1 or n_cols < 1 or n_rows > h or n_cols > w:
         raise ValueError(f"cannot split a {h} x {w} grid into {n_rows} x {n_cols} tiles")

@@ -26,6 +26,21 @@ def flight_angle_table(
 ) -> pd.DataFrame:
     """Flight angle, kite height and downwind distance for every material × wind × length.
 
+    Parameters
+    ----------
+    materials : dict of str to LineMaterial
+        Lines to model, keyed by the name written in the ``material`` column.
+    kite : Kite
+        The kite.
+    winds_m_s : list of float
+        Uniform horizontal wind speeds (m/s).
+    line_lengths_m : ndarray
+        Line lengths (m); each material's line is solved once, down to the longest.
+    atmosphere : Atmosphere
+        Air density and gravity.
+    ds_m : float
+        Segment length of the line model (m).
+
     Returns
     -------
     pandas.DataFrame
@@ -75,6 +90,28 @@ def table2_comparison(
     ``kites`` maps a reading label (e.g. ``"bridle_tension [I-A]"``) to the kite modelled
     under that reading. Columns: ``reading, material, wind_m_s, line_length_m,
     height_paper_m, height_model_m, difference_pct, status``.
+
+    Parameters
+    ----------
+    material : LineMaterial
+        The line.
+    kites : dict of str to Kite
+        Kite modelled under each reading, keyed by the reading's label.
+    winds_m_s : list of float
+        Uniform horizontal wind speeds (m/s).
+    line_lengths_m : list of float
+        The paper's line lengths (m).
+    paper_heights_m : list of float
+        Table 2's flying height for each line length (m), in the same order.
+    atmosphere : Atmosphere
+        Air density and gravity.
+    ds_m : float
+        Segment length of the line model (m).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per reading × wind × line length.
     """
     rows = []
     lengths = np.asarray(line_lengths_m, dtype=float)
@@ -111,6 +148,29 @@ def line_lengths_for_heights(
 
     NaN (with ``reachable = False``) where the height is not reached within
     ``max_length_m`` or before the line touches the ground.
+
+    Parameters
+    ----------
+    materials : dict of str to LineMaterial
+        Lines to model, keyed by the name written in the ``material`` column.
+    kite : Kite
+        The kite.
+    winds_m_s : list of float
+        Uniform horizontal wind speeds (m/s).
+    heights_m : list of float
+        Kite heights above the operator (m).
+    atmosphere : Atmosphere
+        Air density and gravity.
+    max_length_m : float
+        Longest line solved (m).
+    ds_m : float
+        Segment length of the line model (m).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per material × wind × height with columns ``material, wind_m_s, flying_height_m,
+        line_length_m, chord_angle_deg, reachable``; ``chord_angle_deg`` is ``arcsin(height / length)``.
     """
     rows = []
     for name, material in materials.items():

@@ -139,6 +139,13 @@ class LineSchedule:
 def flight_angles(camera: pd.DataFrame, operator: pd.DataFrame, schedule: LineSchedule) -> pd.DataFrame:
     """Pair camera and operator fixes by timestamp and compute the effective flight angle.
 
+    Parameters
+    ----------
+    camera, operator : DataFrame
+        The two logs as :func:`read_track` returns them: ``time`` and ``x, y, z`` (m, site CRS).
+    schedule : LineSchedule
+        Line lengths paid out, timed from the first paired fix.
+
     Returns
     -------
     pandas.DataFrame
@@ -298,6 +305,26 @@ def simulate_flight_logs(
     integrations. Seconds at which the kite could not keep the line off the ground are
     left out of the camera log (the logger still runs, but the camera is not where the
     model can say).
+
+    Parameters
+    ----------
+    flight : SyntheticFlight
+        Kite, line, wind, line schedule, duration and start time of the flight.
+    settings : SyntheticLogSettings
+        Geometry and noise of the logs.
+    atmosphere : Atmosphere
+        Air density and gravity.
+    rng : Generator
+        Draws the gusts, the walking speed, the pendulum swing and the GPS noise.
+    wind_step_m_s : float
+        Spacing of the wind grid the line model is solved on (m/s).
+
+    Returns
+    -------
+    camera : DataFrame
+        Camera log, seconds with the line off the ground only.
+    operator : DataFrame
+        Operator log, every second.
     """
     n = int(flight.duration_s)
     t = np.arange(n, dtype=float)
@@ -359,7 +386,19 @@ def simulate_flight_logs(
 
 
 def write_gpx(track: pd.DataFrame, path: str | Path, crs: str, name: str) -> None:
-    """Write a track (time, x, y, z in ``crs``) as a GPX 1.1 file in WGS84."""
+    """Write a track (time, x, y, z in ``crs``) as a GPX 1.1 file in WGS84.
+
+    Parameters
+    ----------
+    track : DataFrame
+        Columns ``time``, ``x, y`` (in ``crs``) and ``z`` (m), written as the elevation.
+    path : str or Path
+        Output file; missing parent folders are created.
+    crs : str
+        CRS of ``x, y``.
+    name : str
+        Track name written in the file.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tr = Transformer.from_crs(crs, WGS84, always_xy=True)

@@ -185,13 +185,43 @@ class LineSolution:
 
 
 def kite_drag_n(kite: Kite, wind_m_s: np.ndarray, atmosphere: Atmosphere) -> np.ndarray:
-    """Horizontal kite force ``Dk = ½·ρ·A·V²·Cx_wing`` (N)."""
+    """Horizontal kite force ``Dk = ½·ρ·A·V²·Cx_wing`` (N).
+
+    Parameters
+    ----------
+    kite : Kite
+        Gives the area A and Cx of the wing.
+    wind_m_s : ndarray
+        Wind speeds V (m/s).
+    atmosphere : Atmosphere
+        Gives the air density ρ.
+
+    Returns
+    -------
+    ndarray
+        Dk (N) for each wind speed.
+    """
     v = np.asarray(wind_m_s, dtype=float)
     return 0.5 * atmosphere.air_density_kg_m3 * kite.area_m2 * v**2 * kite.drag_coefficient
 
 
 def top_tension(kite: Kite, wind_m_s: np.ndarray, atmosphere: Atmosphere) -> np.ndarray:
-    """Tension (Tx, Tz) at the bridle for each wind, shape (n_wind, 2)."""
+    """Tension (Tx, Tz) at the bridle for each wind, shape (n_wind, 2).
+
+    Parameters
+    ----------
+    kite : Kite
+        The kite; its ``model`` sets the reading of the pull angle.
+    wind_m_s : ndarray
+        Wind speeds (m/s).
+    atmosphere : Atmosphere
+        Air density and gravity.
+
+    Returns
+    -------
+    ndarray (n_wind, 2)
+        Tx = Dk and Tz = Dk·tan(pull), less the wing and payload weight under ``aero_resultant`` (N).
+    """
     dk = kite_drag_n(kite, wind_m_s, atmosphere)
     tz = dk * np.tan(np.radians(kite.pull_angle_deg))
     if kite.model is KiteModel.AERO_RESULTANT:
@@ -311,6 +341,25 @@ def kite_position(
 
     For many lengths at the same wind, call :func:`solve_line` once and use
     :func:`positions_for_lengths` instead (one integration serves all lengths).
+
+    Parameters
+    ----------
+    material : LineMaterial
+        The line.
+    kite : Kite
+        The kite.
+    wind_m_s : float
+        Uniform horizontal wind speed (m/s).
+    line_length_m : float
+        Line length (m).
+    atmosphere : Atmosphere
+        Air density and gravity.
+    ds_m : float
+        Segment length (m).
+
+    Returns
+    -------
+    KitePosition
     """
     sol = solve_line(material, kite, [wind_m_s], line_length_m, atmosphere, ds_m)
     return sol.position(0, line_length_m)
@@ -321,6 +370,20 @@ def line_length_for_height(solution: LineSolution, wind_index: int, height_m: fl
 
     Interpolates the kite height along the solved line. Returns NaN when the height is not
     reached before the line touches the ground or the solved length ends.
+
+    Parameters
+    ----------
+    solution : LineSolution
+        The solved line.
+    wind_index : int
+        Index of the wind in ``solution.winds_m_s``.
+    height_m : float
+        Kite height above the operator (m).
+
+    Returns
+    -------
+    float
+        Line length (m); 0 when ``height_m`` ≤ 0, NaN when the height is not reached or the kite cannot fly.
     """
     if not solution.can_fly[wind_index]:
         return float("nan")

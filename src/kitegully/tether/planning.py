@@ -66,7 +66,22 @@ def line_length_for_angle(height_m: float, flight_angle_deg: float) -> float:
 
 
 def stereo_precision_m(height_m: float, base_m: float, camera: PlanningCamera) -> float:
-    """Vertical precision of a stereo pair ``δz = (H/f)·(H/B)·p`` (Moritani et al. 2010 eq. 1), m."""
+    """Vertical precision of a stereo pair ``δz = (H/f)·(H/B)·p`` (Moritani et al. 2010 eq. 1), m.
+
+    Parameters
+    ----------
+    height_m : float
+        Camera height above the ground (m).
+    base_m : float
+        Stereo base (m).
+    camera : PlanningCamera
+        Gives the focal length and the pixel pitch.
+
+    Returns
+    -------
+    float
+        δz (m); infinite when ``base_m`` ≤ 0.
+    """
     if base_m <= 0:
         return float("inf")
     return (height_m / (camera.focal_length_mm * 1e-3)) * (height_m / base_m) * camera.pixel_pitch_m

@@ -27,6 +27,17 @@ def plot_line_shapes(
 
     The perfect (weightless, dragless) line is drawn thin grey for reference. Lines that
     touch the ground, and kites that cannot fly, are named in the legend instead of drawn.
+
+    Parameters
+    ----------
+    solutions : dict of str to LineSolution
+        Solved line per material; the keys title the panels.
+    reference : LineSolution
+        The perfect line; each wind is drawn against the reference wind nearest to it.
+    line_length_m : float
+        Length of line drawn (m).
+    path : str
+        Figure file.
     """
     fig, axes = new_figure(1, len(solutions), figsize=(3.4 * len(solutions), 3.4), sharey=True, squeeze=False)
     winds = list(reference.winds_m_s)
@@ -55,7 +66,18 @@ def plot_line_shapes(
 
 
 def plot_flight_angle_vs_length(table: pd.DataFrame, path: str, reference_material: str | None = None) -> None:
-    """Fig. 6: flight angle against line length for each wind, one panel per material."""
+    """Fig. 6: flight angle against line length for each wind, one panel per material.
+
+    Parameters
+    ----------
+    table : DataFrame
+        :func:`kitegully.tether.analysis.flight_angle_table`: columns ``material, wind_m_s, line_length_m,
+        flight_angle_deg, status``.
+    path : str
+        Figure file.
+    reference_material : str or None
+        Material drawn as a dashed "perfect line" (its middle wind) in every panel instead of in its own panel.
+    """
     materials = [m for m in table["material"].unique() if m != reference_material]
     fig, axes = new_figure(1, len(materials), figsize=(3.4 * len(materials), 3.2), sharey=True, squeeze=False)
     winds = sorted(table["wind_m_s"].unique())
@@ -90,6 +112,16 @@ def plot_observed_flight_angles(
     Each box spans the flight's line lengths (x) and the range of its measured angles (y);
     the median per line length is marked. ``simulated`` (columns ``line_length_m,
     flight_angle_deg, wind_m_s``) overlays the model's curves for the same line material.
+
+    Parameters
+    ----------
+    summary : DataFrame
+        :func:`kitegully.tether.gps.summarise_flight_angles`: columns ``flight, kite, line_length_m,
+        min_deg, median_deg, max_deg``.
+    simulated : DataFrame or None
+        The model's curves; ``None`` or empty draws none.
+    path : str
+        Figure file.
     """
     fig, ax = new_figure(figsize=(5.5, 3.6))
     kites = list(summary["kite"].unique())

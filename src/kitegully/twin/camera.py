@@ -87,7 +87,20 @@ class Camera:
         return xn * s, yn * s
 
     def undistort(self, xd: np.ndarray, yd: np.ndarray, iterations: int = 20) -> tuple[np.ndarray, np.ndarray]:
-        """Invert :meth:`distort` by fixed-point iteration (converges for |k·r²| ≪ 1)."""
+        """Invert :meth:`distort` by fixed-point iteration (converges for |k·r²| ≪ 1).
+
+        Parameters
+        ----------
+        xd, yd : ndarray
+            Distorted normalised coordinates.
+        iterations : int
+            Number of fixed-point iterations.
+
+        Returns
+        -------
+        xn, yn : ndarray
+            Undistorted normalised coordinates.
+        """
         xn, yn = np.array(xd, dtype=float), np.array(yd, dtype=float)
         for _ in range(iterations):
             r2 = xn * xn + yn * yn

@@ -25,6 +25,21 @@ def retreat_heads(gullies: list[Gully], ecfg: dict, seed: int) -> dict[int, floa
     tracing step), so the retreated head keeps the form it had at epoch 1: depth and width
     are set per vertex and interpolated along segments, and one vertex at the new head
     would make the head a wedge as long as the retreat instead of a headwall.
+
+    Parameters
+    ----------
+    gullies : list of Gully
+        The epoch-1 network; headcut gullies (not the wadi) are extended, and receiving gullies get
+        their ``join_index`` shifted.
+    ecfg : mapping
+        ``twin.epoch2``; reads ``headcut_retreat_m`` (range, m).
+    seed : int
+        Master seed.
+
+    Returns
+    -------
+    dict of int to float
+        Retreat (m) per gully id of the gullies that were extended.
     """
     out: dict[int, float] = {}
     shift: dict[int, int] = {}
@@ -51,7 +66,22 @@ def retreat_heads(gullies: list[Gully], ecfg: dict, seed: int) -> dict[int, floa
 
 
 def widening(gullies: list[Gully], ecfg: dict, seed: int) -> dict[int, tuple[float, float]]:
-    """Width factor and depth increment per gully id (wadi included)."""
+    """Width factor and depth increment per gully id (wadi included).
+
+    Parameters
+    ----------
+    gullies : list of Gully
+        The network.
+    ecfg : mapping
+        ``twin.epoch2``; reads ``widening_fraction`` (range) and ``deepening_m`` (m).
+    seed : int
+        Master seed.
+
+    Returns
+    -------
+    dict of int to tuple of float
+        ``(1 + widening fraction, deepening_m)`` per gully id.
+    """
     lo, hi = ecfg["widening_fraction"]
     return {
         g.gully_id: (1.0 + float(rng_for(seed, "twin", "epoch2", "widen", str(g.gully_id)).uniform(lo, hi)), ecfg["deepening_m"])
@@ -60,7 +90,23 @@ def widening(gullies: list[Gully], ecfg: dict, seed: int) -> dict[int, tuple[flo
 
 
 def sheet_erosion(xs: np.ndarray, ys: np.ndarray, ecfg: dict, seed: int) -> np.ndarray:
-    """Lowering (m, ≥ 0) of bare soil on a grid: mean ``sheet_erosion_m``, patchy."""
+    """Lowering (m, ≥ 0) of bare soil on a grid: mean ``sheet_erosion_m``, patchy.
+
+    Parameters
+    ----------
+    xs, ys : ndarray
+        Column and row coordinates of the grid (m); the result has shape ``(len(ys), len(xs))``.
+    ecfg : mapping
+        ``twin.epoch2``; reads ``sheet_erosion_m`` (m), ``sheet_erosion_wavelength_m`` (m) and
+        ``sheet_erosion_variability``.
+    seed : int
+        Seed of the noise field.
+
+    Returns
+    -------
+    ndarray (len(ys), len(xs)) float64
+        Lowering (m, ≥ 0).
+    """
     n = fbm_grid(xs, ys, seed, np.array([ecfg["sheet_erosion_wavelength_m"]]), np.array([1.0]))
     return ecfg["sheet_erosion_m"] * np.clip(1.0 + ecfg["sheet_erosion_variability"] * n, 0.0, None)
 

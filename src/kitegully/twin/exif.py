@@ -34,7 +34,22 @@ def focal_35mm(camera: Camera) -> int:
 
 
 def exif_bytes(camera: Camera, when: datetime, exposure_time_s: float | None = None) -> bytes:
-    """Serialised EXIF block for one image of ``camera`` taken at ``when``."""
+    """Serialised EXIF block for one image of ``camera`` taken at ``when``.
+
+    Parameters
+    ----------
+    camera : Camera
+        Make, model, image size, sensor size and focal length written to the tags.
+    when : datetime
+        Time the image was taken (DateTime, DateTimeOriginal, SubSecTimeOriginal in 1/100 s).
+    exposure_time_s : float or None
+        Exposure time (s); None or 0 writes no ExposureTime tag.
+
+    Returns
+    -------
+    bytes
+        The EXIF block as made by ``piexif.dump``, without GPS tags or thumbnail.
+    """
     px_per_cm_x = camera.width / (camera.sensor_width_mm / 10.0)
     px_per_cm_y = camera.height / (camera.sensor_height_mm / 10.0)
     zeroth = {
@@ -61,7 +76,19 @@ def exif_bytes(camera: Camera, when: datetime, exposure_time_s: float | None = N
 
 
 def write_jpeg(path: str | Path, image: np.ndarray, exif: bytes, quality: int) -> None:
-    """Write an 8-bit RGB (or single-channel) image as JPEG with the EXIF block."""
+    """Write an 8-bit RGB (or single-channel) image as JPEG with the EXIF block.
+
+    Parameters
+    ----------
+    path : str or Path
+        The JPEG file; its parent folder is created.
+    image : ndarray (H, W, 3) or (H, W) uint8
+        The image; a single channel given as ``(H, W, 1)`` is written as greyscale.
+    exif : bytes
+        EXIF block, as from :func:`exif_bytes`.
+    quality : int
+        JPEG quality; 95 or more keeps full chroma resolution (no subsampling).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     arr = image[..., 0] if image.ndim == 3 and image.shape[2] == 1 else image

@@ -43,7 +43,21 @@ def _axes(ax, extent):
 
 
 def hillshade_gullies(dtm: Path, centrelines: Path, out: Path, max_px: int = 1500, attribution: str | None = None) -> None:
-    """Shaded DTM (sun from the east, as Fig. 8) with the truth gully network coloured by depth."""
+    """Shaded DTM (sun from the east, as Fig. 8) with the truth gully network coloured by depth.
+
+    Parameters
+    ----------
+    dtm : Path
+        The truth DTM GeoTIFF.
+    centrelines : Path
+        The truth gully centrelines (``depth_m`` and ``width_m`` per reach).
+    out : Path
+        The PNG written.
+    max_px : int
+        Largest side of the raster drawn (px); the raster is decimated by a whole factor to fit.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+    """
     z, extent, cell = _read_decimated(dtm, max_px)
     zp = np.pad(np.nan_to_num(z, nan=np.nanmean(z)), 1, mode="edge")
     hs = hillshade(zp, cell, 90.0, 35.0)[1:-1, 1:-1]
@@ -62,7 +76,19 @@ def hillshade_gullies(dtm: Path, centrelines: Path, out: Path, max_px: int = 150
 
 
 def landcover_map(landcover: Path, out: Path, max_px: int = 1500, attribution: str | None = None) -> None:
-    """Land-cover classes with a legend."""
+    """Land-cover classes with a legend.
+
+    Parameters
+    ----------
+    landcover : Path
+        The land-cover GeoTIFF (class codes).
+    out : Path
+        The PNG written.
+    max_px : int
+        Largest side of the raster drawn (px); the raster is decimated by a whole factor to fit.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+    """
     a, extent, _ = _read_decimated(landcover, max_px)
     codes = list(CLASSES)
     cmap = ListedColormap(["white"] + [CLASS_COLOURS[CLASSES[c]] for c in codes])
@@ -79,7 +105,23 @@ def landcover_map(landcover: Path, out: Path, max_px: int = 1500, attribution: s
 
 def site_overview(texture: Path, targets: Path, checkpoints: Path, heads: Path, out: Path, max_px: int = 1500,
                   attribution: str | None = None) -> None:
-    """True-colour texture with GCP targets, checkpoints and digitised gully heads."""
+    """True-colour texture with GCP targets, checkpoints and digitised gully heads.
+
+    Parameters
+    ----------
+    texture : Path
+        The texture GeoTIFF; bands 1 to 3 are drawn as RGB.
+    targets, checkpoints : Path
+        CSV tables of GCP targets and checkpoints (``x``, ``y``).
+    heads : Path
+        The digitised gully heads (points).
+    out : Path
+        The PNG written.
+    max_px : int
+        Largest side of the texture drawn (px); the texture is decimated by a whole factor to fit.
+    attribution : str or None
+        Data attribution printed on the figure; None prints none.
+    """
     with rasterio.open(texture) as src:
         f = max(1, int(np.ceil(max(src.width, src.height) / max_px)))
         shape = (3, max(1, src.height // f), max(1, src.width // f))

@@ -146,7 +146,26 @@ class FlightResult:
 
 
 def ou_process(rng: np.random.Generator, n: int, dt: float, sigma: float, tau: float) -> np.ndarray:
-    """Stationary Ornstein–Uhlenbeck series (sd ``sigma``, correlation time ``tau``)."""
+    """Stationary Ornstein–Uhlenbeck series (sd ``sigma``, correlation time ``tau``).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Random stream.
+    n : int
+        Number of samples.
+    dt : float
+        Time step between samples (s).
+    sigma : float
+        Standard deviation of the series (its own unit); zeros when ≤ 0.
+    tau : float
+        Correlation time (s).
+
+    Returns
+    -------
+    ndarray (n,) float64
+        The series; the first sample is drawn from the stationary distribution.
+    """
     if sigma <= 0 or n == 0:
         return np.zeros(n)
     a = np.exp(-dt / max(tau, 1e-9))
@@ -159,7 +178,22 @@ def ou_process(rng: np.random.Generator, n: int, dt: float, sigma: float, tau: f
 
 
 def footprint_along_across(camera: Camera, height_m: float, settings: FlightSettings) -> tuple[float, float]:
-    """Footprint extents (m) along and across the walking lines for a nadir view at ``height_m``."""
+    """Footprint extents (m) along and across the walking lines for a nadir view at ``height_m``.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    height_m : float
+        Camera height above the ground (m).
+    settings : FlightSettings
+        Gives the line azimuth and the image heading (:attr:`FlightSettings.base_heading_deg`).
+
+    Returns
+    -------
+    along, across : float
+        Extent of the footprint along and across the walking lines (m).
+    """
     fw, fh = camera.footprint(height_m)
     k = np.radians(settings.base_heading_deg)
     up = np.array([np.sin(k), np.cos(k)])
@@ -183,6 +217,22 @@ def plan_strips(
     each extends ``along_extension`` footprints beyond the site at both ends. The line
     lengths cycle over the strips. The operator walks each camera strip shifted upwind by
     the kite's downwind distance.
+
+    Parameters
+    ----------
+    extent : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    camera : Camera
+        The camera.
+    settings : FlightSettings
+        The flight settings.
+    kite_offset : KiteOffset
+        Kite position ``(downwind_m, height_m)`` relative to the operator's hand for a line length (m).
+
+    Returns
+    -------
+    list of Strip
+        The strips in walking order; odd strips run the other way.
     """
     xmin, ymin, xmax, ymax = extent
     centre = np.array([(xmin + xmax) / 2, (ymin + ymax) / 2])
@@ -225,7 +275,26 @@ def plan_strips(
 def footprint_site_fraction(
     camera: Camera, xy: np.ndarray, height_m: float, heading_deg: float, extent: tuple[float, float, float, float]
 ) -> float:
-    """Share of a nadir footprint (planned height, given heading) that lies inside the extent."""
+    """Share of a nadir footprint (planned height, given heading) that lies inside the extent.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    xy : ndarray (2,)
+        Centre of the footprint (m).
+    height_m : float
+        Planned camera height above the ground (m).
+    heading_deg : float
+        Azimuth of the image top (degrees).
+    extent : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+
+    Returns
+    -------
+    float
+        Share (0 to 1) of a 12 × 12 grid of points over the footprint that lie inside the extent.
+    """
     fw, fh = camera.footprint(height_m)
     k = np.radians(heading_deg)
     up = np.array([np.sin(k), np.cos(k)])
@@ -280,6 +349,27 @@ def simulate_flight(
     triggers, GPS errors) all draw from the one ``rng`` stream in a fixed order, and every
     twin's photos and logs depend on that order; a split would have to hand the stream on
     in exactly the same order, which one linear body makes plain to read and to keep.
+
+    Parameters
+    ----------
+    extent : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    camera : Camera
+        The camera.
+    settings : FlightSettings
+        The flight settings.
+    kite_offset : KiteOffset
+        Kite position ``(downwind_m, height_m)`` relative to the operator's hand for a line length (m).
+    ground_z : GroundZ
+        Ground elevation (m) at map coordinates, for the operator's walk.
+    rng : numpy.random.Generator
+        The one random stream of the flight.
+
+    Returns
+    -------
+    FlightResult
+        Strips, poses of the kept shots, operator and camera tracks, their GPS logs, the number
+        of triggers and a summary.
     """
     strips = plan_strips(extent, camera, settings, kite_offset)
     dt = settings.time_step_s
@@ -408,7 +498,23 @@ def pose_from_row(row: Mapping[str, Any], dt_s: float = 0.0) -> Pose:
 
 
 def gps_log(track: pd.DataFrame, settings: FlightSettings, rng: np.random.Generator) -> pd.DataFrame:
-    """A GPS logger's record of a track: one fix every ``gps_interval_s`` with correlated noise."""
+    """A GPS logger's record of a track: one fix every ``gps_interval_s`` with correlated noise.
+
+    Parameters
+    ----------
+    track : DataFrame
+        Track with ``time_s``, ``x_m``, ``y_m``, ``z_m``.
+    settings : FlightSettings
+        Gives ``gps_interval_s``, the noise (``gps_sigma_m``, ``gps_vertical_sigma_m``,
+        ``gps_correlation_s``) and ``start_time``.
+    rng : numpy.random.Generator
+        Random stream.
+
+    Returns
+    -------
+    DataFrame
+        One row per fix: ``time_s``, ``timestamp`` (ISO), ``x_m``, ``y_m``, ``z_m``.
+    """
     t = track["time_s"].to_numpy()
     tg = np.arange(0.0, t[-1] + 1e-9, settings.gps_interval_s)
     x = np.interp(tg, t, track["x_m"])
@@ -429,7 +535,19 @@ def gps_log(track: pd.DataFrame, settings: FlightSettings, rng: np.random.Genera
 
 
 def write_gpx(log: pd.DataFrame, crs: str, path: str | Path, name: str) -> None:
-    """Write a GPS log (site CRS) as a GPX 1.1 track in WGS84."""
+    """Write a GPS log (site CRS) as a GPX 1.1 track in WGS84.
+
+    Parameters
+    ----------
+    log : DataFrame
+        GPS log with ``x_m``, ``y_m``, ``z_m`` and ``timestamp`` (UTC, no zone), as from :func:`gps_log`.
+    crs : str
+        CRS of ``x_m`` and ``y_m``.
+    path : str or Path
+        The GPX file; its parent folder is created.
+    name : str
+        Track name.
+    """
     from pyproj import Transformer
 
     tr = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
@@ -463,7 +581,25 @@ def read_extent(path: str | Path) -> tuple[float, float, float, float]:
 
 
 def tether_kite_offset(tether_cfg: Mapping[str, Any], material: str, kite: str, wind_m_s: float) -> KiteOffset:
-    """Kite position for a line length from the tether model (``kitegully.tether.line``)."""
+    """Kite position for a line length from the tether model (``kitegully.tether.line``).
+
+    Parameters
+    ----------
+    tether_cfg : mapping
+        The ``tether`` config section; ``segment_length_m`` (m, default 1) is the integration step.
+    material : str
+        Name of a line of ``tether.lines``.
+    kite : str
+        Name of a kite of ``tether.kites``.
+    wind_m_s : float
+        Wind speed (m/s).
+
+    Returns
+    -------
+    KiteOffset
+        Function of the line length (m) giving the kite's ``(downwind_m, height_m)``; it raises
+        InputError when the kite does not fly at that length.
+    """
     from kitegully.tether.config import tether_from_config
     from kitegully.tether.line import FlightStatus, kite_position
 

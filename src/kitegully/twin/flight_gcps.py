@@ -33,6 +33,27 @@ def target_pixels(
     the surface (ray cast, ``occlusion_tolerance_m``). Cost: O(images × targets) rays.
 
     Returns columns ``image, gcp_id, im_x_px, im_y_px, fully_in_view, distance_m``.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    poses : DataFrame
+        One row per image (``poses.csv``: ``image`` and the pose columns of
+        :func:`kitegully.twin.flight.pose_from_row`).
+    targets : DataFrame
+        True targets: ``gcp_id``, ``x``, ``y``, ``z`` (m) and ``size_m``.
+    scene : Scene
+        The surface, for corner heights and occlusion.
+    edge_margin_px : float
+        Least distance of the five points from the image border (px).
+    occlusion_tolerance_m : float
+        Tolerance of the visibility test (m), see :func:`kitegully.twin.render.visible`.
+
+    Returns
+    -------
+    DataFrame
+        One row per image and target whose centre projects into the image or within half a pixel of it.
     """
     rows = []
     centres = targets[["x", "y", "z"]].to_numpy(float)
@@ -76,6 +97,24 @@ def digitise(
     Each target is measured in at most ``max_images_per_target`` images (those where it is
     closest to the image centre, i.e. least distorted), with Gaussian click noise of
     ``click_sigma_px`` per axis. Returns ``image, gcp_id, im_x_px, im_y_px``.
+
+    Parameters
+    ----------
+    truth : DataFrame
+        True pixel positions, as from :func:`target_pixels`.
+    camera : Camera
+        The camera; its principal point is the image centre used.
+    rng : numpy.random.Generator
+        Random stream for the click noise.
+    click_sigma_px : float
+        Standard deviation of the click noise per axis (px).
+    max_images_per_target : int
+        Most images in which a target is measured.
+
+    Returns
+    -------
+    DataFrame
+        One row per click, sorted by image and target.
     """
     vis = truth[truth["fully_in_view"]].copy()
     vis["r_px"] = np.hypot(vis["im_x_px"] - camera.cx, vis["im_y_px"] - camera.cy)
@@ -96,6 +135,18 @@ def write_odm_gcp_list(path: str | Path, crs: str, observations: pd.DataFrame, s
     """Write an OpenDroneMap ``gcp_list.txt``: projection line, then one observation per line.
 
     ``geo_x geo_y geo_z im_x im_y image_name gcp_name`` with the surveyed coordinates.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; its parent folder is created.
+    crs : str
+        Projection line (the survey's CRS).
+    observations : DataFrame
+        Image observations: ``image``, ``gcp_id``, ``im_x_px``, ``im_y_px``.
+    survey : DataFrame
+        Surveyed targets: ``gcp_id``, ``x``, ``y``, ``z`` (m); InputError when an observed target is
+        missing.
     """
     sv = survey.set_index(survey["gcp_id"].astype(str))
     lines = [crs]

@@ -243,6 +243,35 @@ def flight_summary(
 
     ``core_counts``: images per ground point in the site's core; ``per_target``: GCP
     observations per target; ``min_images``: ``flight.coverage.min_images``.
+
+    Parameters
+    ----------
+    poses : DataFrame
+        True poses, one row per image (``strip``).
+    stats : DataFrame
+        Per-image facts of :func:`kitegully.twin.render_flight.render_flight` (``gsd_m``, ``blur_px``).
+    overlap : DataFrame
+        Forward overlap per image pair (``forward_overlap``), from
+        :func:`kitegully.twin.render_flight.coverage`.
+    core_counts : ndarray
+        Images per ground point in the core.
+    obs : DataFrame
+        The digitised GCP observations.
+    per_target : Series
+        GCP observations per target.
+    min_images : int
+        ``flight.coverage.min_images``.
+    render_s : float
+        Wall-clock rendering time (s).
+    render_cpu_s : float
+        CPU time of all rendering threads (s).
+    threads : int
+        Rendering threads.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``quantity, value, unit``, one row per quantity.
     """
     return pd.DataFrame(
         [
@@ -274,6 +303,20 @@ def image_footprints(camera: Camera, poses: pd.DataFrame, gsd_m: pd.Series) -> l
     """Ground polygons (4 x 2, m) of every image: corners on the plane through the centre ray's ground hit.
 
     ``gsd_m`` (by image name) gives the ground distance of the centre ray (GSD × focal length in px).
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    poses : DataFrame
+        True poses, one row per image (``image`` and the pose columns).
+    gsd_m : Series
+        GSD (m) by image name.
+
+    Returns
+    -------
+    list of ndarray (4, 2)
+        Corner coordinates (m) of each image's footprint, in the order of ``poses``.
     """
     corners_px = np.array([[-0.5, -0.5], [camera.width - 0.5, -0.5], [camera.width - 0.5, camera.height - 0.5],
                            [-0.5, camera.height - 0.5]])
@@ -303,6 +346,27 @@ def flight_map(
 
     ``image_stats`` is indexed by image name (``gsd_m``); ``flight_cfg`` gives the wind
     (``wind_from_deg``, ``wind_speed_m_s``) and ``line_lengths_m`` for the title.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    poses : DataFrame
+        True poses, one row per image (``x_m``, ``y_m``, ``z_m`` and the pose columns).
+    image_stats : DataFrame
+        Per-image facts.
+    operator_track : DataFrame
+        The operator's path (``x_m``, ``y_m``).
+    survey : DataFrame
+        Surveyed GCP targets (``x``, ``y``).
+    extent : tuple of float
+        The twin's site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    flight_cfg : mapping
+        The ``flight:`` section.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.collections import PolyCollection
 
@@ -342,7 +406,27 @@ def sample_images(
     images_dir: str | Path,
     n_sample_images: int,
 ):
-    """Evenly spaced sample photos with their digitised GCPs, GSD and exposure offset in the titles."""
+    """Evenly spaced sample photos with their digitised GCPs, GSD and exposure offset in the titles.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera; its image shape sets the figure's aspect.
+    poses : DataFrame
+        True poses, one row per image (``image``).
+    image_stats : DataFrame
+        Per-image facts indexed by image name (``gsd_m``, ``ev_offset``).
+    observations : DataFrame
+        Digitised GCPs (``image``, ``gcp_id``, ``im_x_px``, ``im_y_px``).
+    images_dir : str or Path
+        Folder of the JPEGs.
+    n_sample_images : int
+        Number of photos shown (at most the number of images).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     from PIL import Image
 
     obs, stats = observations, image_stats

@@ -126,7 +126,33 @@ _REASONS = {1: "edge", 2: "confluence", 3: "depression", 4: "max_length"}
 
 # ------------------------------------------------------------------------------ heads
 def sample_heads(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace, tgrid, occ, seed: int) -> list[tuple[float, float, str]]:
-    """Gully heads on field-row boundaries, Poisson-disc thinned; returns (x, y, bank)."""
+    """Gully heads on field-row boundaries, Poisson-disc thinned; returns (x, y, bank).
+
+    Parameters
+    ----------
+    valley : Valley
+        The valley.
+    fields : Fields
+        The field layout; heads sit on its row boundaries.
+    gcfg : mapping
+        ``twin.gullies``; reads ``heads_per_km2`` (per bank), ``head_edge_margin_m`` (m),
+        ``head_min_height_above_lake_m`` (m) and ``min_head_spacing_m`` (m).
+    bounds : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    z_trace : ndarray
+        Pre-gully surface (m) on ``tgrid``.
+    tgrid : GridSpec
+        The tracing grid.
+    occ : ndarray of int
+        Occupancy on ``tgrid`` (−1 free); heads lie on free cells only.
+    seed : int
+        Master seed.
+
+    Returns
+    -------
+    list of tuple (float, float, str)
+        ``(x, y, bank)`` per head (m; bank ``"right"`` or ``"left"``).
+    """
     xmin, ymin, xmax, ymax = bounds
     margin = gcfg["head_edge_margin_m"]
     rng = rng_for(seed, "twin", "gully_heads")
@@ -166,7 +192,22 @@ def sample_heads(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace, tg
 
 # ---------------------------------------------------------------------------- network
 def wadi_centreline(valley: Valley, bounds, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """The main wadi along the valley axis, from the upstream site edge to the dam."""
+    """The main wadi along the valley axis, from the upstream site edge to the dam.
+
+    Parameters
+    ----------
+    valley : Valley
+        The valley.
+    bounds : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    step : float
+        Vertex spacing along the valley (m).
+
+    Returns
+    -------
+    x, y : ndarray
+        Vertices (m) within 20 m of the site, from upstream down.
+    """
     xmin, ymin, xmax, ymax = bounds
     u = np.arange(valley.u_min - 50.0, valley.u_dam - 0.5 * valley.dam_crest_width, step)
     x, y = valley.xy(u, valley.axis_v(u))
@@ -181,6 +222,29 @@ def plan_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: np
     which traces a network on an observed DEM).
 
     Complexity O(heads·max_steps) for tracing plus O(cells) for the gradient.
+
+    Parameters
+    ----------
+    valley : Valley
+        The valley.
+    fields : Fields
+        The field layout.
+    gcfg : mapping
+        ``twin.gullies``: head, tracing, joining and wadi keys.
+    bounds : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    z_trace : ndarray
+        Pre-gully surface (m) on ``tgrid``.
+    tgrid : GridSpec
+        The tracing grid.
+    seed : int
+        Master seed.
+
+    Returns
+    -------
+    list of Gully
+        The wadi (id 0) first, then the gullies in tracing order; widths and depths not yet set
+        (:func:`assign_attributes`).
     """
     cell = tgrid.cell
     gy_r, gx = np.gradient(z_trace, cell)
@@ -273,6 +337,19 @@ def assign_attributes(gullies: list[Gully], gcfg: dict, valley: Valley, seed: in
 
     ``widen`` maps gully id → (width factor, depth increment) for the second epoch.
     Random draws are keyed by gully id so both epochs share them.
+
+    Parameters
+    ----------
+    gullies : list of Gully
+        The network, as from :func:`plan_network`; updated in place.
+    gcfg : mapping
+        ``twin.gullies``: wadi, bank, shallow, shape, headcut, taper and discontinuity keys.
+    valley : Valley
+        The valley; the wadi's width and depth change linearly from its upstream end to the dam.
+    seed : int
+        Master seed.
+    widen : dict or None
+        Width factor and depth increment (m) per gully id; None for epoch 1.
     """
     # upstream channel length, tributaries first (they were traced later: reverse order)
     for g in gullies:
@@ -426,6 +503,20 @@ def carve(segs: Segments, grid: GridSpec, buffer: float) -> tuple[np.ndarray, np
 
     The rim distance is only exact within ``buffer`` of a gully (``+inf`` beyond).
     Complexity O(Σ segment bounding-box cells).
+
+    Parameters
+    ----------
+    segs : Segments
+        Centreline segments of the network.
+    grid : GridSpec
+        The grid (or a tile of it).
+    buffer : float
+        Distance beyond the rim within which the rim distance is computed (m).
+
+    Returns
+    -------
+    depth, rim : ndarray (rows, cols) float64
+        Depth (m) and distance outside the nearest rim (m) per cell.
     """
     nrow, ncol = grid.shape
     depth = np.zeros((nrow, ncol), dtype=np.float64)

@@ -75,7 +75,22 @@ class Fields:
         return np.where(k <= 0, k * self.row_depth, k * self.row_depth + jit)
 
     def col_boundary(self, bank, row, j):
-        """Distance along row ``row`` of the boundary before plot ``j`` (m), jittered per bank, row and plot."""
+        """Distance along row ``row`` of the boundary before plot ``j`` (m), jittered per bank, row and plot.
+
+        Parameters
+        ----------
+        bank : ndarray of int
+            +1 right bank, −1 left bank, 0 valley floor.
+        row : ndarray of int
+            Row index.
+        j : ndarray of int
+            Plot index along the row.
+
+        Returns
+        -------
+        ndarray
+            Boundary position (m), broadcast over the arguments.
+        """
         jit = self.plot_jitter * (2.0 * hash01(bank, row, j, seed=self.seed + 13) - 1.0)
         return np.asarray(j) * self.plot_length + jit
 
@@ -108,7 +123,22 @@ def _locate(x, step, bounds_fn):
 
 
 def plot_index(valley: Valley, fields: Fields, u: np.ndarray, vp: np.ndarray) -> PlotIndex:
-    """Locate every cell in the field layout; O(n)."""
+    """Locate every cell in the field layout; O(n).
+
+    Parameters
+    ----------
+    valley : Valley
+        The valley; gives the floor half-width.
+    fields : Fields
+        The field layout.
+    u, vp : ndarray
+        Along-valley position and signed distance from the axis (m, right bank > 0) of each cell.
+
+    Returns
+    -------
+    PlotIndex
+        Bank, row, plot and boundary distances per cell.
+    """
     bank = np.where(vp >= 0, 1, -1).astype(np.int64)
     a = np.abs(vp) - valley.floor_half_width - fields.floor_margin
     bank = np.where(a < 0, 0, bank)
@@ -142,7 +172,22 @@ def tillage_angle(fields: Fields, pi: PlotIndex) -> np.ndarray:
 
 
 def furrow_phase(fields: Fields, pi: PlotIndex, u: np.ndarray) -> np.ndarray:
-    """Coordinate across the furrows (m); furrows run along the tillage direction."""
+    """Coordinate across the furrows (m); furrows run along the tillage direction.
+
+    Parameters
+    ----------
+    fields : Fields
+        The field layout.
+    pi : PlotIndex
+        Plot lookup of the cells.
+    u : ndarray
+        Along-valley position of the cells (m).
+
+    Returns
+    -------
+    ndarray
+        Phase coordinate (m) per cell.
+    """
     th = tillage_angle(fields, pi)
     return -u * np.sin(th) + pi.a * np.cos(th)
 
@@ -155,7 +200,25 @@ def field_humps(fields: Fields, pi: PlotIndex) -> np.ndarray:
 
 
 def tree_heights(fields: Fields, trees: dict, pi: PlotIndex, u: np.ndarray) -> np.ndarray:
-    """Crown heights (m) of the tree rows planted on some row boundaries (0 elsewhere)."""
+    """Crown heights (m) of the tree rows planted on some row boundaries (0 elsewhere).
+
+    Parameters
+    ----------
+    fields : Fields
+        The field layout.
+    trees : mapping
+        ``twin.landcover.trees``; reads ``row_share``, ``spacing_m`` (m), ``crown_radius_m`` and
+        ``height_m`` (ranges, m).
+    pi : PlotIndex
+        Plot lookup of the cells.
+    u : ndarray
+        Along-valley position of the cells (m).
+
+    Returns
+    -------
+    ndarray float64
+        Crown height (m) per cell.
+    """
     k_b = np.where(pi.row_hi_nearer, pi.row + 1, pi.row)
     is_row = (hash01(pi.bank, k_b, seed=fields.seed + 31) < trees["row_share"]) & (pi.bank != 0) & (k_b >= 1)
     spacing = trees["spacing_m"]
@@ -176,7 +239,23 @@ def tree_heights(fields: Fields, trees: dict, pi: PlotIndex, u: np.ndarray) -> n
 
 
 def track_mask(valley: Valley, tracks: dict, u: np.ndarray, vp: np.ndarray) -> np.ndarray:
-    """Dirt tracks: wavy lines along the banks and, optionally, along the dam crest."""
+    """Dirt tracks: wavy lines along the banks and, optionally, along the dam crest.
+
+    Parameters
+    ----------
+    valley : Valley
+        The valley; gives the dam position and half-length.
+    tracks : mapping
+        ``twin.landcover.tracks``; reads ``width_m``, ``wave_amplitude_m``, ``wave_wavelength_m``,
+        ``offsets_m`` (across-valley offsets of the tracks from the axis, m) and ``over_dam``.
+    u, vp : ndarray
+        Along-valley position and signed distance from the axis (m) of each cell.
+
+    Returns
+    -------
+    ndarray bool
+        True on a track.
+    """
     half = 0.5 * tracks["width_m"]
     m = np.zeros(u.shape, dtype=bool)
     wave = tracks["wave_amplitude_m"] * np.sin(2.0 * np.pi * u / tracks["wave_wavelength_m"])
@@ -188,7 +267,21 @@ def track_mask(valley: Valley, tracks: dict, u: np.ndarray, vp: np.ndarray) -> n
 
 
 def building_heights(buildings: list[dict], x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Roof elevation (m) inside building footprints, −inf elsewhere (few buildings: loop)."""
+    """Roof elevation (m) inside building footprints, −inf elsewhere (few buildings: loop).
+
+    Parameters
+    ----------
+    buildings : list of dict
+        Buildings as from :func:`kitegully.twin.site.place_buildings` (``x``, ``y``, ``length_m``,
+        ``width_m``, ``angle_rad``, ``roof_z``).
+    x, y : ndarray
+        Map coordinates (m); broadcast together.
+
+    Returns
+    -------
+    ndarray float64
+        Roof elevation (m) per point.
+    """
     out = np.full(np.broadcast(x, y).shape, -np.inf)
     for b in buildings:
         c, s = np.cos(b["angle_rad"]), np.sin(b["angle_rad"])
@@ -201,6 +294,20 @@ def building_heights(buildings: list[dict], x: np.ndarray, y: np.ndarray) -> np.
 
 
 def noise01(xs, ys, seed: int, wavelength: float) -> np.ndarray:
-    """Two-octave value noise normalised to about [−1, 1] (patch patterns)."""
+    """Two-octave value noise normalised to about [−1, 1] (patch patterns).
+
+    Parameters
+    ----------
+    xs, ys : ndarray
+        Column and row coordinates of the grid (m).
+    seed : int
+        Seed of the noise field.
+    wavelength : float
+        Wavelength of the coarser octave (m); the second has half of it.
+
+    Returns
+    -------
+    ndarray (len(ys), len(xs)) float64
+    """
     n = fbm_grid(xs, ys, seed, np.array([wavelength, 0.5 * wavelength]), np.array([1.0, 0.5]))
     return n / 1.5

@@ -70,6 +70,20 @@ def octaves(amplitude: float, max_wavelength: float, min_wavelength: float, hurs
 
     The amplitude at wavelength λ is ``amplitude·(λ/max_wavelength)^hurst``: a fractal
     (self-affine) surface with Hurst exponent ``hurst``.
+
+    Parameters
+    ----------
+    amplitude : float
+        Amplitude of the longest wavelength.
+    max_wavelength, min_wavelength : float
+        Longest and shortest wavelength kept (m).
+    hurst : float
+        Hurst exponent.
+
+    Returns
+    -------
+    wavelengths, amplitudes : ndarray float64
+        One value per octave, longest first; both empty when ``min_wavelength > max_wavelength``.
     """
     if min_wavelength > max_wavelength:
         return np.zeros(0), np.zeros(0)
@@ -83,6 +97,20 @@ def fbm_grid(xs: np.ndarray, ys: np.ndarray, seed: int, wavelengths: np.ndarray,
     """Sum of value-noise octaves on the grid ``ys × xs`` (rows × columns), float64.
 
     Complexity O(len(xs)·len(ys)·octaves), parallel over rows.
+
+    Parameters
+    ----------
+    xs, ys : ndarray
+        Column and row coordinates (m).
+    seed : int
+        Noise seed; each octave adds its own offset.
+    wavelengths, amplitudes : ndarray
+        The octaves, as from :func:`octaves`.
+
+    Returns
+    -------
+    ndarray (len(ys), len(xs)) float64
+        Zeros when there are no octaves.
     """
     out = np.zeros((len(ys), len(xs)), dtype=np.float64)
     if len(wavelengths):
@@ -92,7 +120,22 @@ def fbm_grid(xs: np.ndarray, ys: np.ndarray, seed: int, wavelengths: np.ndarray,
 
 
 def fbm_points(xs: np.ndarray, ys: np.ndarray, seed: int, wavelengths: np.ndarray, amplitudes: np.ndarray) -> np.ndarray:
-    """Same noise as :func:`fbm_grid` at scattered points."""
+    """Same noise as :func:`fbm_grid` at scattered points.
+
+    Parameters
+    ----------
+    xs, ys : ndarray
+        Coordinates of the points (m); flattened.
+    seed : int
+        Noise seed.
+    wavelengths, amplitudes : ndarray
+        The octaves, as from :func:`octaves`.
+
+    Returns
+    -------
+    ndarray (N,) float64
+        Noise value per point.
+    """
     xs = np.ascontiguousarray(np.ravel(xs), np.float64)
     ys = np.ascontiguousarray(np.ravel(ys), np.float64)
     out = np.zeros(xs.size, dtype=np.float64)

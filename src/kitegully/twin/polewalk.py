@@ -208,6 +208,30 @@ def resting_plane(dem: np.ndarray, grid: GridSpec, corner: np.ndarray, phi: floa
     rest.  The strips' plan footprint depends on the plane's tilt (legs of 1 m in 3-D), so
     it is re-solved ``iterations`` times from the previous plane (start: the least-squares
     plane ``ga, gb``).  O(iterations · samples) plus a 3-variable LP.
+
+    Parameters
+    ----------
+    dem : ndarray (H, W)
+        Surface heights (m) on ``grid``.
+    grid : GridSpec
+        The DEM's grid.
+    corner : ndarray (2,)
+        Map x, y of the rule's corner (m).
+    phi : float
+        Plan azimuth of leg A (rad, anticlockwise from +x).
+    sign : float
+        +1 or −1: the side to which leg B turns from leg A.
+    ga, gb : float
+        Slopes ``dz/dx`` and ``dz/dy`` of the starting plane.
+    iterations : int
+        Number of solves.
+
+    Returns
+    -------
+    ga, gb : float
+        Slopes of the resting plane.
+    corner_z : float
+        Height of the plane at the corner (m).
     """
     from scipy.optimize import linprog
 
@@ -287,6 +311,30 @@ def composite_rule(
     rule's plane inside the strip nearer than the terrain depth (as
     :func:`composite_spheres`); the paint is Lambert-shaded by the scene's sun in linear
     light and re-encoded.  O(s² · bounding-box pixels).
+
+    Parameters
+    ----------
+    refl : ndarray (height, width, 3) float
+        Rendered reflectance (0–1); changed in place.
+    depth : ndarray (height, width)
+        Terrain distance along each pixel's ray (m), NaN where nothing was hit.
+    camera : Camera
+        The camera.
+    pose : Pose
+        The camera pose.
+    rule : ndarray (3, 3)
+        The rule's points (m), as above.
+    sun : ndarray (3,)
+        Unit vector towards the sun (east, north, up).
+    diffuse : float
+        Diffuse fraction of the light (0–1).
+    supersampling : int
+        ``s``: rays per pixel side.
+
+    Returns
+    -------
+    ndarray
+        ``refl``, with the rule drawn in.
     """
     a_end, C, b_end = (np.asarray(p, float) for p in rule)
     ua, ub = a_end - C, b_end - C
@@ -390,7 +438,21 @@ def prepare_pole_scene(scene: CloseRangeScene, sphere_radius_m: float, folding_r
 
 
 def look_at(C: np.ndarray, target: np.ndarray, roll_rad: float = 0.0) -> np.ndarray:
-    """World → camera rotation of a camera at ``C`` looking at ``target`` (image x to the right, level horizon)."""
+    """World → camera rotation of a camera at ``C`` looking at ``target`` (image x to the right, level horizon).
+
+    Parameters
+    ----------
+    C : ndarray (3,)
+        Camera centre (m).
+    target : ndarray (3,)
+        World point on the optical axis (m).
+    roll_rad : float
+        Roll about the optical axis (rad).
+
+    Returns
+    -------
+    ndarray (3, 3)
+    """
     z = np.asarray(target, float) - np.asarray(C, float)
     z /= np.linalg.norm(z)
     x = np.cross(z, [0.0, 0.0, 1.0])
@@ -414,7 +476,22 @@ def _ground_plane(render: Scene):
 
 
 def ground_reach(render: Scene, centre: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Distance (m) from ``centre`` to the edge of the rendered DEM along each direction ``angles`` (rad from +x)."""
+    """Distance (m) from ``centre`` to the edge of the rendered DEM along each direction ``angles`` (rad from +x).
+
+    Parameters
+    ----------
+    render : Scene
+        The rendered scene; its DEM's footprint is used.
+    centre : ndarray (2,)
+        Map x, y of the start point (m).
+    angles : ndarray
+        Directions (rad, anticlockwise from +x).
+
+    Returns
+    -------
+    ndarray
+        Distance (m, ≥ 0) per direction.
+    """
     h, w = render.dsm.shape
     x0, x1 = render.x0, render.x0 + w * render.cell
     y1, y0 = render.y0, render.y0 - h * render.cell
@@ -441,6 +518,24 @@ def walk_poses(
     ring loses overlap (scenes 04/05 did not connect with a ring 2.5–3 m off the DEM).
     Ground heights come from the DEM (bilinear; off the DEM from the plane fitted to it),
     the camera is ``pole_height_m`` above them.
+
+    Parameters
+    ----------
+    pscene : PoleScene
+        The scene.
+    walk : PoleWalk
+        Number of images, pole height, standoff and jitters.
+    rng : numpy.random.Generator
+        Random stream for the jitters.
+    max_radius_m : float or None
+        Cap on the nominal radius (m); None for none.
+    min_radius_m : float or None
+        Least radius (m) when pulling the ring in to the DEM's edge; None keeps the nominal radius.
+
+    Returns
+    -------
+    list of Pose
+        ``walk.n_images`` poses, in order round the ring.
     """
     radius = pscene.patch_reach_m + walk.standoff_m
     if max_radius_m is not None:
@@ -478,6 +573,34 @@ def composite_spheres(
     ``|C + t d − S| = r`` has a root nearer than the terrain depth.  Coverage blends the
     sphere's shaded colour (Lambert: ``diffuse + (1 − diffuse)·max(n·sun, 0)``, in linear
     light, re-encoded with the scene gamma) with the terrain's.
+
+    Parameters
+    ----------
+    refl : ndarray (height, width, 3) float
+        Rendered reflectance (0–1); changed in place.
+    depth : ndarray (height, width)
+        Terrain distance along each pixel's ray (m), NaN where nothing was hit.
+    camera : Camera
+        The camera.
+    pose : Pose
+        The camera pose.
+    centres : ndarray (K, 3)
+        Sphere centres (m).
+    radius : float
+        Sphere radius (m).
+    colour : ndarray (3,)
+        Encoded colour of a fully lit sphere (0–1).
+    sun : ndarray (3,)
+        Unit vector towards the sun (east, north, up).
+    diffuse : float
+        Diffuse fraction of the light (0–1).
+    supersampling : int
+        ``s``: rays per pixel side.
+
+    Returns
+    -------
+    ndarray
+        ``refl``, with the spheres drawn in.
     """
     h, w = refl.shape[:2]
     inv = 1.0 / supersampling
@@ -518,7 +641,22 @@ def composite_spheres(
 
 
 def project_spheres(camera: Camera, pose: Pose, centres: np.ndarray) -> np.ndarray:
-    """True images (px) of the sphere centres, NaN behind the camera."""
+    """True images (px) of the sphere centres, NaN behind the camera.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    pose : Pose
+        The camera pose.
+    centres : ndarray (K, 3)
+        Sphere centres (m).
+
+    Returns
+    -------
+    ndarray (K, 2)
+        Pixel positions (px).
+    """
     return camera.project(np.atleast_2d(centres), pose)
 
 
@@ -530,6 +668,26 @@ def photograph_walk(
 
     ``effects`` default: the scene's tones (gamma 1), 0.1 EV exposure scatter, 20 %
     vignetting, read and shot noise.
+
+    Parameters
+    ----------
+    pscene : PoleScene
+        The scene.
+    walk : PoleWalk
+        Gives the camera and the supersampling.
+    poses : list of Pose
+        Camera poses, as from :func:`walk_poses`.
+    rng : numpy.random.Generator
+        Random stream for exposure and noise.
+    effects : Photographic or None
+        Camera effects; None for the default above.
+
+    Yields
+    ------
+    index : int
+        Position of the pose in ``poses``.
+    image : ndarray (height, width, 3) uint8
+        The photograph.
     """
     cam = walk.camera()
     fx = effects or Photographic(exposure_gain=1.0, exposure_ev_sd=0.1, vignetting=0.2, gamma=1.0,

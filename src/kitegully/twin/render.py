@@ -436,7 +436,22 @@ def _cast_many(O, D, dsm, x0, y0, cell, bmax, block, smax, sblock, zmin, zmax, o
 
 
 def cast_rays(scene: Scene, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Distance (m) along each unit ray to the first surface hit; NaN where none."""
+    """Distance (m) along each unit ray to the first surface hit; NaN where none.
+
+    Parameters
+    ----------
+    scene : Scene
+        The surface.
+    origins : ndarray (N, 3)
+        Ray origins in world coordinates (m).
+    directions : ndarray (N, 3)
+        Ray directions; normalised here, so any length will do.
+
+    Returns
+    -------
+    ndarray (N,) float64
+        Distance (m) from each origin to the first hit; NaN where the ray hits nothing.
+    """
     O = np.ascontiguousarray(np.atleast_2d(origins), dtype=np.float64)
     D = np.atleast_2d(np.asarray(directions, dtype=np.float64))
     D = np.ascontiguousarray(D / np.linalg.norm(D, axis=1, keepdims=True))
@@ -451,6 +466,22 @@ def visible(scene: Scene, pose: Pose, points: np.ndarray, tolerance_m: float) ->
 
     A point is visible when the first surface hit along the ray towards it lies within
     ``tolerance_m`` of the point's distance (points on the surface) or beyond it.
+
+    Parameters
+    ----------
+    scene : Scene
+        The surface.
+    pose : Pose
+        Camera pose; only its centre is used.
+    points : ndarray (N, 3)
+        World points (m).
+    tolerance_m : float
+        Allowed shortfall of the first hit before the point (m).
+
+    Returns
+    -------
+    ndarray (N,) bool
+        True where the point is visible; also True where the ray hits no surface at all.
     """
     P = np.atleast_2d(np.asarray(points, dtype=float))
     D = P - pose.C
@@ -569,6 +600,19 @@ def photograph(
     Order: exposure (random EV offset) → vignetting → motion blur → tone curve →
     sensor noise → quantisation. Vectorised; O(pixels).
 
+    Parameters
+    ----------
+    reflectance : ndarray (height, width, channels) float32
+        Rendered reflectance (0–1), as from :func:`render_reflectance`.
+    camera : Camera
+        The camera; its principal point centres the vignetting.
+    effects : Photographic
+        Exposure, vignetting, tone curve and noise settings.
+    rng : numpy.random.Generator
+        Random stream for the exposure offset and the sensor noise.
+    blur_px : ndarray (2,) or None
+        Motion-blur vector in the image (px); None or shorter than 0.3 px gives no blur.
+
     Returns
     -------
     image : (height, width, channels) uint8
@@ -601,7 +645,20 @@ def _heights(dsm, x0, y0, cell, x, y, out):
 
 
 def surface_height(scene: Scene, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Bilinear surface height at map points (NaN outside the DSM), as the ray caster sees it."""
+    """Bilinear surface height at map points (NaN outside the DSM), as the ray caster sees it.
+
+    Parameters
+    ----------
+    scene : Scene
+        The surface.
+    x, y : ndarray
+        Map coordinates (m); flattened.
+
+    Returns
+    -------
+    ndarray (N,) float64
+        Surface height (m) per point; NaN outside the DSM or next to a NaN cell.
+    """
     x = np.ascontiguousarray(np.ravel(x), dtype=np.float64)
     y = np.ascontiguousarray(np.ravel(y), dtype=np.float64)
     out = np.empty(len(x))

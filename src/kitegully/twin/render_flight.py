@@ -27,7 +27,25 @@ log = logging.getLogger(__name__)
 
 
 def blur_vector(camera: Camera, row: pd.Series, ground_point: np.ndarray, exposure_time_s: float) -> np.ndarray:
-    """Image motion (px) of ``ground_point`` during the exposure, from the pose rates."""
+    """Image motion (px) of ``ground_point`` during the exposure, from the pose rates.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    row : Series
+        One row of the poses table, with the velocity and attitude-rate columns.
+    ground_point : ndarray (3,)
+        World point (m).
+    exposure_time_s : float
+        Shutter time (s).
+
+    Returns
+    -------
+    ndarray (2,)
+        Displacement of the point in the image (px) between shutter open and close; 0 where it
+        does not project.
+    """
     a = camera.project(ground_point[None], pose_from_row(row))[0]
     b = camera.project(ground_point[None], pose_from_row(row, exposure_time_s))[0]
     v = b - a
@@ -49,6 +67,34 @@ def render_flight(
     """Render and write every image of ``poses``; returns per-image facts.
 
     Returns columns ``image, gsd_m`` (median over the image), ``ev_offset, blur_px, hit_fraction, render_s``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The surface and texture.
+    camera : Camera
+        The camera.
+    poses : DataFrame
+        True poses, one row per image (``image``, ``timestamp`` and the pose columns).
+    out_dir : str or Path
+        Folder the JPEGs are written to; created if missing.
+    effects : Photographic
+        Camera effects.
+    seed : int
+        Seed of the per-image noise streams.
+    channels : sequence of int
+        Texture band index of each output channel.
+    supersampling : int
+        ``s`` gives ``s × s`` rays per pixel.
+    background : sequence of float
+        Reflectance (0–1) per output channel where a ray misses the surface.
+    jpeg_quality : int
+        JPEG quality.
+
+    Returns
+    -------
+    DataFrame
+        One row per image.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -119,6 +165,30 @@ def coverage(
     seen by image i+1, on a coarser grid that extends past the site (off-site ground at the
     DSM's median height) so images at the strip ends are measured whole. Returns (x
     centres, y centres, counts as rows × cols, overlap table). Cost: O(images × points).
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    poses : DataFrame
+        True poses, one row per image (``image``, ``strip``, ``x_m``, ``y_m``, ``z_m`` and the pose columns).
+    scene : Scene
+        The surface.
+    extent : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    cell_m : float
+        Spacing of the ground points (m).
+    core_buffer_m : float
+        Not used here; :func:`core_mask` cuts the core.
+
+    Returns
+    -------
+    xs, ys : ndarray
+        x and y of the grid's columns and rows (m); rows run south.
+    counts : ndarray (len(ys), len(xs)) int
+        Images seeing each ground point.
+    overlap : DataFrame
+        ``image, next_image, strip, forward_overlap``, one row per consecutive pair on a strip.
     """
     xs, ys, P = _ground_points(scene, extent, cell_m)
     counts = _seen(camera, poses, P).sum(axis=0).reshape(len(ys), len(xs))
@@ -139,7 +209,21 @@ def coverage(
 
 
 def core_mask(xs: np.ndarray, ys: np.ndarray, extent: tuple[float, float, float, float], buffer_m: float) -> np.ndarray:
-    """Boolean (rows × cols) mask of grid points inside ``extent`` shrunk by ``buffer_m``."""
+    """Boolean (rows × cols) mask of grid points inside ``extent`` shrunk by ``buffer_m``.
+
+    Parameters
+    ----------
+    xs, ys : ndarray
+        x and y of the grid's columns and rows (m).
+    extent : tuple of float
+        Site extent ``(xmin, ymin, xmax, ymax)`` (m).
+    buffer_m : float
+        Inward buffer (m).
+
+    Returns
+    -------
+    ndarray (len(ys), len(xs)) bool
+    """
     xmin, ymin, xmax, ymax = extent
     X, Y = np.meshgrid(xs, ys)
     return (X >= xmin + buffer_m) & (X <= xmax - buffer_m) & (Y >= ymin + buffer_m) & (Y <= ymax - buffer_m)
@@ -151,6 +235,23 @@ def load_scene(dsm_path: str | Path, texture_path: str | Path, channels: Sequenc
     ``channels`` name texture bands by their descriptions (e.g. ``R, G, B, NIR``); a
     texture without descriptions is taken as R, G, B, NIR in that order. Returns the scene
     and the band index of each channel. Memory: DSM + 4/3 × texture.
+
+    Parameters
+    ----------
+    dsm_path : str or Path
+        The DSM GeoTIFF.
+    texture_path : str or Path
+        The texture GeoTIFF: uint8 reflectance × 255, in the DSM's CRS.
+    channels : sequence of str
+        Band names of the output channels.
+    block : int
+        Block size (cells) of the empty-space-skipping grid.
+
+    Returns
+    -------
+    scene : Scene
+    indices : list of int
+        Band index of each channel.
     """
     import rasterio
 

@@ -244,7 +244,31 @@ def build_site(tw: TwinParams, crs: str, seed: int, epoch: int = 1) -> TwinSite:
 
 
 def place_buildings(bcfg: dict, valley: Valley, fields: lcm.Fields, network, z_trace, tgrid: GridSpec, seed: int) -> list[dict]:
-    """Farm buildings on gentle ground of the banks, away from gullies and each other."""
+    """Farm buildings on gentle ground of the banks, away from gullies and each other.
+
+    Parameters
+    ----------
+    bcfg : mapping
+        ``twin.landcover.buildings``: count, spacing, clearance, slope limit, size ranges (m).
+    valley : Valley
+        The valley.
+    fields : Fields
+        The field layout; buildings stay off the valley floor and its margin.
+    network : list of Gully
+        The gully network, kept ``gully_clearance_m`` away.
+    z_trace : ndarray
+        Pre-gully surface (m) on ``tgrid``.
+    tgrid : GridSpec
+        The tracing grid.
+    seed : int
+        Master seed.
+
+    Returns
+    -------
+    list of dict
+        Per building: ``x``, ``y``, ``length_m``, ``width_m``, ``angle_rad``, ``height_m``, ``roof_z``
+        (m); at most ``count``, from 200 tries.
+    """
     rng = rng_for(seed, "twin", "buildings")
     if bcfg["count"] == 0:
         return []
@@ -304,6 +328,19 @@ def compute_tile(site: TwinSite, r0: int, c0: int, nrow: int, ncol: int) -> Tile
     """DTM, DSM, land cover and furrow phase for rows r0.., cols c0.. (may extend outside).
 
     Complexity O(cells·octaves + Σ nearby gully segment boxes).
+
+    Parameters
+    ----------
+    site : TwinSite
+        The planned site.
+    r0, c0 : int
+        First row and column on the DEM grid.
+    nrow, ncol : int
+        Tile size (cells).
+
+    Returns
+    -------
+    Tile
     """
     tw, g, v, f = site.tw, site.grid, site.valley, site.fields
     xs, ys = g.cell_centres(r0, c0, nrow, ncol)
@@ -365,10 +402,26 @@ def _tiles(height: int, width: int, size: int):
 
 # ------------------------------------------------------------------------- generation
 def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, texture: bool = True) -> dict:
-    """Write one epoch: ``out/truth/*`` and ``out/observed/*``; returns statistics.
+    """Write one epoch: ``out/truth/*`` and ``out/observed/*``; returns its run times.
 
     ``fixed_points`` (epoch 2) holds the epoch-1 ``targets`` and ``checkpoints`` tables,
     re-surveyed on the eroded surface instead of being drawn again.
+
+    Parameters
+    ----------
+    site : TwinSite
+        The planned site; its parameters hold the epoch keys.
+    out : Path
+        The epoch's folder.
+    fixed_points : dict or None
+        See above; None draws the targets and checkpoints.
+    texture : bool
+        Write ``truth/texture.tif`` (the second tiled pass).
+
+    Returns
+    -------
+    dict
+        Run times (s): ``time_s``, ``terrain_s``, ``texture_s``.
     """
     site.tw.require(EPOCH_KEYS, "generate an epoch")
     t0 = time.perf_counter()
@@ -452,7 +505,19 @@ def generate_epoch(site: TwinSite, out: Path, fixed_points: dict | None = None, 
 
 
 def write_texture(site: TwinSite, truth: Path, gcps: pd.DataFrame, lc_full: np.ndarray) -> None:
-    """Second tiled pass: reflectance texture from the written DTM/DSM and land cover."""
+    """Second tiled pass: reflectance texture from the written DTM/DSM and land cover.
+
+    Parameters
+    ----------
+    site : TwinSite
+        The planned site.
+    truth : Path
+        Folder holding ``dtm.tif`` and ``dsm.tif``; ``texture.tif`` is written there.
+    gcps : DataFrame
+        GCP targets painted into the texture.
+    lc_full : ndarray
+        Land-cover codes on the whole DEM grid.
+    """
     k = site.tex_factor
     tgrid = site.tex_grid
     prof = _profile(tgrid, 4, "uint8", None)
@@ -482,7 +547,21 @@ def write_texture(site: TwinSite, truth: Path, gcps: pd.DataFrame, lc_full: np.n
 
 
 def compute_phase(site: TwinSite, r0: int, c0: int, nrow: int, ncol: int) -> np.ndarray:
-    """Furrow phase (m) on a block of the DEM grid (may extend outside the site)."""
+    """Furrow phase (m) on a block of the DEM grid (may extend outside the site).
+
+    Parameters
+    ----------
+    site : TwinSite
+        The planned site.
+    r0, c0 : int
+        First row and column on the DEM grid.
+    nrow, ncol : int
+        Block size (cells).
+
+    Returns
+    -------
+    ndarray (nrow, ncol) float64
+    """
     g, v = site.grid, site.valley
     xs, ys = g.cell_centres(r0, c0, nrow, ncol)
     u, vp = v.u_vp(xs[None, :], ys[:, None])
@@ -500,7 +579,25 @@ def _read_padded(src, r0: int, c0: int, h: int, w: int) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- vectors
 def centrelines(network: list[gl.Gully], min_depth: float, reach_length: float, crs: str) -> gpd.GeoDataFrame:
-    """Truth centrelines as reaches of about ``reach_length`` m where depth ≥ ``min_depth``."""
+    """Truth centrelines as reaches of about ``reach_length`` m where depth ≥ ``min_depth``.
+
+    Parameters
+    ----------
+    network : list of Gully
+        The network.
+    min_depth : float
+        Least depth of a mapped centreline (m).
+    reach_length : float
+        Target reach length (m).
+    crs : str
+        Site CRS.
+
+    Returns
+    -------
+    GeoDataFrame
+        One line per reach: ``gully_id, kind, bank, shape``, mean ``width_m`` and ``depth_m``,
+        ``width_min_m, depth_min_m, depth_max_m, length_m``.
+    """
     recs = []
     for g in network:
         s = g.s
@@ -522,7 +619,22 @@ def centrelines(network: list[gl.Gully], min_depth: float, reach_length: float, 
 
 
 def polygons(network: list[gl.Gully], min_depth: float, crs: str) -> gpd.GeoDataFrame:
-    """Gully outlines (rim to rim) per gully: union of segment buffers where depth ≥ min_depth."""
+    """Gully outlines (rim to rim) per gully: union of segment buffers where depth ≥ min_depth.
+
+    Parameters
+    ----------
+    network : list of Gully
+        The network.
+    min_depth : float
+        Least depth (m) at both ends of a segment that is kept.
+    crs : str
+        Site CRS.
+
+    Returns
+    -------
+    GeoDataFrame
+        One polygon per gully that has a kept segment: ``gully_id, kind, area_m2``.
+    """
     recs = []
     for g in network:
         ok = (g.depth[:-1] >= min_depth) & (g.depth[1:] >= min_depth)
@@ -537,7 +649,22 @@ def polygons(network: list[gl.Gully], min_depth: float, crs: str) -> gpd.GeoData
 
 
 def heads(network: list[gl.Gully], crs: str, retreat: dict) -> gpd.GeoDataFrame:
-    """True gully heads (not the wadi): id, kind, bank, headcut, retreat since epoch 1."""
+    """True gully heads (not the wadi): id, kind, bank, headcut, retreat since epoch 1.
+
+    Parameters
+    ----------
+    network : list of Gully
+        The network.
+    crs : str
+        Site CRS.
+    retreat : dict
+        Retreat (m) per gully id; missing ids get 0.
+
+    Returns
+    -------
+    GeoDataFrame
+        One point per head: ``gully_id, kind, bank, headcut, retreat_m, end``.
+    """
     recs = [{"gully_id": g.gully_id, "kind": g.kind, "bank": g.bank, "headcut": bool(g.headcut),
              "retreat_m": float(retreat.get(g.gully_id, 0.0)), "end": g.end_reason, "geometry": Point(g.x[0], g.y[0])}
             for g in network if g.kind != "wadi"]
@@ -547,7 +674,28 @@ def heads(network: list[gl.Gully], crs: str, retreat: dict) -> gpd.GeoDataFrame:
 
 def site_statistics(site: TwinSite, cl: gpd.GeoDataFrame, counts: np.ndarray, zr, n_gcp: int, n_cp: int,
                     t_terrain: float, t_texture: float, total: float) -> pd.DataFrame:
-    """Area, gully numbers and lengths, land-cover shares, elevation range, timings."""
+    """Area, gully numbers and lengths, land-cover shares, elevation range, timings.
+
+    Parameters
+    ----------
+    site : TwinSite
+        The planned site.
+    cl : GeoDataFrame
+        The truth centrelines, as from :func:`centrelines`.
+    counts : ndarray
+        Cells per land-cover code.
+    zr : tuple of float
+        Least and greatest DTM elevation (m).
+    n_gcp, n_cp : int
+        Numbers of GCP targets and checkpoints.
+    t_terrain, t_texture, total : float
+        Times of the terrain pass, the texture pass and the whole epoch (s).
+
+    Returns
+    -------
+    DataFrame
+        Columns ``quantity, value, unit``.
+    """
     g = site.grid
     area = g.width * g.height * g.cell**2
     gul = cl[cl["kind"] != "wadi"] if len(cl) else cl

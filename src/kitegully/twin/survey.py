@@ -34,7 +34,26 @@ log = logging.getLogger(__name__)
 
 
 def rtk_observe(df: pd.DataFrame, id_col: str, sigma_h: float, sigma_v: float, rng: np.random.Generator) -> pd.DataFrame:
-    """Add RTK noise to true points (columns id, x, y, z)."""
+    """Add RTK noise to true points (columns id, x, y, z).
+
+    Parameters
+    ----------
+    df : DataFrame
+        True points.
+    id_col : str
+        Name of the id column, copied as is.
+    sigma_h : float
+        Horizontal standard deviation per axis (m).
+    sigma_v : float
+        Vertical standard deviation (m).
+    rng : numpy.random.Generator
+        Random stream.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``id_col, x, y, z``, one row per point, in the same order.
+    """
     n = len(df)
     return pd.DataFrame({
         id_col: df[id_col].to_numpy(),
@@ -49,6 +68,27 @@ def sample_checkpoints(ccfg: dict, lc: np.ndarray, dtm: np.ndarray, grid: GridSp
 
     Rejection sampling in batches; O(batches·stencil). Logs a warning if fewer points
     than asked fit the open ground.
+
+    Parameters
+    ----------
+    ccfg : mapping
+        ``twin.survey.checkpoints``; reads ``count``, ``cluster_share``, ``cluster_radius_m`` (m),
+        ``edge_margin_m`` (m), ``open_classes`` and ``clearance_m`` (m).
+    lc : ndarray
+        Land-cover codes on ``grid``.
+    dtm : ndarray
+        Ground elevation (m) on ``grid``.
+    grid : GridSpec
+        The DEM grid.
+    centre : tuple of float
+        Centre ``(x, y)`` of the cluster (m).
+    seed : int
+        Master seed.
+
+    Returns
+    -------
+    DataFrame
+        ``id`` (``CP0001``, ...), ``x``, ``y``, ``z`` (m): the clustered points first.
     """
     rng = rng_for(seed, "twin", "checkpoints")
     n_total = ccfg["count"]
@@ -83,7 +123,22 @@ def sample_checkpoints(ccfg: dict, lc: np.ndarray, dtm: np.ndarray, grid: GridSp
 
 
 def lake_centre(lc: np.ndarray, grid: GridSpec, fallback: tuple[float, float]) -> tuple[float, float]:
-    """Centroid of the water cells (the reservoir), or ``fallback`` if there is none."""
+    """Centroid of the water cells (the reservoir), or ``fallback`` if there is none.
+
+    Parameters
+    ----------
+    lc : ndarray
+        Land-cover codes on ``grid``; every 4th row and column is read.
+    grid : GridSpec
+        The grid of ``lc``.
+    fallback : tuple of float
+        ``(x, y)`` returned when there is no water (m).
+
+    Returns
+    -------
+    tuple of float
+        ``(x, y)`` of the centroid (m).
+    """
     r, c = np.nonzero(lc[::4, ::4] == CODE["water"])
     if len(r) == 0:
         return fallback
@@ -119,6 +174,31 @@ def field_network(gullies: list[Gully], scfg: dict, min_depth: float, crs: str, 
     upstream/middle/downstream points, delineation on imagery). Reaches under open water
     (``water``, a boolean raster on ``grid``: the reservoir) cannot be walked or seen and
     are left out.
+
+    Parameters
+    ----------
+    gullies : list of Gully
+        The true network.
+    scfg : mapping
+        ``twin.survey.field_network``; reads ``mapping_error_m`` (m), ``mapping_wavelength_m`` (m),
+        ``min_section_length_m`` (m), ``section_width_ratio``, ``width_estimate_sigma`` and
+        ``width_estimate_step_m`` (m).
+    min_depth : float
+        Least depth of a surveyed reach (m).
+    crs : str
+        Site CRS.
+    seed : int
+        Seed of the mapping error and the width estimates.
+    water : ndarray of bool or None
+        Open water on ``grid``; None leaves no reach out.
+    grid : GridSpec or None
+        The grid of ``water``.
+
+    Returns
+    -------
+    GeoDataFrame
+        One line per section: ``section_id``, ``gully_no``, ``width_m`` (estimated, rounded to
+        ``width_estimate_step_m``).
     """
     rng = rng_for(seed, "twin", "field_network")
     sx, sy = rng.integers(0, 2**31 - 1, 2)
@@ -180,6 +260,20 @@ def resolved_relief(depth: np.ndarray, width: np.ndarray, factor: float, resolut
     narrower than the window keeps its cross-section area ``a = factor·depth·width`` but
     spreads it over the window: its apparent depth is ``a / resolution_m``; a wider channel
     keeps its depth. Hence ``min(depth, a / resolution_m)``: depth × width is what decides.
+
+    Parameters
+    ----------
+    depth, width : ndarray
+        Depth and width of the channel (m).
+    factor : float
+        Cross-section area / (depth · width), see :func:`shape_factor`.
+    resolution_m : float
+        Horizontal resolution of the DSM (m).
+
+    Returns
+    -------
+    ndarray
+        Resolved relief (m).
     """
     a = factor * np.asarray(depth, dtype=float) * np.asarray(width, dtype=float)
     return np.minimum(np.asarray(depth, dtype=float), a / resolution_m)
@@ -190,6 +284,22 @@ def visible_head_index(s: np.ndarray, relief: np.ndarray, threshold_m: float, mi
 
     Returns -1 when no run is long enough (the incision is never seen). ``s`` is the
     distance along the channel from the head (m), increasing.
+
+    Parameters
+    ----------
+    s : ndarray
+        Distance from the head at each vertex (m).
+    relief : ndarray
+        Resolved relief at each vertex (m).
+    threshold_m : float
+        Least visible relief (m).
+    min_run_m : float
+        Least length of a visible run (m).
+
+    Returns
+    -------
+    int
+        Vertex index, or -1.
     """
     vis = np.asarray(relief) >= threshold_m
     d = np.diff(np.concatenate([[0], vis.astype(np.int8), [0]]))
@@ -224,6 +334,31 @@ def digitised_heads(gullies: list[Gully], sigma: float, crs: str, seed: int, vis
     heads (Poisson) fall on cells of ``false_head_classes`` (tracks, ploughed furrows and
     plot-edge dead furrows look like incisions in a hillshade) that are at least
     ``false_head_clearance_m`` from every gully vertex. Only ``head_id`` reaches the file.
+
+    Parameters
+    ----------
+    gullies : list of Gully
+        The true network; the wadi is skipped.
+    sigma : float
+        Standard deviation of the position error per axis (m).
+    crs : str
+        Site CRS.
+    seed : int
+        Seed of the digitising random stream.
+    vis : mapping
+        ``twin.survey.heads_visibility`` (:data:`HEAD_VISIBILITY_KEYS`).
+    u_exponent : float
+        Cross-section exponent ``p`` of U-shaped gullies.
+    landcover : ndarray or None
+        Land-cover codes on ``grid``, for false heads; None gives no false heads.
+    grid : GridSpec or None
+        The grid of ``landcover``; None gives no false heads.
+
+    Returns
+    -------
+    GeoDataFrame
+        One point per digitised head with ``head_id`` (1, 2, ...), numbered west to east before
+        the error is added.
     """
     rng = rng_for(seed, "twin", "digitised_heads")
     thr = vis["relief_k"] * vis["dsm_sigma_z_m"]

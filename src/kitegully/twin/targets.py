@@ -12,7 +12,24 @@ from kitegully.twin.landcover import CODE
 
 
 def sample_nearest(arr: np.ndarray, grid: GridSpec, x, y, fill=0):
-    """Value of the cell containing each point (``fill`` outside the grid)."""
+    """Value of the cell containing each point (``fill`` outside the grid).
+
+    Parameters
+    ----------
+    arr : ndarray (H, W)
+        Raster on ``grid``.
+    grid : GridSpec
+        The raster's grid.
+    x, y : ndarray
+        Map coordinates (m).
+    fill : scalar
+        Value for points outside the grid.
+
+    Returns
+    -------
+    ndarray
+        One value per point, of ``arr``'s dtype.
+    """
     r, c = grid.rowcol(x, y)
     ri = np.round(r).astype(np.int64)
     ci = np.round(c).astype(np.int64)
@@ -23,7 +40,22 @@ def sample_nearest(arr: np.ndarray, grid: GridSpec, x, y, fill=0):
 
 
 def sample_bilinear(arr: np.ndarray, grid: GridSpec, x, y) -> np.ndarray:
-    """Bilinear interpolation between cell centres (NaN outside the grid)."""
+    """Bilinear interpolation between cell centres (NaN outside the grid).
+
+    Parameters
+    ----------
+    arr : ndarray (H, W)
+        Raster on ``grid``.
+    grid : GridSpec
+        The raster's grid.
+    x, y : ndarray
+        Map coordinates (m).
+
+    Returns
+    -------
+    ndarray float64
+        One value per point; NaN beyond the outermost cell centres.
+    """
     r, c = grid.rowcol(np.asarray(x, float), np.asarray(y, float))
     ok = (r >= 0) & (r <= grid.height - 1) & (c >= 0) & (c <= grid.width - 1)
     r = np.clip(r, 0, grid.height - 1.000001)
@@ -46,7 +78,25 @@ def stencil(radius: float, step: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def eligible(lc: np.ndarray, grid: GridSpec, x, y, classes: list[str], radius: float) -> np.ndarray:
-    """True where every cell within ``radius`` of a point has one of ``classes``."""
+    """True where every cell within ``radius`` of a point has one of ``classes``.
+
+    Parameters
+    ----------
+    lc : ndarray (H, W)
+        Land-cover codes on ``grid``.
+    grid : GridSpec
+        The grid of ``lc``.
+    x, y : ndarray
+        Map coordinates of the points (m).
+    classes : list of str
+        Land-cover names allowed.
+    radius : float
+        Radius checked around each point (m), sampled on a lattice of one cell.
+
+    Returns
+    -------
+    ndarray (len(x),) bool
+    """
     codes = np.array([CODE[c] for c in classes], dtype=np.uint8)
     dx, dy = stencil(radius, grid.cell)
     ok = np.ones(len(x), dtype=bool)
@@ -61,6 +111,26 @@ def select_gcps(tcfg: dict, lc: np.ndarray, dsm: np.ndarray, grid: GridSpec, see
     Candidates are drawn uniformly (``edge_margin_m`` from the border); a candidate is kept
     when all cells under the target plus ``clearance_m`` are of ``classes`` and the local
     slope is below ``max_slope_deg``. Returns ``gcp_id, x, y, z, size_m`` (z on the DSM).
+
+    Parameters
+    ----------
+    tcfg : mapping
+        ``twin.targets``; reads ``count``, ``candidates``, ``edge_margin_m`` (m), ``size_m`` (m),
+        ``classes``, ``clearance_m`` (m) and ``max_slope_deg`` (degrees).
+    lc : ndarray (H, W)
+        Land-cover codes on ``grid``.
+    dsm : ndarray (H, W)
+        Surface elevation (m) on ``grid``.
+    grid : GridSpec
+        The DEM grid.
+    seed : int
+        Master seed.
+
+    Returns
+    -------
+    DataFrame
+        One row per target, ``gcp_id`` ``GCP01``, ``GCP02``, ...; the first is the candidate nearest
+        the grid's top-left corner.
     """
     rng = rng_for(seed, "twin", "gcp_targets")
     xmin, ymin, xmax, ymax = grid.bounds
@@ -95,6 +165,20 @@ def paint_targets(refl: np.ndarray, tx: np.ndarray, ty: np.ndarray, targets: pd.
 
     ``checker``: a white square whose inner part is a 2×2 black/white checker (the centre
     is the checker corner); ``cross``: a white square with a black cross through the centre.
+
+    Parameters
+    ----------
+    refl : ndarray (bands, rows, cols) float
+        Reflectance tile; changed in place.
+    tx : ndarray (cols,)
+        Map x of the texel centres (m).
+    ty : ndarray (rows,)
+        Map y of the texel centres (m).
+    targets : DataFrame
+        Targets with ``x``, ``y`` and ``size_m`` (m).
+    tcfg : mapping
+        ``twin.targets``; reads ``pattern``, ``white_reflectance`` and ``black_reflectance`` (per band),
+        ``border_fraction`` and ``cross_bar_fraction``.
     """
     white = np.asarray(tcfg["white_reflectance"], dtype=refl.dtype)[:, None, None]
     black = np.asarray(tcfg["black_reflectance"], dtype=refl.dtype)[:, None, None]

@@ -191,6 +191,22 @@ def pregully_grid(valley: Valley, xs: np.ndarray, ys: np.ndarray, seed: int, wl:
     """Valley surface plus micro-relief on the grid ``ys × xs`` (float64), before gullies.
 
     Complexity O(n·octaves) for n cells.
+
+    Parameters
+    ----------
+    valley : Valley
+        The valley.
+    xs, ys : ndarray
+        Column and row coordinates of the grid (m).
+    seed : int
+        Seed of the micro-relief noise.
+    wl, amp : ndarray
+        Octave wavelengths (m) and amplitudes (m), as from :func:`relief_octaves`.
+
+    Returns
+    -------
+    ndarray (len(ys), len(xs)) float64
+        Elevation (m).
     """
     z = valley.base(xs[None, :], ys[:, None])
     return z + fbm_grid(xs - valley.cx, ys - valley.cy, seed, wl, amp)

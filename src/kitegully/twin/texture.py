@@ -33,7 +33,24 @@ def palette(tcfg: dict) -> np.ndarray:
 
 
 def hillshade(z: np.ndarray, cell: float, azimuth_deg: float, elevation_deg: float) -> np.ndarray:
-    """cos(incidence)/sin(sun elevation): 1 on flat ground; z padded by one cell each side."""
+    """cos(incidence)/sin(sun elevation): 1 on flat ground; z padded by one cell each side.
+
+    Parameters
+    ----------
+    z : ndarray (H, W)
+        Elevation (m), padded.
+    cell : float
+        Cell size (m).
+    azimuth_deg : float
+        Sun azimuth (degrees clockwise from north).
+    elevation_deg : float
+        Sun elevation (degrees).
+
+    Returns
+    -------
+    ndarray (H, W)
+        Relative illumination (≥ 0) per cell, the padding included.
+    """
     dzdy_r, dzdx = np.gradient(z, cell)
     dzdy = -dzdy_r
     az = np.deg2rad(azimuth_deg)
@@ -60,6 +77,30 @@ def texture_tile(tcfg: dict, lc: np.ndarray, dtm_pad: np.ndarray, dsm_pad: np.nd
     ``lc`` is the tile's land cover; ``*_pad`` are DTM, DSM and furrow phase with a
     one-cell border; ``tx, ty`` are the texel-centre coordinates relative to the site
     centre. Complexity O(texels·octaves).
+
+    Parameters
+    ----------
+    tcfg : mapping
+        ``twin.texture``: palette, noise, contrasts, furrow and strata periods, illumination.
+    lc : ndarray (rows, cols) uint8
+        Land-cover codes of the tile.
+    dtm_pad, dsm_pad, phase_pad : ndarray (rows + 2, cols + 2)
+        DTM (m), DSM (m) and furrow phase (m) with a one-cell border.
+    cell : float
+        DEM cell (m).
+    k : int
+        Texels per DEM cell side.
+    tx : ndarray (cols·k,)
+        Texel-centre x relative to the site centre (m).
+    ty : ndarray (rows·k,)
+        Texel-centre y relative to the site centre (m).
+    seed : int
+        Seed of the noise field.
+
+    Returns
+    -------
+    ndarray (4, rows·k, cols·k) float32
+        Reflectance of R, G, B and NIR.
     """
     lc_up = np.repeat(np.repeat(lc, k, axis=0), k, axis=1)
     pal = palette(tcfg)
