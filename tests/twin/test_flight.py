@@ -80,7 +80,7 @@ def test_flight_covers_core_with_three_images_and_target_overlap():
     res = simulate_flight(EXTENT, cam, s, const_offset(), lambda x, y: np.full_like(x, 100.0), np.random.default_rng(0))
     dsm = np.full((100, 100), 100.0, np.float32)
     scene = make_scene(dsm, (X0, Y0 + 200), 2.0, np.zeros((1, 8, 8), np.uint8), (X0, Y0 + 200), 25.0, ("R",))
-    xs, ys, counts, ov = coverage(cam, res.poses, scene, EXTENT, 4.0, 20.0)
+    xs, ys, counts, ov = coverage(cam, res.poses, scene, EXTENT, 4.0)
     core = core_mask(xs, ys, EXTENT, 20.0)
     assert counts[core].min() >= 3
     # kept every k-th shot so overlap ≈ target (jitter and yaw drift move it a little)

@@ -27,7 +27,7 @@ from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.tables import write_table
 
 
-def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, offset: np.ndarray, out_dir: str | Path) -> pycolmap.Reconstruction:
+def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, out_dir: str | Path) -> pycolmap.Reconstruction:
     """Write the adjusted model (COLMAP binary) in the local frame; returns it.
 
     Parameters
@@ -38,8 +38,6 @@ def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, o
         The adjusted block in the local frame.
     index : ModelIndex
         Ids that tie the block's rows to ``rec``.
-    offset : ndarray (3,)
-        Offset of the local frame (site CRS, m).
     out_dir : str or Path
         Output folder; removed first if it exists.
 
@@ -52,7 +50,7 @@ def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, o
     if out_dir.exists():
         shutil.rmtree(out_dir)
     out_dir.mkdir(parents=True)
-    rec = write_block_to_reconstruction(rec, block, index, offset)
+    rec = write_block_to_reconstruction(rec, block, index)
     rec.write(out_dir)
     return rec
 

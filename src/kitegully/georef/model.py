@@ -192,10 +192,10 @@ def retriangulate_all(block: Block, index: ModelIndex) -> tuple[np.ndarray, np.n
     return X, miss
 
 
-def write_block_to_reconstruction(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, offset: np.ndarray) -> pycolmap.Reconstruction:
+def write_block_to_reconstruction(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex) -> pycolmap.Reconstruction:
     """Copy adjusted poses, intrinsics and re-triangulated points into ``rec`` (in place).
 
-    The model's coordinates are the block's local frame, i.e. site CRS minus ``offset``.
+    The model's coordinates are the block's local frame (site CRS minus the block's offset).
     Points whose rays no longer meet (NaN) are deleted.
 
     Parameters
@@ -206,8 +206,6 @@ def write_block_to_reconstruction(rec: pycolmap.Reconstruction, block: Block, in
         The adjusted block.
     index : ModelIndex
         Ids that tie the block's rows to ``rec``.
-    offset : ndarray (3,)
-        Offset of the local frame (m); the block is already in that frame, so it is not applied.
 
     Returns
     -------

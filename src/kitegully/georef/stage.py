@@ -299,7 +299,7 @@ def georeference(
         params = replace(params, bundle=replace(params.bundle, refine=()))
     res = georeference_block(block, gcps, infos, rows, params, sfm_frame, tape, str(gcp_source or gcp_file))
 
-    rec = export.write_model(rec, res.block, index, res.offset, out["model"])
+    rec = export.write_model(rec, res.block, index, out["model"])
     export.write_transform(out["transform"], crs, res.offset, res.transform.as_dict(), res.report)
     export.write_residual_tables(res.residuals, res.loo, out["residuals"], out["loo"])
     write_table(export.calibration_table(sfm_block, res.block, index, rec), out["calibration"])

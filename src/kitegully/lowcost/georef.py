@@ -183,7 +183,7 @@ def georeference_tape_horn(model_t: Mapping[str, np.ndarray], gps: Mapping[str, 
         sim = level_to_water(sim, model_water, min_spread_m)
     dz = water_level_m - float(np.mean(sim.apply(model_water)[:, 2]))
     final = Similarity(s, sim.R, sim.t + np.array([0.0, 0.0, dz]))
-    return final, dz, residual_rows("tape_horn_gps", Similarity(s, rigid.R, rigid.t), model_t, gps, ids, edges, res)
+    return final, dz, residual_rows("tape_horn_gps", Similarity(s, rigid.R, rigid.t), model_t, ids, edges, res)
 
 
 def level_to_water(sim: Similarity, model_water: np.ndarray, min_spread_m: float) -> Similarity:
@@ -265,10 +265,10 @@ def georeference_rtk(model_t: Mapping[str, np.ndarray], rtk: Mapping[str, np.nda
     b = np.array([rtk[k] for k in ids])
     sim = umeyama(a, b)
     res = np.linalg.norm(sim.apply(a) - b, axis=1)
-    return sim, residual_rows("similarity_rtk", sim, model_t, rtk, ids, edges, res)
+    return sim, residual_rows("similarity_rtk", sim, model_t, ids, edges, res)
 
 
-def residual_rows(method: str, sim: Similarity, model_t, ref, ids, edges, res) -> pd.DataFrame:
+def residual_rows(method: str, sim: Similarity, model_t, ids, edges, res) -> pd.DataFrame:
     """Residual table rows: global mean 3-D, local mean edge-length, each target and edge.
 
     Parameters
@@ -279,8 +279,6 @@ def residual_rows(method: str, sim: Similarity, model_t, ref, ids, edges, res) -
         Fitted similarity; only its scale is used, for the edge lengths.
     model_t : mapping
         Target coordinates (ndarray (3,), model frame) by target name.
-    ref : mapping
-        Reference target coordinates (m); not read.
     ids : list of str
         Targets of the fit, in the order of ``res``.
     edges : list of (str, str, float)

@@ -285,7 +285,7 @@ def _pools_below_rims(m: np.ndarray, rims: tuple[np.ndarray, np.ndarray, np.ndar
     return keep[pools]
 
 
-def polygons_from_labels(labels: np.ndarray, grid: GridSpec, threshold: float, dem: np.ndarray | None = None,
+def polygons_from_labels(labels: np.ndarray, grid: GridSpec, threshold: float,
                          fd: np.ndarray | None = None) -> gpd.GeoDataFrame:
     """Vectorise a label raster: one polygon per label with area (m²) and mean fill depth (m).
 
@@ -297,8 +297,6 @@ def polygons_from_labels(labels: np.ndarray, grid: GridSpec, threshold: float, d
         Grid of ``labels``.
     threshold : float
         Fill-depth threshold (m) written to each row.
-    dem : ndarray (H, W) or None
-        Not used.
     fd : ndarray (H, W) or None
         Fill depth (m), NaN read as 0; without it there is no ``mean_fill_depth_m`` column.
 

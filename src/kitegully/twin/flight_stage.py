@@ -213,7 +213,7 @@ def photograph_flight(
                         g, n, gcfg["min_images_per_target"])
     log.info("GCP list: %d observations of %d targets", len(obs), int((per_target > 0).sum()))
 
-    xs, ys, counts, overlap = coverage(camera, poses, scene, extent, ccfg["cell_m"], ccfg["core_buffer_m"])
+    xs, ys, counts, overlap = coverage(camera, poses, scene, extent, ccfg["cell_m"])
     core = core_mask(xs, ys, extent, ccfg["core_buffer_m"])
     cov_grid = GridSpec(extent[0], extent[3], ccfg["cell_m"], len(xs), len(ys), crs)
     stats = stats.merge(poses[["image", "strip", "z_m"]], on="image")

@@ -156,7 +156,6 @@ def coverage(
     scene: Scene,
     extent: tuple[float, float, float, float],
     cell_m: float,
-    core_buffer_m: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, pd.DataFrame]:
     """Images seeing each ground point (occlusion ignored) and forward overlap per image pair.
 
@@ -178,8 +177,6 @@ def coverage(
         Site extent ``(xmin, ymin, xmax, ymax)`` (m).
     cell_m : float
         Spacing of the ground points (m).
-    core_buffer_m : float
-        Not used here; :func:`core_mask` cuts the core.
 
     Returns
     -------
