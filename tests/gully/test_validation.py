@@ -16,6 +16,7 @@ from kitegully.gully.validation import (
     catchment_outline,
     check_reference,
     score_network,
+    score_networks,
 )
 from kitegully.io.raster import GridSpec
 
@@ -122,3 +123,18 @@ def test_score_gully_areas_leaves_cells_off_the_dem_out():
     t = score_gully_areas(truth, {"a": (gully, grid)}).set_index("map_variant")
     assert t.loc["a", "truth_area_m2"] == 35.0 and t.loc["a", "predicted_area_m2"] == 40.0
     assert t.loc["a", "precision"] == pytest.approx(20 / 40) and t.loc["a", "recall"] == pytest.approx(20 / 35)
+
+
+def test_score_networks_side_by_side_equal_each_scored_alone():
+    ref, ext = _networks()
+    params = ValidationParams(tolerance_m=5.0, extra_tolerances_m=(2.0,), reference_join_m=3.0)
+    digitised = ext.iloc[:1].copy()  # the same network without the spur
+    res, alone = score_networks(ref, ext, digitised, _valid(), GRID, params)
+    solo = score_network(ref, ext, _valid(), GRID, params)
+    solo_digitised = score_network(ref, digitised, _valid(), GRID, params, geometries=False)
+    assert res.table.equals(solo.table) and res.tolerances.equals(solo.tolerances)
+    assert alone.table.equals(solo_digitised.table) and alone.tolerances.equals(solo_digitised.tolerances)
+    assert set(res.pieces) == {"good_fit", "false_negative", "false_positive", "not_scored"} and not alone.pieces
+    assert alone.percent()["false_positive"] == pytest.approx(0.0) and res.percent()["false_positive"] > 0
+    only, none = score_networks(ref, ext, None, _valid(), GRID, params)
+    assert none is None and only.table.equals(solo.table)

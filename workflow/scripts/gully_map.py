@@ -2,13 +2,12 @@
 
 import numpy as np
 
-from kitegully.gully import GullyParams, gully_summary, map_gullies, map_raster
+from kitegully.gully import GullyParams, gully_summary, map_gullies, write_map_products
 from kitegully.gully.heads import automatic_head_params
 from kitegully.gully.inputs import (check_dem, check_heads_on_dem, read_heads, read_orthophoto_on_grid,
                                    read_tiled_inputs)
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.io.tables import write_table
-from kitegully.io.vectors import write_vector
 from kitegully.logs import setup_script_logging
 from kitegully.memory import keep_freed_memory
 
@@ -30,15 +29,7 @@ res = map_gullies(np.asarray(dem, dtype=np.float32), grid, hx, hy, params, worke
                   auto_heads=auto if heads != "digitised" else None, incision=auto, ortho=ortho, **tiled,
                   on_depth=lambda s, d: (write_raster(out.depth, d, grid), write_raster(out.smoothed, s, grid)))  # beside the fill
 if heads != "automatic": check_heads_on_dem(res.heads_inside, inp.heads)  # noqa: E701
-write_raster(out.gully_map, map_raster(res.gully, np.isfinite(dem)), grid, nodata=255)
-write_raster(out.gully_map_whole, map_raster(res.gully_whole_patches, np.isfinite(dem)), grid, nodata=255)
-write_vector(res.lines, out.network, layer="gully_network")
-write_vector(res.extracted_lines, out.mapped_network, layer="gully_network_mapped")
-if "mapped_network_digitised" in out.keys():  # gully.heads: both: the digitised heads' network alone, for Table 4
-    write_vector(res.given_extracted_lines, out.mapped_network_digitised, layer="gully_network_mapped")
-write_vector(res.polygons, out.polygons, layer="gully_polygons")
-res.network.save(out.network_cells)
-write_table(res.patch_table, out.patches, markdown=False)
+write_map_products(res, np.isfinite(dem), grid, out)
 summary = gully_summary(res, grid, params, source, hx.size, heads)
 write_table(summary, out.summary)
 log.info("gully map done: %s", "; ".join(f"{k} = {v}" for k, v in summary.itertuples(index=False)))

@@ -8,7 +8,7 @@ unfiltered numbers are reported beside them.
 from concurrent.futures import ThreadPoolExecutor
 
 from kitegully.gully.plots import validation_map
-from kitegully.gully import ValidationParams, catchment_outline, check_reference, score_network
+from kitegully.gully import ValidationParams, catchment_outline, check_reference, score_networks
 from kitegully.io.figures import save_figure
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
@@ -22,16 +22,13 @@ params = ValidationParams.from_config(snakemake.params.validation)
 reference = check_reference(read_vector(inp.reference, crs=crs), inp.reference)
 catchment = catchment_outline(read_vector(inp.catchment, crs=crs), inp.catchment) if getattr(inp, "catchment", None) else None
 gully, grid = read_raster(inp.gully_map)
-valid, both = gully != 255, "table_digitised" in out.keys()  # both: the digitised heads alone too (paper's procedure)
-# the DEM decoded and the digitised heads' network scored beside the mapped one (GEOS frees the GIL; 136 -> 73-99 s)
-with ThreadPoolExecutor(max_workers=2) as pool:
+both = "table_digitised" in out.keys()  # gully.heads: both: the digitised heads alone too (the paper's procedure)
+digitised = read_vector(inp.mapped_network_digitised, crs=crs) if both else None
+with ThreadPoolExecutor(max_workers=1) as pool:  # the DEM decoded beside the scoring
     later = pool.submit(read_raster, inp.dem)
-    digitised = (pool.submit(score_network, reference, read_vector(inp.mapped_network_digitised, crs=crs), valid, grid,
-                             params, catchment, geometries=False, label="digitised heads alone") if both else None)
-    res = score_network(reference, read_vector(inp.mapped_network, crs=crs), valid, grid, params, catchment,
-                        label="all heads" if both else None)
-    dem, _ = later.result()
-    alone = digitised.result() if both else None
+    res, alone = score_networks(reference, read_vector(inp.mapped_network, crs=crs), digitised, gully != 255, grid, params,
+                                catchment)
+dem, _ = later.result()
 write_table(res.table, out.table, floatfmt=".1f")
 write_table(res.tolerances, out.tolerances, floatfmt=".1f")
 if both:

@@ -5,7 +5,7 @@ filter), ``network`` (g-j: heads, steepest-descent tracing, Strahler order, line
 ``mapping`` (k-m: buffer ∩ patches, polygons), ``pipeline`` (the whole chain),
 ``sensitivity`` (σ × depth threshold), ``validation`` (the network scoring protocol,
 :func:`~kitegully.gully.validation.score_network`, and the area scores against truth),
-``plots`` (section view, validation map).
+``plots`` (section view, validation map), ``products`` (the map's files on disk).
 
 Entry points (docs/architecture.md), exported here lazily: :func:`map_gullies` with
 :class:`GullyParams` (``pipeline``), :func:`score_network` with :class:`ValidationParams`
@@ -18,7 +18,7 @@ _EXPORTS = {"GullyParams": "pipeline", "map_gullies": "pipeline", "gully_summary
             "tracing_surface": "pipeline",
             "ValidationParams": "validation", "score_network": "validation", "score_gully_areas": "validation",
             "check_reference": "validation", "catchment_outline": "validation",
-            "gully_sensitivity": "sensitivity"}
+            "gully_sensitivity": "sensitivity", "write_map_products": "products", "score_networks": "validation"}
 __all__ = sorted(_EXPORTS)
 
 
