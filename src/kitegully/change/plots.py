@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
 from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.raster import GridSpec
+
+if TYPE_CHECKING:
+    from kitegully.change.budget import Variogram
 
 
 def _decimate(a: np.ndarray, max_px: int) -> tuple[np.ndarray, int]:
@@ -123,7 +127,7 @@ def plot_histogram(dod: np.ndarray, stable: np.ndarray, path: str | Path, limit_
     save_figure(fig, path, attribution)
 
 
-def plot_variogram(vg, path: str | Path, attribution: str | None = None) -> None:
+def plot_variogram(vg: Variogram | None, path: str | Path, attribution: str | None = None) -> None:
     """Empirical variogram of standardised stable-ground dh and its nugget + spherical fit.
 
     Parameters

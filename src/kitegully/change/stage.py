@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -25,6 +25,10 @@ from kitegully.change.widening import COLUMNS as WIDENING_COLUMNS, measure_widen
 from kitegully.io.raster import Raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector
+
+if TYPE_CHECKING:
+    from kitegully.change.coregister import Coregistration
+    from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
 
@@ -119,7 +123,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
                           params, out, [g.name for g in groups if ":" not in g.name], figure, attribution, t0)
 
 
-def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, grid, params: ChangeParams,
+def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, grid: GridSpec, params: ChangeParams,
                       out: Mapping[str, str], attribution: str | None = None) -> tuple[Any, float]:
     """Variogram of dh/σ on stable ground (table and figure written) and the co-registration offset SD.
 
@@ -179,10 +183,11 @@ def uncertainty_model(dod: np.ndarray, sigma: np.ndarray, stable: np.ndarray, gr
     return vg, coreg_sd
 
 
-def write_products(budget: pd.DataFrame, coreg, sigma_rows: list, sigma: np.ndarray, n_void: int, grid, z1: np.ndarray,
-                   z2: np.ndarray, dod: np.ndarray, stable: np.ndarray, heads_path: str | None, sections_path: str | None,
-                   params: ChangeParams, out: Mapping[str, str], top_masks: list[str], figure: Mapping[str, Any] | None,
-                   attribution: str | None, t0: float) -> dict[str, Any]:
+def write_products(budget: pd.DataFrame, coreg: Coregistration, sigma_rows: list, sigma: np.ndarray, n_void: int,
+                   grid: GridSpec, z1: np.ndarray, z2: np.ndarray, dod: np.ndarray, stable: np.ndarray,
+                   heads_path: str | None, sections_path: str | None, params: ChangeParams, out: Mapping[str, str],
+                   top_masks: list[str], figure: Mapping[str, Any] | None, attribution: str | None,
+                   t0: float) -> dict[str, Any]:
     """The stage's tables (budget, co-registration, σ, thresholds, headcuts, widening) and figures; the summary.
 
     ``budget`` is :func:`kitegully.change.budget.compute_budgets`'s table; ``top_masks`` the

@@ -53,7 +53,7 @@ import logging
 import time
 from math import ceil
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 from scipy import ndimage
@@ -69,6 +69,9 @@ from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
 from kitegully.change.stage import uncertainty_model, write_products
 from kitegully.io.raster import GridSpec, Raster
 from kitegully.terrain.tiling import TilingParams
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 log = logging.getLogger(__name__)
 
@@ -466,7 +469,7 @@ def change_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     log.info("tile %s: DoD of %d valid cells, %d void cells", name, int(valid.sum()), n_void)
 
 
-def budgets_from_tiles(tile_files: Sequence[str | Path], cell: float, vg: Any, coreg_sd_m: float):
+def budgets_from_tiles(tile_files: Sequence[str | Path], cell: float, vg: Any, coreg_sd_m: float) -> pd.DataFrame:
     """The budget table from the tiles' partial sums, rows in the untiled order (site, then each mask's rows).
 
     Parameters

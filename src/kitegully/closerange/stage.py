@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass, field, fields
 from datetime import datetime, timedelta
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import cv2
 import numpy as np
@@ -37,6 +37,10 @@ from kitegully.closerange.spheres import SphereDetection, detect_spheres
 from kitegully.config import config_section
 from kitegully.georef.similarity import Similarity
 from kitegully.io.raster import GridSpec, write_raster
+
+if TYPE_CHECKING:
+    from kitegully.twin.camera import Pose
+    from kitegully.twin.polewalk import PoleScene, PoleWalk
 
 log = logging.getLogger(__name__)
 
@@ -218,7 +222,7 @@ class CloseRangeParams:
 def scene_walk(
     ortho_path: str, dem_path: str, truth_markers_path: str, truth_eroded_path: str, meta: dict, markers: pd.DataFrame,
     walk_cfg: Mapping[str, Any], sphere_radius_m: float, folding_rule: bool, seed: int, scene: str,
-):
+) -> tuple[PoleScene, PoleWalk, list[Pose]]:
     """The photographed world and the pole walk of one scene: ``(PoleScene, PoleWalk, poses)`` (twin side).
 
     What :func:`photograph_scene` renders; also read by the walk-geometry benchmark

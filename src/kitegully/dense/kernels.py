@@ -6,8 +6,13 @@ All kernels work on one tile: a grid of ``H × W`` ground cells with local coord
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit, prange
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
 
 
 @njit(cache=True)
@@ -106,7 +111,7 @@ def sgm_aggregate(cost: np.ndarray, p1: float, p2: float, directions: int) -> np
 
 
 @njit(cache=True)
-def ncc_cost(score, nan_cost, out):
+def ncc_cost(score: np.ndarray, nan_cost: float, out: np.ndarray) -> None:
     """SGM cost ``(1 − NCC)/2`` (float32, ``nan_cost`` where NaN) of ``score`` (K, H, W),
     written transposed into ``out`` (H, W, K). Serial: a parallel region costs more than
     this pass on the shared 2-core machine. O(K·H·W).
@@ -132,7 +137,7 @@ def ncc_cost(score, nan_cost, out):
 
 
 @njit(cache=True)
-def sgm_winner(agg, d_out, off_out):
+def sgm_winner(agg: np.ndarray, d_out: np.ndarray, off_out: np.ndarray) -> None:
     """Label of least aggregated cost ``agg`` (H, W, K) per cell (first on ties, as
     ``np.argmin``) into ``d_out`` and the sub-step offset in [−0.5, 0.5] of a parabola
     through the costs around it (0 at the first and last label) into ``off_out``, in the
@@ -186,7 +191,8 @@ def _height_nearest(dsm, x0, y0, cell, x, y):
 
 
 @njit(cache=True, parallel=True)
-def occlusion_mask(dsm, x0, y0, cell, zmax, xs, ys, Z, C, step, tolerance, out):
+def occlusion_mask(dsm: np.ndarray, x0: float, y0: float, cell: float, zmax: float, xs: np.ndarray, ys: np.ndarray,
+                   Z: np.ndarray, C: np.ndarray, step: float, tolerance: float, out: np.ndarray) -> None:
     """True where the line of sight from ground point ``(xs[j], ys[i], Z[i, j])`` to the
     camera centre ``C`` passes below the surface ``dsm`` (grid with top-left corner
     ``(x0, y0)`` and cell ``cell``, local coordinates) by more than ``tolerance``.
@@ -246,7 +252,7 @@ def occlusion_mask(dsm, x0, y0, cell, zmax, xs, ys, Z, C, step, tolerance, out):
 
 
 @njit(cache=True, parallel=True)
-def openness_kernel(z, cell, radius, out):
+def openness_kernel(z: np.ndarray, cell: float, radius: int, out: np.ndarray) -> None:
     """Positive openness (degrees): mean over 8 directions of 90° minus the highest
     elevation angle within ``radius`` cells. NaN cells are skipped. O(H·W·8·radius).
 
@@ -293,7 +299,8 @@ def openness_kernel(z, cell, radius, out):
 
 
 @njit(cache=True, parallel=True)
-def sample_stack(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
+def sample_stack(imgs: Sequence[np.ndarray], Rs: np.ndarray, Cs: np.ndarray, Ps: np.ndarray, levels: np.ndarray,
+                 xs: np.ndarray, ys: np.ndarray, base: np.ndarray, dz: float, out: np.ndarray) -> None:
     """Resample every view at every candidate surface ``base + k·dz`` (k = 0 … K−1).
 
     ``imgs`` is a typed list of (h, w) float32 pyramid levels, one per view, with
@@ -372,7 +379,8 @@ def sample_stack(imgs, Rs, Cs, Ps, levels, xs, ys, base, dz, out):
 
 
 @njit(cache=True, parallel=True)
-def multiview_ncc_stack(stack, half, min_std, score, nviews):
+def multiview_ncc_stack(stack: np.ndarray, half: int, min_std: np.ndarray, score: np.ndarray,
+                        nviews: np.ndarray) -> None:
     """Multi-image normalised cross-correlation of ground windows for every candidate.
 
     ``stack`` (K, V, H, W) holds the V images resampled on the ground grid at K candidate
@@ -509,8 +517,10 @@ def multiview_ncc_stack(stack, half, min_std, score, nviews):
 
 
 @njit(cache=True, parallel=True)
-def best_view_ortho(imgs, Rs, Cs, Ps, levels, widths, heights, xs, ys, Z, dsm, x0, y0, cell, zmax, step,
-                    tolerance, out, source):
+def best_view_ortho(imgs: Sequence[np.ndarray], Rs: np.ndarray, Cs: np.ndarray, Ps: np.ndarray, levels: np.ndarray,
+                    widths: np.ndarray, heights: np.ndarray, xs: np.ndarray, ys: np.ndarray, Z: np.ndarray,
+                    dsm: np.ndarray, x0: float, y0: float, cell: float, zmax: float, step: float,
+                    tolerance: float, out: np.ndarray, source: np.ndarray) -> None:
     """True-orthophoto colours: for each ground point take the most nadir image that sees it.
 
     For each cell the views are tried from the smallest off-nadir angle of the line of

@@ -33,7 +33,7 @@ import json
 import logging
 from dataclasses import replace
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -48,6 +48,9 @@ from kitegully.io.raster import GridSpec, _profile, read_raster
 from kitegully.io.tables import write_table
 from kitegully.terrain.tiled_fill import Tile
 from kitegully.terrain.tiling import TilingParams, whole_block_tiles
+
+if TYPE_CHECKING:
+    from kitegully.dense.cell import CellChoice
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +99,8 @@ def dense_tiles(shape: tuple[int, int], params: DenseParams, tiling: TilingParam
 
 
 def load_views_and_grid(model_dir: str | Path, transform_json: str | Path | None, image_dir: str | Path, crs: str,
-                        params: DenseParams, site_json: str | Path | None = None):
+                        params: DenseParams,
+                        site_json: str | Path | None = None) -> tuple[ViewSet, CellChoice, DenseParams, GridSpec]:
     """The model's views, the cell choice, the resolved parameters and the DSM grid (as the untiled stage).
 
     Returns ``(views, cell, params, grid)``; deterministic, so every tile job finds the same grid.

@@ -16,10 +16,14 @@ import json
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kitegully import InputError
+
+if TYPE_CHECKING:
+    import pycolmap
 
 
 @dataclass(frozen=True)
@@ -128,8 +132,9 @@ def read_offset(transform_json: str | Path | None) -> np.ndarray:
     return off
 
 
-def views_from_reconstruction(rec, image_dir: str | Path, model_offset: np.ndarray | None = None,
-                              local_offset: np.ndarray | None = None, where: str = "model") -> ViewSet:
+def views_from_reconstruction(rec: pycolmap.Reconstruction, image_dir: str | Path,
+                              model_offset: np.ndarray | None = None, local_offset: np.ndarray | None = None,
+                              where: str = "model") -> ViewSet:
     """Oriented images of a ``pycolmap.Reconstruction`` (pycolmap 4.x API).
 
     Parameters

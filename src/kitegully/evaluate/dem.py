@@ -167,7 +167,7 @@ def sample_bilinear(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray)
     return np.where(inside, v, np.nan)
 
 
-def sample_nearest(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, fill=0) -> np.ndarray:
+def sample_nearest(z: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, fill: float = 0) -> np.ndarray:
     """Value of the cell containing each map point (``fill`` outside the grid, 0 by default).
 
     Parameters
@@ -415,7 +415,7 @@ def profile_points(vertices: Sequence[Sequence[float]], spacing: float) -> tuple
 
 
 def profile_comparison(model: np.ndarray, grid: GridSpec, reference: np.ndarray, ref_grid: GridSpec,
-                       vertices, spacing: float, classes: np.ndarray | None = None,
+                       vertices: Sequence[Sequence[float]], spacing: float, classes: np.ndarray | None = None,
                        class_grid: GridSpec | None = None, vegetation_codes: Sequence[int] = ()) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Sample model and reference along a polyline (Feurer et al. 2018 Fig. 10, Table 5).
 
@@ -543,8 +543,9 @@ def checkpoint_figures(errors: pd.DataFrame, hist_png: str | Path, map_png: str 
     save_figure(fig, map_png)
 
 
-def validate_checkpoints(dsm_path, checkpoints_path, params: CheckpointParams, out: Mapping,
-                         landcover_path=None, classes_path=None) -> pd.DataFrame:
+def validate_checkpoints(dsm_path: str | Path, checkpoints_path: str | Path, params: CheckpointParams, out: Mapping,
+                         landcover_path: str | Path | None = None,
+                         classes_path: str | Path | None = None) -> pd.DataFrame:
     """DSM errors at independent checkpoints: error table, summary, histogram and map.
 
     Parameters
@@ -600,7 +601,7 @@ def validate_checkpoints(dsm_path, checkpoints_path, params: CheckpointParams, o
     return err
 
 
-def auto_profile(centrelines_path, length_m: float) -> list[list[float]]:
+def auto_profile(centrelines_path: str | Path, length_m: float) -> list[list[float]]:
     """A straight section across the longest gully centreline, centred on its midpoint."""
     from kitegully.io.vectors import read_vector
 
@@ -617,8 +618,9 @@ def auto_profile(centrelines_path, length_m: float) -> list[list[float]]:
     return [[p.x - n[0], p.y - n[1]], [p.x + n[0], p.y + n[1]]]
 
 
-def validate_against_truth(dsm_path, truth_dsm_path, truth_dtm_path, landcover_path, classes_path,
-                           centrelines_path, params: TruthParams, out: Mapping) -> dict:
+def validate_against_truth(dsm_path: str | Path, truth_dsm_path: str | Path, truth_dtm_path: str | Path,
+                           landcover_path: str | Path, classes_path: str | Path, centrelines_path: str | Path,
+                           params: TruthParams, out: Mapping) -> dict:
     """Twin only (evaluation): DSM − truth error raster, statistics by land cover, error map
     and the profile comparison (Fig. 10 / Table 5) along the configured or automatic polyline.
 

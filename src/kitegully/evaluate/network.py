@@ -92,13 +92,17 @@ class NetworkScorer:
         """The domain (buffer) of a line network, as used by :meth:`score`."""
         return _buffer(lines, tolerance_m)
 
-    def clip(self, extracted) -> BaseGeometry:
+    def clip(self, extracted: gpd.GeoDataFrame | gpd.GeoSeries | Iterable[BaseGeometry]) -> BaseGeometry:
         """The extracted lines as one geometry, clipped to the domain."""
         ext = _lines(extracted)
         return ext.intersection(self.domain) if self.domain is not None else ext
 
     def score(
-        self, extracted, tolerance_m: float, clipped: BaseGeometry | None = None, clipped_buffer: BaseGeometry | None = None
+        self,
+        extracted: gpd.GeoDataFrame | gpd.GeoSeries | Iterable[BaseGeometry],
+        tolerance_m: float,
+        clipped: BaseGeometry | None = None,
+        clipped_buffer: BaseGeometry | None = None,
     ) -> pd.DataFrame:
         """Rows ``reference, good_fit, false_positive, false_negative`` (see :func:`network_validation`).
 
@@ -471,7 +475,12 @@ def rasterize_polygons(polygons: gpd.GeoDataFrame | Iterable[BaseGeometry], grid
     return out.astype(bool)
 
 
-def footprint(valid: np.ndarray, grid: GridSpec, near=None, margin_cells: int = 2) -> BaseGeometry:
+def footprint(
+    valid: np.ndarray,
+    grid: GridSpec,
+    near: gpd.GeoDataFrame | gpd.GeoSeries | Iterable[BaseGeometry] | None = None,
+    margin_cells: int = 2,
+) -> BaseGeometry:
     """Polygon of the valid cells of a raster (the DEM footprint). O(n).
 
     With ``near`` (lines, e.g. the reference and the traced network) only the valid cells

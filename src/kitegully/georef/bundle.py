@@ -105,7 +105,8 @@ class BundleSettings:
     rel_tolerance: float = 1e-6
 
 
-def projection_jacobian(intr, rv, t, X):
+def projection_jacobian(intr: np.ndarray, rv: np.ndarray, t: np.ndarray,
+                        X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Pixels and their derivatives for each observation row.
 
     Returns ``p`` (n, 2), ``J_intr`` (n, 2, 5), ``J_pose`` (n, 2, 6) (rotation vector then

@@ -7,8 +7,13 @@ truth, GCP RMSE ≤ 1 GSD horizontally and ≤ 1.5 GSD vertically, leave-one-out
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pandas as pd
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 
 def evaluate_twin(cameras: pd.DataFrame, truth_poses: pd.DataFrame, residuals: pd.DataFrame, loo: pd.DataFrame,
@@ -81,8 +86,9 @@ def evaluate_twin(cameras: pd.DataFrame, truth_poses: pd.DataFrame, residuals: p
     return table, summary
 
 
-def evaluate_against_flight_truth(cameras_gpkg, poses_csv, image_stats_csv, residuals_csv, loo_csv, sfm_summary_json,
-                                  table_csv, summary_json) -> dict:
+def evaluate_against_flight_truth(cameras_gpkg: str | Path, poses_csv: str | Path, image_stats_csv: str | Path,
+                                  residuals_csv: str | Path, loo_csv: str | Path, sfm_summary_json: str | Path,
+                                  table_csv: str | Path, summary_json: str | Path) -> dict:
     """Twin only (evaluation): the georef stage's products against the flight truth, written out.
 
     Parameters

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import geopandas as gpd
 import laspy
@@ -25,6 +26,9 @@ from kitegully.georef.geometry import camera_centres, rotvec_to_matrix
 from kitegully.georef.model import ModelIndex, write_block_to_reconstruction
 from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.tables import write_table
+
+if TYPE_CHECKING:
+    from typing import Any
 
 
 def write_model(rec: pycolmap.Reconstruction, block: Block, index: ModelIndex, out_dir: str | Path) -> pycolmap.Reconstruction:
@@ -75,7 +79,7 @@ def write_transform(path: str | Path, crs: str, offset: np.ndarray, sim_dict: di
     Path(path).write_text(json.dumps(clean_json(doc), indent=2) + "\n", encoding="utf-8")
 
 
-def clean_json(o):
+def clean_json(o: Any) -> Any:
     """A JSON-safe copy: NumPy scalars/arrays to Python, NaN/inf to None."""
     if isinstance(o, dict):
         return {str(k): clean_json(v) for k, v in o.items()}

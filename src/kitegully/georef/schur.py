@@ -53,7 +53,8 @@ def _rotate(r0, r1, r2, x0, x1, x2):
 
 
 @njit(parallel=True, cache=True)
-def weighted_jacobians(intr, cam, rv, t, o_img, pts, o_pt, weight):
+def weighted_jacobians(intr: np.ndarray, cam: np.ndarray, rv: np.ndarray, t: np.ndarray, o_img: np.ndarray,
+                       pts: np.ndarray, o_pt: np.ndarray, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Camera and point Jacobians of every observation's pixel, times ``weight``.
 
     The same derivatives as :func:`kitegully.georef.bundle.projection_jacobian` (analytic
@@ -135,7 +136,9 @@ def _chunks(start, n_chunks):
 
 
 @njit(parallel=True, cache=True)
-def accumulate_normal_equations(Jc, Jx, rr, ci, order, start, n_cam, n_chunks):
+def accumulate_normal_equations(Jc: np.ndarray, Jx: np.ndarray, rr: np.ndarray, ci: np.ndarray, order: np.ndarray,
+                                start: np.ndarray, n_cam: int,
+                                n_chunks: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Gauss–Newton blocks of the weighted Jacobian.
 
     Parameters
@@ -194,7 +197,8 @@ def _sum_chunks(a):
 
 
 @njit(parallel=True, cache=True)
-def reduce_to_cameras(Jc, Jx, ci, order, start, Vinv, gp, n_cam, n_chunks):
+def reduce_to_cameras(Jc: np.ndarray, Jx: np.ndarray, ci: np.ndarray, order: np.ndarray, start: np.ndarray,
+                      Vinv: np.ndarray, gp: np.ndarray, n_cam: int, n_chunks: int) -> tuple[np.ndarray, np.ndarray]:
     """The points' share of the reduced camera system and of its right-hand side.
 
     Parameters
@@ -262,7 +266,8 @@ def reduce_to_cameras(Jc, Jx, ci, order, start, Vinv, gp, n_cam, n_chunks):
 
 
 @njit(parallel=True, cache=True)
-def point_steps(Jc, Jx, ci, order, start, Vinv, gp, dc):
+def point_steps(Jc: np.ndarray, Jx: np.ndarray, ci: np.ndarray, order: np.ndarray, start: np.ndarray,
+                Vinv: np.ndarray, gp: np.ndarray, dc: np.ndarray) -> np.ndarray:
     """Point updates after the camera update ``dc``: ``dp_p = −V_p⁻¹ (g_p + W_pᵀ dc)``.
 
     Parameters

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from kitegully.terrain.smoothing import gaussian_smooth_fft
+
+if TYPE_CHECKING:
+    from kitegully.terrain.tiled_fill import Tile
 
 
 def depth_map(
@@ -68,7 +73,7 @@ def depth_halo_cells(cell_m: float, sigma_m: float, truncate: float = 4.0) -> in
 
 def depth_map_tile(
     path: str,
-    tile,
+    tile: Tile,
     cell_m: float,
     sigma_m: float,
     truncate: float = 4.0,

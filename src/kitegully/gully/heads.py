@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import scipy.ndimage as ndi
@@ -46,6 +46,9 @@ from kitegully.evaluate.dem import nmad
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.flow import D8_OFFSETS, END_MERGE, END_ON_NETWORK, trace_paths
 from kitegully.terrain.smoothing import gaussian_smooth_fft
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 log = logging.getLogger(__name__)
 
@@ -761,7 +764,8 @@ def surface_roughness(relief: np.ndarray) -> float:
     return 0.0 if np.isnan(spread) else spread
 
 
-def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points, outlier_nmad: float | None = 4.0) -> float:
+def dsm_noise_at_checkpoints(dsm: np.ndarray, grid: GridSpec, points: pd.DataFrame,
+                             outlier_nmad: float | None = 4.0) -> float:
     """The DSM's noise σ_z (m): SD of DSM minus checkpoint elevation, blunders left out.
 
     [I] A checkpoint more than ``outlier_nmad`` NMADs from the median error lies on a gross

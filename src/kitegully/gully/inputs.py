@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 import shapely
@@ -11,6 +11,9 @@ from pyproj import CRS
 
 from kitegully import InputError
 from kitegully.io.vectors import read_vector
+
+if TYPE_CHECKING:
+    from kitegully.io.raster import GridSpec
 
 
 def read_heads(path: str | Path, crs: str) -> tuple[np.ndarray, np.ndarray]:
@@ -56,7 +59,7 @@ def check_heads_on_dem(inside: np.ndarray, path: str | Path) -> None:
         raise InputError(f"{path}: none of the {inside.size} gully heads lies on valid DEM cells")
 
 
-def read_orthophoto_on_grid(path: str | Path, grid) -> np.ndarray:
+def read_orthophoto_on_grid(path: str | Path, grid: GridSpec) -> np.ndarray:
     """The orthophoto's first three bands (R, G, B) averaged onto ``grid`` (float32, 0 = no data).
 
     The orthophoto of Stage 5 is made on the DSM's footprint at a finer cell (0.1 m for a

@@ -11,6 +11,7 @@ confluences into segments that carry their order and length.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import geopandas as gpd
 import numpy as np
@@ -19,6 +20,9 @@ from shapely import linestrings
 
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.flow import END_OUTLET, END_PIT, trace_paths
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 
 #: How a digitised head is moved onto the gully (``gully.head_snap``).
@@ -213,7 +217,7 @@ def _plane_gradient(smoothed: np.ndarray, r0: np.ndarray, c0: np.ndarray) -> tup
 
 
 @njit(cache=True)
-def topological_order(pos_down):
+def topological_order(pos_down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cells of a downstream forest in topological order, heads first (Kahn's algorithm).
 
     Parameters
@@ -360,7 +364,7 @@ class GullyNetwork:
         """Paths that reached an outlet (``ends == END_OUTLET``)."""
         return int(np.sum(self.ends == END_OUTLET))
 
-    def save(self, path) -> None:
+    def save(self, path: str | Path) -> None:
         """Write the network to a ``.npz`` file (arrays only, no pickle)."""
         np.savez_compressed(
             path, cells=self.cells, pos_down=self.pos_down, order=self.order, seg_vertices=self.seg_vertices,
@@ -369,7 +373,7 @@ class GullyNetwork:
         )
 
     @classmethod
-    def load(cls, path) -> "GullyNetwork":
+    def load(cls, path: str | Path) -> "GullyNetwork":
         """Read a network written by :meth:`save`."""
         with np.load(path, allow_pickle=False) as f:
             return cls(

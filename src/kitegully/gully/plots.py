@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.ndimage as ndi
 from matplotlib.colors import ListedColormap
@@ -10,6 +12,9 @@ from shapely.geometry.base import BaseGeometry
 from kitegully.gully.network import GullyNetwork
 from kitegully.io.figures import new_figure
 from kitegully.io.raster import GridSpec
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def pick_section(net: GullyNetwork, depth: np.ndarray, gully: np.ndarray, grid: GridSpec, half_length_m: float) -> tuple[float, float, float, float]:
@@ -76,7 +81,7 @@ def section_figure(
     line: tuple[float, float, float, float],
     sigma_m: float,
     threshold_m: float,
-):
+) -> Figure:
     """Four stacked panels along a transect: kernel, DEM vs smoothed, depth, detected cells.
 
     Parameters
@@ -168,7 +173,7 @@ def validation_map(
     pieces: dict[str, BaseGeometry],
     tolerance_m: float,
     max_pixels: int = 1500,
-):
+) -> Figure:
     """Fig. 9b style map: hillshade, mapped gullies, good fit / false negative / false positive lines.
 
     Colours as in the paper's Fig. 9b: yellow good fit, thick black false positives, blue

@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -24,6 +25,12 @@ from kitegully.gully.network import GullyNetwork, network_lines
 from kitegully.gully.patches import depth_patches
 from kitegully.gully.pipeline import GullyParams
 from kitegully.io.raster import GridSpec
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    import geopandas as gpd
+    from shapely.geometry.base import BaseGeometry
 
 log = logging.getLogger(__name__)
 
@@ -38,9 +45,9 @@ def sensitivity_table(
     buffer_m: float,
     connectivity: int,
     truncate: float,
-    reference=None,
+    reference: gpd.GeoDataFrame | None = None,
     tolerance_m: float = 5.0,
-    domain=None,
+    domain: BaseGeometry | Callable[[], BaseGeometry] | None = None,
     truth_mask: np.ndarray | None = None,
     workers: int = 1,
     known_depths: dict[float, np.ndarray] | None = None,
@@ -137,7 +144,7 @@ def gully_sensitivity(
     sigmas_m: Sequence[float],
     thresholds_m: Sequence[float],
     tolerance_m: float,
-    reference=None,
+    reference: gpd.GeoDataFrame | None = None,
     truth_mask: np.ndarray | None = None,
     workers: int = 1,
 ) -> pd.DataFrame:

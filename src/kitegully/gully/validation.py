@@ -140,7 +140,7 @@ def catchment_outline(catchment: gpd.GeoDataFrame, path: str) -> BaseGeometry:
 
 
 def tolerance_table(
-    scorers: Mapping[str, NetworkScorer], extracted, tolerances_m: list[float], clipped: BaseGeometry
+    scorers: Mapping[str, NetworkScorer], extracted: gpd.GeoDataFrame, tolerances_m: list[float], clipped: BaseGeometry
 ) -> pd.DataFrame:
     """Thommeret lengths of ``extracted`` for every tolerance and every named scorer.
 

@@ -57,15 +57,15 @@ class Findings:
             raise ValueError(f"unknown finding level {level!r}")
         self.items.append(Finding(level, str(source), message))
 
-    def error(self, source, message: str) -> None:
+    def error(self, source: str, message: str) -> None:
         """Add an error: the run is refused."""
         self.add("error", source, message)
 
-    def warning(self, source, message: str) -> None:
+    def warning(self, source: str, message: str) -> None:
         """Add a warning: the run goes on, the report says why it may suffer."""
         self.add("warning", source, message)
 
-    def note(self, source, message: str) -> None:
+    def note(self, source: str, message: str) -> None:
         """Add a note: a fact worth knowing."""
         self.add("note", source, message)
 

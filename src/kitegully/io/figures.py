@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+
+if TYPE_CHECKING:
+    from typing import Any
+
+    from matplotlib.figure import Figure
 
 PRINT_DPI = 300
 
@@ -24,13 +30,13 @@ STYLE = {
 }
 
 
-def new_figure(*args, **kwargs):
+def new_figure(*args: Any, **kwargs: Any) -> tuple[Figure, Any]:
     """``plt.subplots`` under the project style."""
     with plt.rc_context(STYLE):
         return plt.subplots(*args, **kwargs)
 
 
-def save_figure(fig, path: str | Path, attribution: str | None = None) -> None:
+def save_figure(fig: Figure, path: str | Path, attribution: str | None = None) -> None:
     """Save ``fig`` as PNG at print resolution and close it; add an attribution line if given.
 
     Parameters

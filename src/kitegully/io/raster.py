@@ -440,7 +440,7 @@ def read_grid(path: str | Path) -> GridSpec:
         return grid_of(src, path)
 
 
-def grid_of(src, path: str | Path) -> GridSpec:
+def grid_of(src: rasterio.DatasetReader, path: str | Path) -> GridSpec:
     """The grid of an open rasterio dataset ``src`` read from ``path``.
 
     Raises :class:`InputError` naming ``path`` when the raster is rotated or not

@@ -268,7 +268,8 @@ def georeference_rtk(model_t: Mapping[str, np.ndarray], rtk: Mapping[str, np.nda
     return sim, residual_rows("similarity_rtk", sim, model_t, ids, edges, res)
 
 
-def residual_rows(method: str, sim: Similarity, model_t, ids, edges, res) -> pd.DataFrame:
+def residual_rows(method: str, sim: Similarity, model_t: Mapping[str, np.ndarray], ids: list[str],
+                  edges: list[tuple[str, str, float]], res: np.ndarray) -> pd.DataFrame:
     """Residual table rows: global mean 3-D, local mean edge-length, each target and edge.
 
     Parameters

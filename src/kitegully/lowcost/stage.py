@@ -15,7 +15,7 @@ import sqlite3
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import pandas as pd
@@ -33,6 +33,9 @@ from kitegully.lowcost.georef import (georeference_rtk, georeference_tape_horn, 
 from kitegully.lowcost.surface import slope_aspect
 from kitegully.obia.indices import excess_green, ndvi
 from kitegully.seeds import rng_for
+
+if TYPE_CHECKING:
+    from collections.abc import Collection
 
 log = logging.getLogger(__name__)
 
@@ -625,7 +628,8 @@ def _accuracy(pred: np.ndarray, true: np.ndarray) -> dict:
             "bare_users_accuracy": tp / max(tp + fp, 1)}
 
 
-def score_bare_soil_maps(survey_dir: str | Path, cls: np.ndarray, grid: GridSpec, bare_classes) -> pd.DataFrame:
+def score_bare_soil_maps(survey_dir: str | Path, cls: np.ndarray, grid: GridSpec,
+                         bare_classes: Collection[str]) -> pd.DataFrame:
     """Accuracy of the OBIA bare-soil maps (``bare_soil_ndvi.tif``, ``bare_soil_exg.tif``)
     against the land cover ``cls`` under the mosaic cells (truth class codes).
 

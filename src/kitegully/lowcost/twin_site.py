@@ -25,7 +25,7 @@ import logging
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import pandas as pd
@@ -41,6 +41,9 @@ from kitegully.seeds import rng_for
 from kitegully.twin.camera import Camera, Pose, nadir_rotation
 from kitegully.twin.exif import exif_bytes, write_jpeg
 from kitegully.twin.render import Photographic, make_scene, photograph, render_reflectance, surface_height, visible
+
+if TYPE_CHECKING:
+    from kitegully.twin.render import Scene
 
 log = logging.getLogger(__name__)
 
@@ -397,7 +400,7 @@ def _project(camera: Camera, pose: Pose, X: np.ndarray) -> np.ndarray:
     return uv
 
 
-def render_photo(scene, camera: Camera, pose: Pose, weights: np.ndarray, effects: Photographic,
+def render_photo(scene: Scene, camera: Camera, pose: Pose, weights: np.ndarray, effects: Photographic,
                  rng: np.random.Generator, supersampling: int) -> np.ndarray:
     """One 8-bit photo: the texture's four bands ray-cast (``supersampling``² rays per
     pixel), mixed into the camera's channels by ``weights`` (channels x 4 bands, see

@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
 import numpy as np
 import rasterio
@@ -31,6 +31,10 @@ from kitegully.obia.classify import NODATA, classify_segments, remove_small_erod
 from kitegully.obia.indices import blue_dominant
 from kitegully.obia.scene import ObiaParams, blurred_index, segment
 from kitegully.obia.threshold import FINE_BINS_PER_BIN, ThresholdResult, find_bare_threshold
+
+if TYPE_CHECKING:
+    from rasterio.io import DatasetReader
+    from rasterio.windows import Window
 
 log = logging.getLogger("kitegully.obia.kite")
 
@@ -184,7 +188,8 @@ def unimodal_code(params: ObiaParams) -> int:
     return 0 if params.unimodal_class == "grass" else 1
 
 
-def block_histogram(ortho, dsm, nir, read, core, params: ObiaParams, src: str, edges: np.ndarray) -> np.ndarray:
+def block_histogram(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader | None, read: Window, core: Window,
+                    params: ObiaParams, src: str, edges: np.ndarray) -> np.ndarray:
     """Fine-histogram counts of the blurred index over one block's core (``read`` = core + halo).
 
     Open datasets ``ortho``, ``dsm`` (and ``nir`` or None); cells whose blue band is the
@@ -222,7 +227,8 @@ def block_histogram(ortho, dsm, nir, read, core, params: ObiaParams, src: str, e
     return np.histogram(inner[np.isfinite(inner) & land], bins=edges)[0]
 
 
-def classify_block(ortho, dsm, nir, read, core, params: ObiaParams, src: str, cell: float, valley: float | None,
+def classify_block(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader | None, read: Window, core: Window,
+                   params: ObiaParams, src: str, cell: float, valley: float | None,
                    unimodal: int) -> tuple[np.ndarray, int]:
     """Segment and classify one block (``read`` = core + halo); the core's classes and its water cells.
 

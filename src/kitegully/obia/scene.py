@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,6 +30,9 @@ from kitegully.obia.seeds import generate_seeds
 from kitegully.obia.slope import wood_slope
 from kitegully.obia.srg import seeded_region_growing
 from kitegully.obia.threshold import ThresholdResult, find_bare_threshold, fine_histogram
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 log = logging.getLogger("kitegully.obia")
 
@@ -140,7 +144,7 @@ class SceneResult:
     timings_s: dict
 
 
-def marker_mask(shape: tuple[int, int], grid, markers, factor: float) -> np.ndarray:
+def marker_mask(shape: tuple[int, int], grid: GridSpec, markers: pd.DataFrame | None, factor: float) -> np.ndarray:
     """Cells within ``factor`` x radius of any surveyed marker centre (``x, y, radius_m``).
 
     Parameters
@@ -243,7 +247,8 @@ def segment(
     return Segmentation(slope, feats, seeds, segments, nseg, t)
 
 
-def blurred_exg(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.ndarray, params: ObiaParams):
+def blurred_exg(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.ndarray,
+                params: ObiaParams) -> tuple[np.ndarray, np.ndarray]:
     """ExG (NaN off ``valid``) and its Gaussian blur (``exg_blur`` parameters). O(N).
 
     Parameters
@@ -268,7 +273,7 @@ def blurred_exg(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.
 
 
 def blurred_index(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: np.ndarray, params: ObiaParams,
-                  nir: np.ndarray | None = None, source: str = "orthophoto"):
+                  nir: np.ndarray | None = None, source: str = "orthophoto") -> tuple[np.ndarray, np.ndarray]:
     """The thresholded index (``params.index``: ExG, or NDVI from ``nir`` and red; NaN off
     ``valid``) and its Gaussian blur (``exg_blur`` parameters, used for either index). O(N).
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import geopandas as gpd
 import numpy as np
@@ -26,6 +26,9 @@ from kitegully.obia.accuracy import accuracies, accuracy_rows, area_error, confu
 from kitegully.obia.classify import eroded_polygons
 from kitegully.obia.scene import ObiaParams, SceneResult, classify_scene, marker_mask
 from kitegully.obia.threshold import ThresholdResult
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 log = logging.getLogger(__name__)
 
@@ -161,7 +164,7 @@ def scene_figure(
     grid: GridSpec,
     scene: str,
     overall_accuracy: float,
-):
+) -> Figure:
     """Scene figure (001 Figs 3-4): RGB, segments, ExG histogram with both thresholds, classification vs reference.
 
     Parameters
@@ -301,7 +304,7 @@ def summarise_scenes(results: Sequence[dict]) -> SceneSummary:
     return SceneSummary(pd.DataFrame(rows), pd.DataFrame(areas), comp_df)
 
 
-def summary_figure(summary: SceneSummary, paper_overall_accuracy_pct: float = 94.3):
+def summary_figure(summary: SceneSummary, paper_overall_accuracy_pct: float = 94.3) -> Figure:
     """OA per scene (valley vs Otsu) against the eroded share, and automated vs reference eroded area."""
     c = summary.comparison[summary.comparison["scene"] != "all"]
     fig, axes = new_figure(1, 2, figsize=(9, 3.6))
@@ -330,7 +333,7 @@ def summary_figure(summary: SceneSummary, paper_overall_accuracy_pct: float = 94
 
 # --------------------------------------------------------------------------- obia_kite_scale
 def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: ThresholdResult, figure_max_px: float,
-                    index: str = "exg"):
+                    index: str = "exg") -> Figure:
     """Orthophoto, the bare-soil map over it, and the blurred-index histogram with both thresholds.
 
     The orthophoto is read averaged down to at most ``figure_max_px`` pixels a side;

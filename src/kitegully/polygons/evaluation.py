@@ -8,7 +8,7 @@ centres inside) and areas are cell counts × cell area.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import geopandas as gpd
 import numpy as np
@@ -20,6 +20,12 @@ from shapely.geometry import shape
 
 from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
+    from pathlib import Path
+
+    from kitegully.io.raster import Raster
 
 #: The paper's Table 1 and sect. 5.3 numbers (Höfle et al. 2013; METHODS.md 3.4), m² or %.
 PAPER_TABLE1 = {
@@ -70,7 +76,8 @@ class EvaluationParams:
         return cls(zone_m=float(cfg["zone_m"]), wide_gully_m=float(cfg["wide_gully_m"]), match_distance_m=float(cfg["match_distance_m"]))
 
 
-def rasterize(geoms, grid: GridSpec, values=None, dtype=np.uint8) -> np.ndarray:
+def rasterize(geoms: Iterable[shapely.Geometry | None], grid: GridSpec, values: Sequence[float] | None = None,
+              dtype: type = np.uint8) -> np.ndarray:
     """Burn geometries (cell centres inside) on ``grid``; ``values`` default 1.
 
     Parameters
@@ -300,7 +307,7 @@ def morphometry_errors(sections: gpd.GeoDataFrame, centrelines: gpd.GeoDataFrame
     return per, pd.DataFrame(summ), gv.reset_index()
 
 
-def observable_region(grid: GridSpec, landcover=None, classes: pd.DataFrame | None = None,
+def observable_region(grid: GridSpec, landcover: Raster | None = None, classes: pd.DataFrame | None = None,
                       unseen_classes: tuple[str, ...] = ("water",)) -> shapely.Geometry:
     """The part of the stage grid where a survey sees the ground: the grid's extent less open water.
 
@@ -337,7 +344,8 @@ def observable_region(grid: GridSpec, landcover=None, classes: pd.DataFrame | No
     return shapely.difference(region, unseen)
 
 
-def observable_region_from_files(grid: GridSpec, landcover_path=None, classes_path=None) -> shapely.Geometry:
+def observable_region_from_files(grid: GridSpec, landcover_path: str | Path | None = None,
+                                 classes_path: str | Path | None = None) -> shapely.Geometry:
     """:func:`observable_region` from a twin's ``truth/landcover.tif`` and ``truth/landcover_classes.csv``.
 
     Without the files (a DEM twin has no land cover) the region is the grid's extent.

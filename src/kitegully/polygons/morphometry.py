@@ -194,7 +194,8 @@ def clip_to_extent(line: shapely.LineString, grid: GridSpec) -> shapely.LineStri
     return max(parts, key=lambda g: g.length) if parts else None
 
 
-def prolong_to_outline(axis: shapely.LineString, poly, start: bool, end: bool, look_m: float) -> shapely.LineString:
+def prolong_to_outline(axis: shapely.LineString, poly: shapely.Polygon | shapely.MultiPolygon, start: bool, end: bool,
+                       look_m: float) -> shapely.LineString:
     """The axis prolonged at its free ends, straight on, to the polygon outline.
 
     Thinning stops a medial axis at the centre of the last inscribed circle, about a half
@@ -251,7 +252,7 @@ def prolong_to_outline(axis: shapely.LineString, poly, start: bool, end: bool, l
     return shapely.LineString(np.concatenate(out))
 
 
-def without_holes(poly):
+def without_holes(poly: shapely.Polygon | shapely.MultiPolygon) -> shapely.Polygon | shapely.MultiPolygon:
     """The polygon (or each part of a multipolygon) with its holes filled.
 
     The medial axes are thinned from the filled mask (:func:`medial_axis`,

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 _OFFS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
 
@@ -177,7 +182,7 @@ def _chain_from_leaf(G, leaf):
     return nodes, keys
 
 
-def prune_network(G, radius: np.ndarray, min_extension: float) -> None:
+def prune_network(G: nx.MultiGraph, radius: np.ndarray, min_extension: float) -> None:
     """Drop terminal branches that reach less than ``min_extension`` beyond their parent's edge (in place).
 
     A terminal branch (leaf to the next junction through degree-2 nodes) of length L that

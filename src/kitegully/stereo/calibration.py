@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -27,6 +28,9 @@ import pandas as pd
 from kitegully import InputError
 from kitegully.stereo.rig import D2H_NOMINAL_F_MM, PAPER_TABLE1, camera_to_table, nadir_pose
 from kitegully.twin.camera import Camera, Pose
+
+if TYPE_CHECKING:
+    from kitegully.stereo.measure import PrintedMarks
 
 log = logging.getLogger(__name__)
 
@@ -510,7 +514,7 @@ def distortion_precision(result: CalibrationResult, truth: Camera | None = None)
 TARGET_DIAMETER_M = 0.010
 
 
-def calibration_targets(field: ControlField, diameter_m: float = TARGET_DIAMETER_M):
+def calibration_targets(field: ControlField, diameter_m: float = TARGET_DIAMETER_M) -> PrintedMarks:
     """The field's targets as printed discs: a white disc on a black square plate, horizontal, centred on each target.
 
     Pole tops carry the plate on the pole (the pole itself is not rendered: under the plate it is hidden
@@ -522,8 +526,8 @@ def calibration_targets(field: ControlField, diameter_m: float = TARGET_DIAMETER
     return PrintedMarks(np.asarray(field.xyz, float), MarkDesign(diameter_m))
 
 
-def render_calibration_image(camera: Camera, pose: Pose, targets, noise_dn: float, rng: np.random.Generator,
-                             window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+def render_calibration_image(camera: Camera, pose: Pose, targets: PrintedMarks, noise_dn: float,
+                             rng: np.random.Generator, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
     """One calibration photograph: the printed targets over a plain grey table (reflectance 0.30), 0–255 float.
 
     [I] The table's texture is irrelevant to a target: each disc is measured against its own black plate.

@@ -278,7 +278,8 @@ def locate_marks(image: np.ndarray, predicted_uv: np.ndarray, radius_px: np.ndar
     return MarkMeasurement(np.array(uv), np.array(sig), np.array(con), np.array(noi))
 
 
-def search_disc(img: np.ndarray, predicted: np.ndarray, radius_px: float, gate_px: float):
+def search_disc(img: np.ndarray, predicted: np.ndarray, radius_px: float,
+                gate_px: float) -> tuple[np.ndarray, float, float, float] | None:
     """Template search for a printed disc within ``gate_px`` of ``predicted``, then its weighted centroid.
 
     Parameters

@@ -6,9 +6,14 @@ M is the measured (reference) value and A the photogrammetric one. The paper fit
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from kitegully import InputError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 def _pair(M, A, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -22,13 +27,13 @@ def _pair(M, A, name: str) -> tuple[np.ndarray, np.ndarray]:
     return M, A
 
 
-def mae(M, A) -> float:
+def mae(M: ArrayLike, A: ArrayLike) -> float:
     """Mean absolute error ``(1/N) Σ |M_i − A_i|`` (Eq. 2), in the units of M."""
     M, A = _pair(M, A, "MAE")
     return float(np.mean(np.abs(M - A)))
 
 
-def mre(M, A) -> float:
+def mre(M: ArrayLike, A: ArrayLike) -> float:
     """Mean relative error ``(1/N) Σ |M_i − A_i| / M_i · 100`` (Eq. 3), %; every M_i must be non-zero."""
     M, A = _pair(M, A, "MRE")
     if np.any(M == 0):
@@ -36,7 +41,7 @@ def mre(M, A) -> float:
     return float(np.mean(np.abs(M - A) / np.abs(M)) * 100.0)
 
 
-def fit_through_origin(x, y) -> tuple[float, float]:
+def fit_through_origin(x: ArrayLike, y: ArrayLike) -> tuple[float, float]:
     """Least-squares slope of ``y = s·x`` and its R².
 
     Returns
@@ -55,11 +60,11 @@ def fit_through_origin(x, y) -> tuple[float, float]:
     return s, r2
 
 
-def fit_mae_vs_L(L_m, mae_mm) -> tuple[float, float]:
+def fit_mae_vs_L(L_m: ArrayLike, mae_mm: ArrayLike) -> tuple[float, float]:
     """Paper's ``MAE = a·L``: slope a (mm per m of L) and R²."""
     return fit_through_origin(L_m, mae_mm)
 
 
-def fit_A_vs_M(M_mm, A_mm) -> tuple[float, float]:
+def fit_A_vs_M(M_mm: ArrayLike, A_mm: ArrayLike) -> tuple[float, float]:
     """Paper's ``A = b·M``: slope b (dimensionless) and R²."""
     return fit_through_origin(M_mm, A_mm)

@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass
 from typing import ClassVar
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -54,6 +54,12 @@ from kitegully.stereo.rig import (D2H_NOMINAL_F_MM, D2H_PIXEL_MM, StereoRig, del
                                   stereo_L_m)
 from kitegully.stereo.synth import render_heightfield, soil_texture
 from kitegully.twin.camera import Camera, Pose
+
+if TYPE_CHECKING:
+    from kitegully.io.raster import Raster
+    from kitegully.stereo.matching import Disparity
+    from kitegully.stereo.measure import MarkMeasurement
+    from kitegully.stereo.rectify import Rectification
 
 log = logging.getLogger(__name__)
 
@@ -403,8 +409,9 @@ class PairProcessor:
         return sim, 1e3 * float(np.sqrt(np.mean(np.sum((sim.apply(P) - self.marks_xyz) ** 2, axis=1))))
 
     @staticmethod
-    def measure_marks(cams: Mapping[str, Camera], img_l, img_r, marks_xyz, diameter_m: float, B_m: float, H_m: float,
-                      centre=(0.0, 0.0)):
+    def measure_marks(cams: Mapping[str, Camera], img_l: np.ndarray, img_r: np.ndarray, marks_xyz: np.ndarray,
+                      diameter_m: float, B_m: float, H_m: float,
+                      centre: tuple[float, float] = (0.0, 0.0)) -> list[MarkMeasurement]:
         """Locate the printed marks in both photographs, predicted from the rig's nominal pose (H, B, aimed at ``centre``).
 
         Parameters
@@ -436,8 +443,9 @@ class PairProcessor:
         return out
 
     @classmethod
-    def from_images(cls, cams: Mapping[str, Camera], img_l, img_r, marks_xyz, diameter_m: float, B_m: float, H_m: float,
-                    match: MatchParams, centre=(0.0, 0.0)) -> "PairProcessor":
+    def from_images(cls, cams: Mapping[str, Camera], img_l: np.ndarray, img_r: np.ndarray, marks_xyz: np.ndarray,
+                    diameter_m: float, B_m: float, H_m: float, match: MatchParams,
+                    centre: tuple[float, float] = (0.0, 0.0)) -> "PairProcessor":
         """Measure SIFT tie points and the printed frame marks in a pair of photographs and orient it.
 
         Parameters
@@ -467,7 +475,7 @@ class PairProcessor:
         pp.info.update(marks_uv=(ml.uv, mr.uv), mark_sigma_noise_px=float(np.median(np.r_[ml.sigma_px, mr.sigma_px])))
         return pp
 
-    def reoriented(self, marks_l, marks_r) -> "PairProcessor":
+    def reoriented(self, marks_l: np.ndarray, marks_r: np.ndarray) -> "PairProcessor":
         """A copy whose absolute orientation comes from a new image measurement of the frame marks (same survey)."""
         import copy
 
@@ -476,19 +484,20 @@ class PairProcessor:
         new.info = dict(self.info, mark_abs_rms_mm=abs_rms, marks_uv=(np.asarray(marks_l), np.asarray(marks_r)))
         return new
 
-    def reoriented_from_images(self, img_l, img_r) -> "PairProcessor":
+    def reoriented_from_images(self, img_l: np.ndarray, img_r: np.ndarray) -> "PairProcessor":
         """A copy oriented on the frame marks located anew in this pair's photographs (same relative orientation)."""
         ml, mr = self.measure_marks(self.cams, img_l, img_r, self.marks_xyz, self.diameter_m, self.B_m, self.H_m, self.centre)
         new = self.reoriented(ml.uv, mr.uv)
         new.info["mark_sigma_noise_px"] = float(np.median(np.r_[ml.sigma_px, mr.sigma_px]))
         return new
 
-    def points(self, uv_l, uv_r) -> np.ndarray:
+    def points(self, uv_l: np.ndarray, uv_r: np.ndarray) -> np.ndarray:
         """World coordinates of manually matched points (point measurement)."""
         a, b = self.rect.rectify_points(uv_l, "left"), self.rect.rectify_points(uv_r, "right")
         return self.to_world.apply(triangulate_points(self.rect, a, b, self.model_pose))
 
-    def dem(self, img_l, img_r, grid: GridSpec, z_range: tuple[float, float] = (-0.05, 0.05), return_disparity: bool = False):
+    def dem(self, img_l: np.ndarray, img_r: np.ndarray, grid: GridSpec, z_range: tuple[float, float] = (-0.05, 0.05),
+            return_disparity: bool = False) -> tuple[Raster, int] | tuple[Raster, int, Disparity]:
         """Surface measurement: match the rectified pair where it sees ``grid``, triangulate, grid (mean per cell).
 
         Only the part of the left rectified image that sees the grid (between ``z_range``, world m)
@@ -578,7 +587,8 @@ def _pair_columns(pp: "PairProcessor", truth: StereoRig, marks_xyz: np.ndarray) 
             "mark_error_px": mark_error_px(pp, truth, marks_xyz)}
 
 
-def matching_residual_px(rect, disp, truth: StereoRig, height: Callable, grid: GridSpec, step_m: float = 0.002) -> dict[str, float]:
+def matching_residual_px(rect: Rectification, disp: Disparity, truth: StereoRig, height: Callable, grid: GridSpec,
+                         step_m: float = 0.002) -> dict[str, float]:
     """Evaluation: the matcher's achieved precision δ (px), measured directly against the twin's surface.
 
     Points of the true surface (every ``step_m`` over ``grid``) are projected through the true

@@ -11,11 +11,14 @@ photos of a whole site); it is the minimal renderer a calibrated close-range pai
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from kitegully.twin.camera import Camera, Pose
+
+if TYPE_CHECKING:
+    from kitegully.stereo.measure import PrintedMarks
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,8 @@ def soil_texture(rng: np.random.Generator, extent_m: tuple[float, float, float, 
 def render_heightfield(camera: Camera, pose: Pose, height: Callable[[np.ndarray, np.ndarray], np.ndarray],
                        texture: Texture, z_start: float = 0.0, iterations: int = 8,
                        noise_dn: float = 0.0, rng: np.random.Generator | None = None,
-                       window: tuple[int, int, int, int] | None = None, marks=None) -> np.ndarray:
+                       window: tuple[int, int, int, int] | None = None,
+                       marks: PrintedMarks | None = None) -> np.ndarray:
     """Render an 8-bit-scaled float image (0–255) of a textured height field.
 
     Parameters

@@ -11,11 +11,18 @@ gully id so they are reproducible):
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from kitegully.seeds import rng_for
 from kitegully.twin.gullies import Gully
 from kitegully.twin.noise import fbm_grid
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from kitegully.io.raster import GridSpec
 
 
 def retreat_heads(gullies: list[Gully], ecfg: dict, seed: int) -> dict[int, float]:
@@ -111,7 +118,8 @@ def sheet_erosion(xs: np.ndarray, ys: np.ndarray, ecfg: dict, seed: int) -> np.n
     return ecfg["sheet_erosion_m"] * np.clip(1.0 + ecfg["sheet_erosion_variability"] * n, 0.0, None)
 
 
-def disturb_targets(targets, ecfg: dict, seed: int, lc: np.ndarray, grid, open_classes: list[str]):
+def disturb_targets(targets: pd.DataFrame, ecfg: dict, seed: int, lc: np.ndarray, grid: GridSpec,
+                    open_classes: list[str]) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Epoch-2 GCP targets: a few lost, a few moved, as happens between two field campaigns.
 
     ``targets_lost`` targets (drawn at random) are gone: not painted, not surveyed, absent

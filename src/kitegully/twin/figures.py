@@ -146,8 +146,9 @@ def site_overview(texture: Path, targets: Path, checkpoints: Path, heads: Path, 
     save_figure(fig, out, attribution)
 
 
-def twin_figures(dtm, centrelines, landcover, texture, targets, checkpoints, heads, hillshade_png, landcover_png,
-                 overview_png, attribution: str | None = None) -> None:
+def twin_figures(dtm: str | Path, centrelines: str | Path, landcover: str | Path, texture: str | Path,
+                 targets: str | Path, checkpoints: str | Path, heads: str | Path, hillshade_png: str | Path,
+                 landcover_png: str | Path, overview_png: str | Path, attribution: str | None = None) -> None:
     """The twin's three report figures: hillshade with gullies, land-cover map, site overview.
 
     Parameters

@@ -13,7 +13,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
@@ -29,6 +29,9 @@ from kitegully.twin.flight import FlightSettings, pose_from_row, simulate_flight
 from kitegully.twin.flight_gcps import digitise, target_pixels
 from kitegully.twin.render import Photographic
 from kitegully.twin.render_flight import core_mask, coverage, load_scene, render_flight
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 log = logging.getLogger(__name__)
 
@@ -341,7 +344,7 @@ def flight_map(
     survey: pd.DataFrame,
     extent: tuple[float, float, float, float],
     flight_cfg: Mapping[str, Any],
-):
+) -> Figure:
     """Map of the simulated flight: image footprints, operator path, camera positions, GCPs, wind.
 
     ``image_stats`` is indexed by image name (``gsd_m``); ``flight_cfg`` gives the wind
@@ -405,7 +408,7 @@ def sample_images(
     observations: pd.DataFrame,
     images_dir: str | Path,
     n_sample_images: int,
-):
+) -> Figure:
     """Evenly spaced sample photos with their digitised GCPs, GSD and exposure offset in the titles.
 
     Parameters

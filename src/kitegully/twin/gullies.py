@@ -125,7 +125,10 @@ _REASONS = {1: "edge", 2: "confluence", 3: "depression", 4: "max_length"}
 
 
 # ------------------------------------------------------------------------------ heads
-def sample_heads(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace, tgrid, occ, seed: int) -> list[tuple[float, float, str]]:
+def sample_heads(
+    valley: Valley, fields: Fields, gcfg: dict, bounds: tuple[float, float, float, float], z_trace: np.ndarray,
+    tgrid: GridSpec, occ: np.ndarray, seed: int,
+) -> list[tuple[float, float, str]]:
     """Gully heads on field-row boundaries, Poisson-disc thinned; returns (x, y, bank).
 
     Parameters
@@ -191,7 +194,9 @@ def sample_heads(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace, tg
 
 
 # ---------------------------------------------------------------------------- network
-def wadi_centreline(valley: Valley, bounds, step: float) -> tuple[np.ndarray, np.ndarray]:
+def wadi_centreline(
+    valley: Valley, bounds: tuple[float, float, float, float], step: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """The main wadi along the valley axis, from the upstream site edge to the dam.
 
     Parameters
@@ -216,7 +221,10 @@ def wadi_centreline(valley: Valley, bounds, step: float) -> tuple[np.ndarray, np
     return x[inside], y[inside]
 
 
-def plan_network(valley: Valley, fields: Fields, gcfg: dict, bounds, z_trace: np.ndarray, tgrid, seed: int) -> list[Gully]:
+def plan_network(
+    valley: Valley, fields: Fields, gcfg: dict, bounds: tuple[float, float, float, float], z_trace: np.ndarray,
+    tgrid: GridSpec, seed: int,
+) -> list[Gully]:
     """The twin's true network: wadi plus gullies traced from sampled heads on the
     pre-gully surface ``z_trace`` (not :func:`kitegully.gully.network.trace_network`,
     which traces a network on an observed DEM).
@@ -452,7 +460,7 @@ class Segments:
         cols = [np.concatenate([p[i] for p in parts]) if parts else np.zeros(0) for i in range(10)]
         return cls(*[np.ascontiguousarray(c, np.float64) for c in cols[:9]], gid=cols[9].astype(np.int64))
 
-    def select(self, bounds, buffer: float) -> "Segments":
+    def select(self, bounds: tuple[float, float, float, float], buffer: float) -> "Segments":
         """Segments whose influence (half-width + buffer) reaches into ``bounds``."""
         xmin, ymin, xmax, ymax = bounds
         h = np.maximum(self.h0, self.h1) + buffer

@@ -68,13 +68,13 @@ class Fields:
             furrow_amplitude=f["furrow_amplitude_m"], furrow_period=f["furrow_period_m"], seed=seed,
         )
 
-    def row_boundary(self, bank, k):
+    def row_boundary(self, bank: int | np.ndarray, k: int | np.ndarray) -> np.ndarray:
         """Distance up the bank of the boundary below row ``k`` (k = 0 is the floor edge)."""
         k = np.asarray(k)
         jit = self.row_jitter * (2.0 * hash01(bank, k, seed=self.seed + 11) - 1.0)
         return np.where(k <= 0, k * self.row_depth, k * self.row_depth + jit)
 
-    def col_boundary(self, bank, row, j):
+    def col_boundary(self, bank: np.ndarray, row: np.ndarray, j: np.ndarray) -> np.ndarray:
         """Distance along row ``row`` of the boundary before plot ``j`` (m), jittered per bank, row and plot.
 
         Parameters
@@ -94,7 +94,7 @@ class Fields:
         jit = self.plot_jitter * (2.0 * hash01(bank, row, j, seed=self.seed + 13) - 1.0)
         return np.asarray(j) * self.plot_length + jit
 
-    def col_offset(self, bank, row):
+    def col_offset(self, bank: np.ndarray, row: np.ndarray) -> np.ndarray:
         """Shift (m) of the plot boundaries along row ``row`` of ``bank``, in [0, ``plot_length``)."""
         return self.plot_length * hash01(bank, row, seed=self.seed + 17)
 
@@ -293,7 +293,7 @@ def building_heights(buildings: list[dict], x: np.ndarray, y: np.ndarray) -> np.
     return out
 
 
-def noise01(xs, ys, seed: int, wavelength: float) -> np.ndarray:
+def noise01(xs: np.ndarray, ys: np.ndarray, seed: int, wavelength: float) -> np.ndarray:
     """Two-octave value noise normalised to about [−1, 1] (patch patterns).
 
     Parameters

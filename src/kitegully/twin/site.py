@@ -174,7 +174,7 @@ class TwinSite:
         return self.grid.refined(self.tex_factor)
 
     @property
-    def bounds(self):
+    def bounds(self) -> tuple[float, float, float, float]:
         """(xmin, ymin, xmax, ymax) of the DEM grid in map units."""
         return self.grid.bounds
 
@@ -243,7 +243,8 @@ def build_site(tw: TwinParams, crs: str, seed: int, epoch: int = 1) -> TwinSite:
                     (float(np.nanmin(z_trace)), float(np.nanmax(z_trace))), retreat)
 
 
-def place_buildings(bcfg: dict, valley: Valley, fields: lcm.Fields, network, z_trace, tgrid: GridSpec, seed: int) -> list[dict]:
+def place_buildings(bcfg: dict, valley: Valley, fields: lcm.Fields, network: list[gl.Gully], z_trace: np.ndarray,
+                    tgrid: GridSpec, seed: int) -> list[dict]:
     """Farm buildings on gentle ground of the banks, away from gullies and each other.
 
     Parameters
@@ -672,8 +673,8 @@ def heads(network: list[gl.Gully], crs: str, retreat: dict) -> gpd.GeoDataFrame:
         {"gully_id": []}, geometry=[], crs=crs)
 
 
-def site_statistics(site: TwinSite, cl: gpd.GeoDataFrame, counts: np.ndarray, zr, n_gcp: int, n_cp: int,
-                    t_terrain: float, t_texture: float, total: float) -> pd.DataFrame:
+def site_statistics(site: TwinSite, cl: gpd.GeoDataFrame, counts: np.ndarray, zr: tuple[float, float], n_gcp: int,
+                    n_cp: int, t_terrain: float, t_texture: float, total: float) -> pd.DataFrame:
     """Area, gully numbers and lengths, land-cover shares, elevation range, timings.
 
     Parameters

@@ -11,7 +11,7 @@ from kitegully.seeds import rng_for
 from kitegully.twin.landcover import CODE
 
 
-def sample_nearest(arr: np.ndarray, grid: GridSpec, x, y, fill=0):
+def sample_nearest(arr: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, fill: float = 0) -> np.ndarray:
     """Value of the cell containing each point (``fill`` outside the grid).
 
     Parameters
@@ -39,7 +39,7 @@ def sample_nearest(arr: np.ndarray, grid: GridSpec, x, y, fill=0):
     return out
 
 
-def sample_bilinear(arr: np.ndarray, grid: GridSpec, x, y) -> np.ndarray:
+def sample_bilinear(arr: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Bilinear interpolation between cell centres (NaN outside the grid).
 
     Parameters
@@ -77,7 +77,8 @@ def stencil(radius: float, step: float) -> tuple[np.ndarray, np.ndarray]:
     return dx[keep], dy[keep]
 
 
-def eligible(lc: np.ndarray, grid: GridSpec, x, y, classes: list[str], radius: float) -> np.ndarray:
+def eligible(lc: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray, classes: list[str],
+             radius: float) -> np.ndarray:
     """True where every cell within ``radius`` of a point has one of ``classes``.
 
     Parameters

@@ -67,41 +67,41 @@ class Valley:
         """Unit vector (east, north) towards the right bank: :attr:`flow` turned 90° clockwise."""
         return float(np.cos(self.azimuth_rad)), float(-np.sin(self.azimuth_rad))
 
-    def uv(self, x, y):
+    def uv(self, x: float | np.ndarray, y: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Map coordinates to (u downstream, v towards the right bank)."""
         (fx, fy), (rx, ry) = self.flow, self.right
         dx = np.asarray(x, dtype=np.float64) - self.cx
         dy = np.asarray(y, dtype=np.float64) - self.cy
         return dx * fx + dy * fy, dx * rx + dy * ry
 
-    def xy(self, u, v):
+    def xy(self, u: float | np.ndarray, v: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Frame coordinates back to map coordinates."""
         (fx, fy), (rx, ry) = self.flow, self.right
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
         return self.cx + u * fx + v * rx, self.cy + u * fy + v * ry
 
-    def axis_v(self, u):
+    def axis_v(self, u: float | np.ndarray) -> np.ndarray:
         """Across-valley position of the meandering axis at ``u``."""
         return self.axis_offset + self.meander_amplitude * np.sin(2.0 * np.pi * np.asarray(u) / self.meander_wavelength)
 
-    def u_vp(self, x, y):
+    def u_vp(self, x: float | np.ndarray, y: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u, vp): along-valley position and signed distance from the axis (right > 0)."""
         u, v = self.uv(x, y)
         return u, v - self.axis_v(u)
 
     # --- elevation ---------------------------------------------------------------------
-    def floor(self, u):
+    def floor(self, u: float | np.ndarray) -> np.ndarray:
         """Valley-floor elevation: rises upstream of the dam with ``long_slope``."""
         return self.outlet_elevation + self.long_slope * (self.u_dam - np.asarray(u))
 
-    def base(self, x, y) -> np.ndarray:
+    def base(self, x: float | np.ndarray, y: float | np.ndarray) -> np.ndarray:
         """Smooth valley surface with the dam (no micro-relief, no gullies); O(n)."""
         u, vp = self.u_vp(x, y)
         z = self.floor(u) + self.bank(vp)
         return np.maximum(z, self.dam(u, vp))
 
-    def bank(self, vp):
+    def bank(self, vp: float | np.ndarray) -> np.ndarray:
         """Cross-valley profile added to the floor elevation."""
         vp = np.asarray(vp, dtype=np.float64)
         a = np.abs(vp)
@@ -115,13 +115,13 @@ class Valley:
         z = z + self.left_relief * _smooth_ramp(left_l) + self.plateau_slope * self.left_width * np.clip(left - 1.0, 0, None)
         return z
 
-    def dam(self, u, vp):
+    def dam(self, u: float | np.ndarray, vp: float | np.ndarray) -> np.ndarray:
         """Elevation of the dam embankment (−inf away from it)."""
         du = np.abs(np.asarray(u) - self.u_dam) - 0.5 * self.dam_crest_width
         crest = self.dam_crest - self.dam_side_slope * np.clip(du, 0.0, None)
         return np.where(np.abs(vp) <= self.dam_half_length, crest, -np.inf)
 
-    def lake_zone(self, u):
+    def lake_zone(self, u: float | np.ndarray) -> np.ndarray:
         """Where water can stand: between the tail of the reservoir and the dam."""
         u = np.asarray(u)
         return (u >= self.lake_u_min) & (u <= self.u_dam)
