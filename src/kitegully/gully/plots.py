@@ -12,6 +12,7 @@ from shapely.geometry.base import BaseGeometry
 from kitegully.gully.network import GullyNetwork
 from kitegully.io.figures import new_figure
 from kitegully.io.raster import GridSpec
+from kitegully.terrain.shading import hillshade
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -138,32 +139,6 @@ def section_figure(
     ax[3].legend(loc="best")
     fig.tight_layout()
     return fig
-
-
-def hillshade(z: np.ndarray, cell: float, azimuth_deg: float = 315, altitude_deg: float = 45) -> np.ndarray:
-    """Lambertian hillshade in [0, 1] (NaN where ``z`` is NaN).
-
-    Parameters
-    ----------
-    z : ndarray (H, W)
-        Elevation (m).
-    cell : float
-        Cell size (m).
-    azimuth_deg : float
-        Azimuth of the light (degrees).
-    altitude_deg : float
-        Altitude of the light above the horizon (degrees).
-
-    Returns
-    -------
-    ndarray (H, W) float64
-    """
-    gy, gx = np.gradient(np.asarray(z, dtype=np.float64), cell)
-    slope = np.arctan(np.hypot(gx, gy))
-    aspect = np.arctan2(-gx, gy)
-    az = np.deg2rad(360 - azimuth_deg + 90)
-    alt = np.deg2rad(altitude_deg)
-    return np.clip(np.sin(alt) * np.cos(slope) + np.cos(alt) * np.sin(slope) * np.cos(az - aspect), 0, 1)
 
 
 def validation_map(

@@ -11,34 +11,7 @@ from matplotlib.lines import Line2D
 
 from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.raster import GridSpec
-
-
-def hillshade(z: np.ndarray, cell: float, azimuth_deg: float = 315.0, altitude_deg: float = 45.0) -> np.ndarray:
-    """Lambertian hillshade in [0, 1] (NaN where ``z`` is NaN).
-
-    Parameters
-    ----------
-    z : ndarray (H, W)
-        DEM (m), NaN nodata.
-    cell : float
-        Cell size (m).
-    azimuth_deg : float
-        Direction the light comes from, clockwise from north (degrees).
-    altitude_deg : float
-        Elevation of the light above the horizon (degrees).
-
-    Returns
-    -------
-    ndarray (H, W) float
-        Hillshade.
-    """
-    zf = np.where(np.isfinite(z), z, np.nanmean(z))
-    dzdy, dzdx = np.gradient(zf, cell)
-    dzdy = -dzdy  # rows go south
-    az, alt = np.radians(azimuth_deg), np.radians(altitude_deg)
-    sx, sy, sz = np.sin(az) * np.cos(alt), np.cos(az) * np.cos(alt), np.sin(alt)
-    hs = (-dzdx * sx - dzdy * sy + sz) / np.sqrt(1 + dzdx**2 + dzdy**2)
-    return np.where(np.isfinite(z), np.clip(hs, 0, 1), np.nan)
+from kitegully.terrain.shading import hillshade
 
 
 def _extent(grid: GridSpec):

@@ -18,6 +18,8 @@ Modules, one job each:
 ``least_cost``
     Drainage directions of an unfilled DEM by least-cost search (depressions breached
     along their lowest route, after GRASS ``r.watershed``), O(n log n).
+``shading``
+    The Lambertian hillshade the project's maps are drawn over.
 """
 
 from kitegully.terrain.fill import priority_flood_fill
