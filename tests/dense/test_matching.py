@@ -19,11 +19,12 @@ from kitegully import InputError
 from kitegully.dense.kernels import multiview_ncc_stack, occlusion_mask
 from kitegully.dense.matching import MatchParams, equal_significance_correlation
 from kitegully.dense.ortho import orthophoto
-from kitegully.dense.shading import hillshade, openness
+from kitegully.dense.shading import openness
 from kitegully.dense.surface import count_seen, dense_surface, tile_z_range
 from kitegully.dense.views import PyramidCache, ViewSet, load_image, views_from_reconstruction
 from kitegully.io.raster import GridSpec
 from kitegully.seeds import rng_for
+from kitegully.terrain.shading import hillshade
 
 GSD = 20.0 / 400.0
 CELL = 0.1

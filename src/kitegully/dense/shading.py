@@ -1,11 +1,10 @@
-"""Relief shading of a DSM: hillshade (:mod:`kitegully.terrain.shading`) and positive openness (a sky-view-like measure)."""
+"""Positive openness of a DSM (a sky-view-like relief measure); its hillshade is :func:`kitegully.terrain.shading.hillshade`."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from kitegully.dense.kernels import openness_kernel
-from kitegully.terrain.shading import hillshade  # noqa: F401  (the DSM figure's shading, re-exported)
 
 
 def openness(z: np.ndarray, cell: float, radius_m: float) -> np.ndarray:

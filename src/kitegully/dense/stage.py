@@ -26,12 +26,13 @@ from kitegully.dense.cell import choose_cell
 from kitegully.dense.datum import DatumParams, check_datum
 from kitegully.dense.matching import MatchParams
 from kitegully.dense.ortho import orthophoto
-from kitegully.dense.shading import hillshade, openness
+from kitegully.dense.shading import openness
 from kitegully.dense.surface import dense_surface
 from kitegully.dense.views import ViewSet, read_offset, views_from_reconstruction
 from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.raster import GridSpec, write_raster
 from kitegully.io.tables import write_table
+from kitegully.terrain.shading import hillshade
 
 log = logging.getLogger(__name__)
 
