@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from kitegully.logs import setup_script_logging
-from kitegully.lowcost.stage import map_bare_soil
+from kitegully.lowcost import map_bare_soil
 
 log = setup_script_logging(snakemake.log[0])
 inp = snakemake.input

@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from kitegully.logs import setup_script_logging
-from kitegully.lowcost.stage import evaluate_lowcost
+from kitegully.lowcost import evaluate_lowcost
 
 log = setup_script_logging(snakemake.log[0])
 evaluate_lowcost(Path(snakemake.output.summary).parent, snakemake.input.truth, snakemake.params.evaluation,

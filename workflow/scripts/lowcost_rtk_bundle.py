@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from kitegully.logs import setup_script_logging
-from kitegully.lowcost.stage import adjust_rtk_bundle
+from kitegully.lowcost import adjust_rtk_bundle
 
 log = setup_script_logging(snakemake.log[0])
 adjust_rtk_bundle(snakemake.input.observed, Path(snakemake.input.sfm), snakemake.params.georef, snakemake.params.crs,

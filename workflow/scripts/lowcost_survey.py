@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from kitegully.logs import setup_script_logging
-from kitegully.lowcost.stage import survey_lowcost
+from kitegully.lowcost import survey_lowcost
 
 log = setup_script_logging(snakemake.log[0])
 survey_lowcost(snakemake.input.observed, snakemake.params.sfm, snakemake.params.survey, snakemake.params.seed,

@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from kitegully.logs import setup_script_logging
-from kitegully.lowcost.twin_site import make_lowcost_twin
+from kitegully.lowcost import make_lowcost_twin
 
 log = setup_script_logging(snakemake.log[0])
 make_lowcost_twin(snakemake.params.twin, snakemake.params.seed, snakemake.params.crs,
