@@ -5,7 +5,7 @@ faster with L than the δz model at its matching precision; measured in the phot
 it is 0.86 × (README "Plot-scale stereo"). This script isolates the
 geometric part of the chain: points of the true soil surface are projected through the true
 cameras into both photographs (exact matching) and processed by the stage's own
-:class:`kitegully.stereo.stage.PairProcessor` (rectification from the estimated relative
+:class:`kitegully.stereo.processing.PairProcessor` (rectification from the estimated relative
 orientation, triangulation, similarity on the 10 frame marks); their height error is the error a
 perfect matcher would leave. Each error source is switched on alone:
 
@@ -43,7 +43,9 @@ from kitegully.seeds import rng_for
 from kitegully.stereo.matching import MatchParams
 from kitegully.stereo.metrics import fit_mae_vs_L
 from kitegully.stereo.rig import delta_z_m, paper_cameras, paper_rig, stereo_L_m
-from kitegully.stereo.stage import BOX, PairProcessor, _box_grid, _frame_marks, _load_cameras, _relief
+from kitegully.stereo.lab import BOX, box_grid, frame_marks, relief
+from kitegully.stereo.processing import PairProcessor
+from kitegully.stereo.stage import _load_cameras
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -54,22 +56,22 @@ def geometric_mae_mm(H, B, cams, proc, rng, sources):
     n = int(proc["n_ties"])
     # the ties lie where SIFT finds them: on the soil surface of the box (a nearly flat scene)
     tx, ty = rng.uniform(BOX[0], BOX[2], n), rng.uniform(BOX[1], BOX[3], n)
-    tie = np.column_stack([tx, ty, _relief(tx, ty)])
+    tie = np.column_stack([tx, ty, relief(tx, ty)])
     # without the tie-point source the ties get 0.01 px (exactly noise-free ties can leave the RANSAC with < 5 inliers)
     st = proc["tie_sigma_px"] if "ties" in sources else 0.01
     sm = proc["mark_sigma_px"] if "marks" in sources else 0.0
     smm = proc["mark_sigma_mm"] if ("marks" in sources or "survey" in sources) else 0.0
     tl = truth.left.project(tie, truth.pose_left) + rng.normal(0, st, (n, 2))
     tr = truth.right.project(tie, truth.pose_right) + rng.normal(0, st, (n, 2))
-    marks = _frame_marks()
+    marks = frame_marks()
     ml = truth.left.project(marks, truth.pose_left) + rng.normal(0, sm, (10, 2))
     mr = truth.right.project(marks, truth.pose_right) + rng.normal(0, sm, (10, 2))
     surveyed = marks + rng.normal(0, smm * 1e-3, marks.shape)
     pp = PairProcessor(cams if "calibration" in sources else paper_cameras(), tl, tr, ml, mr, surveyed, B, H,
                        MatchParams(**proc["matching"]))
-    grid = _box_grid(proc["cell_mm"] * 1e-3)
+    grid = box_grid(proc["cell_mm"] * 1e-3)
     X, Y = np.meshgrid(*grid.cell_centres())
-    P = np.column_stack([X.ravel(), Y.ravel(), _relief(X.ravel(), Y.ravel())])
+    P = np.column_stack([X.ravel(), Y.ravel(), relief(X.ravel(), Y.ravel())])
     Q = pp.points(truth.left.project(P, truth.pose_left), truth.right.project(P, truth.pose_right))
     return 1e3 * float(np.mean(np.abs(Q[:, 2] - P[:, 2])))
 
@@ -90,16 +92,16 @@ def reorientation_spread(H, B, proc, seed, draws=200, slope_deg=10.0):
     rng = rng_for(seed, "budget", "reorient", f"{H}-{B}")
     truth = paper_rig(H, B)
     tan = np.tan(np.radians(slope_deg))
-    marks = _frame_marks() + np.c_[np.zeros((10, 2)), -tan * _frame_marks()[:, 1]]
+    marks = frame_marks() + np.c_[np.zeros((10, 2)), -tan * frame_marks()[:, 1]]
     n = int(proc["n_ties"])
     tx, ty = rng.uniform(BOX[0], BOX[2], n), rng.uniform(BOX[1], BOX[3], n)
-    tie = np.column_stack([tx, ty, -tan * ty + _relief(tx, ty)])
+    tie = np.column_stack([tx, ty, -tan * ty + relief(tx, ty)])
     tl = truth.left.project(tie, truth.pose_left) + rng.normal(0, proc["tie_sigma_px"], (n, 2))
     tr = truth.right.project(tie, truth.pose_right) + rng.normal(0, proc["tie_sigma_px"], (n, 2))
     ml, mr = _measure_marks(truth, marks, rng, proc["mark_sigma_px"])
     pp = PairProcessor(paper_cameras(), tl, tr, ml, mr, marks + rng.normal(0, proc["mark_sigma_mm"] * 1e-3, marks.shape), B, H,
                        MatchParams(**proc["matching"]))
-    grid = _box_grid(proc["cell_mm"] * 1e-3)
+    grid = box_grid(proc["cell_mm"] * 1e-3)
     X, Y = np.meshgrid(*grid.cell_centres())
     P = np.column_stack([X.ravel(), Y.ravel(), -tan * Y.ravel()])
     ul, ur = truth.left.project(P, truth.pose_left), truth.right.project(P, truth.pose_right)

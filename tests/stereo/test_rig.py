@@ -1,9 +1,8 @@
-import numpy as np
 import pytest
 
 from kitegully import InputError
 from kitegully.stereo.rig import (PAPER_TABLE1, camera_to_table, delta_z_m, paper_cameras, paper_rig,
-                                  radial_mm_to_normalised, radial_normalised_to_mm, stereo_L_m)
+                                  radial_mm_to_normalised, radial_normalised_to_mm)
 
 
 def test_paper_cameras_round_trip_table1():

@@ -1,7 +1,7 @@
 """Rule stereo_wind: the sand tray before and after the wind."""
 
 from kitegully.logs import setup_script_logging
-from kitegully.stereo.stage import measure_wind
+from kitegully.stereo import measure_wind
 
 log = setup_script_logging(snakemake.log[0])  # noqa: F821
 sm = snakemake  # noqa: F821

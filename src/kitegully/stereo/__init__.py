@@ -1,10 +1,31 @@
 """Close-range stereo photogrammetry of soil surfaces (Moritani et al. 2010, paper 003).
 
-Library core only (issue 19): the paper's two-camera rig (:mod:`.rig`), inner orientation
-on a 3-D control field (:mod:`.calibration`), relative orientation and epipolar
-rectification (:mod:`.rectify`), coarse-to-fine epipolar matching, triangulation and
-gridding (:mod:`.matching`), the paper's accuracy measures (:mod:`.metrics`) and a direct
-projection renderer of textured height fields for tests and benchmarks (:mod:`.synth`).
+Library core: the paper's two-camera rig (:mod:`.rig`), inner orientation on a 3-D control
+field (:mod:`.calibration`), relative orientation and epipolar rectification (:mod:`.rectify`),
+coarse-to-fine epipolar matching, triangulation and gridding (:mod:`.matching`), the printed
+marks and tie points measured in the photographs (:mod:`.measure`), the paper's accuracy
+measures (:mod:`.metrics`) and a direct projection renderer of textured height fields
+(:mod:`.synth`).
+
 The workflow stage (:mod:`.stage`; rules ``workflow/rules/stereo.smk``, site
-``config/sites/stereo_lab.yaml``) runs the paper's calibration test, dry box, rain and wind runs.
+``config/sites/stereo_lab.yaml``) runs the paper's calibration test, dry box, rain and wind
+runs. Its entry points :func:`calibrate_rig`, :func:`measure_dry_box`, :func:`measure_rain`,
+:func:`measure_wind` and their :class:`StereoParams` are imported lazily from here. Its parts:
+the parameters (:mod:`.params`), the twin's laboratory (:mod:`.lab`), the processing of one
+pair from observed data (:mod:`.processing`), the evaluation against the twin
+(:mod:`.evaluation`) and the rain runs' process models (:mod:`.erosion`).
 """
+
+from importlib import import_module
+
+_EXPORTS = {
+    "calibrate_rig": "stage", "measure_dry_box": "stage", "measure_rain": "stage", "measure_wind": "stage",
+    "StereoParams": "params",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -11,13 +11,15 @@ Entry points, one per rule, named after what they make:
 * :func:`measure_wind` — the wind-tunnel tray, before/after.
 
 Every pair is made in two separate steps: a *twin* step renders the two photographs of
-the true surface through the true cameras (:func:`_render_pair`), and a *processing* step
+the true surface through the true cameras (:mod:`kitegully.stereo.lab`), and a *processing* step
 sees only what the paper had — the photographs, the calibrated cameras and the surveyed
 coordinates of the 10 printed frame marks — measures tie points (SIFT) and the marks
 (template + weighted centroid, :mod:`kitegully.stereo.measure`) in the photographs and returns
-a DEM (:class:`PairProcessor.from_images`).
-Only the evaluation (MAE against the point gauge or the gravimetric depth) reads the
-reference, as the paper's did.
+a DEM (:meth:`kitegully.stereo.processing.PairProcessor.from_images`).
+Only the evaluation (MAE against the point gauge or the gravimetric depth,
+:mod:`kitegully.stereo.evaluation`) reads the reference, as the paper's did. Parameters:
+:class:`kitegully.stereo.params.StereoParams`; the rain runs' process models:
+:mod:`kitegully.stereo.erosion`.
 """
 
 from __future__ import annotations
@@ -25,41 +27,36 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import dataclass
-from typing import ClassVar
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import pandas as pd
 
 from kitegully import InputError
-from kitegully.config import config_section
-from kitegully.evaluate.dem import nmad
 from kitegully.georef.similarity import umeyama
 from kitegully.io.figures import new_figure, save_figure
-from kitegully.io.raster import GridSpec
 from kitegully.io.tables import write_table
 from kitegully.seeds import rng_for
 from kitegully.stereo.calibration import (ControlField, calibrate_camera, calibrate_camera_weighted, calibration_field,
                                           calibration_poses, calibration_table, convergent_poses, distortion_precision,
-                                          measure_calibration_images,
-                                          simulate_observations)
-from kitegully.stereo.matching import MatchParams, disparity_to_points, grid_dem, match_epipolar, triangulate_points
+                                          measure_calibration_images, simulate_observations)
+from kitegully.stereo.erosion import interrill_rate_kg_m2_h, runoff_detachment_kg_m2_h, settlement_mm
+from kitegully.stereo.evaluation import error_decomposition, matching_residual_px, pair_columns
+from kitegully.stereo.lab import (BOX, TEXTURE_EXTENT, box_grid, cell_truth, frame_marks, nail_positions, relief,
+                                  render_pair, survey_marks)
+from kitegully.stereo.matching import MatchParams, triangulate_points
+from kitegully.stereo.measure import MarkDesign, PrintedMarks
 from kitegully.stereo.metrics import fit_A_vs_M, fit_mae_vs_L, mae, mre
-from kitegully.stereo.rectify import rectify_pair, relative_orientation, relative_orientation_from_poses
-from kitegully.stereo.measure import (MarkDesign, PrintedMarks, coplanarity_residuals_px, locate_marks, predict_marks,
-                                      sift_tie_points)
-from kitegully.stereo.rig import (D2H_NOMINAL_F_MM, D2H_PIXEL_MM, StereoRig, delta_z_m, look_at_pose, paper_cameras, paper_rig,
-                                  stereo_L_m)
-from kitegully.stereo.synth import render_heightfield, soil_texture
+from kitegully.stereo.params import StereoParams, as_floats
+from kitegully.stereo.processing import PairProcessor
+from kitegully.stereo.rectify import rectify_pair, relative_orientation
+from kitegully.stereo.rig import D2H_NOMINAL_F_MM, D2H_PIXEL_MM, delta_z_m, paper_cameras, paper_rig, stereo_L_m
+from kitegully.stereo.synth import soil_texture
 from kitegully.twin.camera import Camera, Pose
 
 if TYPE_CHECKING:
-    from kitegully.io.raster import Raster
-    from kitegully.stereo.matching import Disparity
-    from kitegully.stereo.measure import MarkMeasurement
-    from kitegully.stereo.rectify import Rectification
+    from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
 
@@ -71,618 +68,6 @@ PAPER = {"a_calibration_without_io": 0.74, "a_calibration_with_io": 0.057, "a_po
          "b": 1.06, "mae_9_1_mm": 0.21, "mre_9_1_pct": 15.8, "wind_mae_mm": 0.21, "upstream_minus_downstream_mm": 0.49,
          "rain": {0.91: (2.21, 392.5), 0.98: (1.07, 126.4), 1.09: (0.59, 57.6)}}
 
-
-# ----------------------------------------------------------------------------- parameters
-def _floats(v, where: str, n: int | None = None) -> tuple[float, ...]:
-    try:
-        out = tuple(float(x) for x in v)
-    except (TypeError, ValueError):
-        raise InputError(f"{where}: must be a list of numbers, got {v!r}") from None
-    if n is not None and len(out) != n:
-        raise InputError(f"{where}: must hold {n} numbers, got {len(out)}")
-    return out
-
-
-def _positive(where: str, **vals: float) -> None:
-    for k, v in vals.items():
-        if not (v > 0):
-            raise InputError(f"{where}.{k}: must be positive, got {v}")
-
-
-#: Calibration image sets (``stereo.calibration.stations``).
-STATIONS = ("paper", "paper+convergent", "paper+convergent+corners")
-
-
-@dataclass(frozen=True)
-class StereoParams:
-    """Parameters of the stereo stage (config section ``stereo``; keys as below, nested).
-
-    Attributes
-    ----------
-    calibration.stations : str
-        ``"paper"`` = the paper's 6 parallel images shifted over the field at H ≈ 3 m;
-        ``"paper+convergent"`` = those 6 plus ``n_convergent`` convergent, rolled images;
-        ``"paper+convergent+corners"`` = those 14 plus ``n_corner`` convergent images turned
-        so the field's centre is imaged ``corner_fraction`` of the way to a frame corner.
-        [I] see :func:`kitegully.stereo.calibration.convergent_poses`: near-nadir images
-        cannot separate f from the camera distance against a 0.2 mm field error, and K1 is
-        only told from K2 where targets reach the frame's corners.
-    calibration.n_corner, calibration.corner_fraction : int, float
-        The corner images (optional; default 8 and 0.5).
-    calibration.weighted_control : bool
-        Adjust the field coordinates as observations with σ = ``field_sigma_mm``
-        (free network with weighted control) instead of holding them fixed.
-    calibration.H_m : float
-        Height of the calibration images (m) [P] ≈ 3.0.
-    calibration.target_sigma_px : float
-        Target measurement precision (px). [I] 0.1 px: centroids of round targets ~10 px wide.
-    calibration.targets : str
-        ``"rendered"``: each target a printed disc rendered into the photographs and located
-        (template + weighted centroid, :func:`kitegully.stereo.calibration.measure_targets`), the
-        bundle weighted with the median centroid σ from the noise; ``"simulated"``: projections +
-        N(0, ``target_sigma_px``) (the session-9 model; the calibration test at H = 2–6 m always uses it).
-    calibration.target_diameter_mm, calibration.image_noise_dn : float
-        Printed disc (mm) [I] 10: 15–18 px across at 3.0–3.6 m (see ``TARGET_DIAMETER_M``); image noise (DN) [I] 1.
-    calibration.field_sigma_mm : float
-        Accuracy of the field coordinates (mm) [P] 0.2.
-    calibration.convergent_offset_m, calibration.n_convergent : float, int
-        Radius of the circle of convergent stations (m) and their number.
-    calibration_test.H_m, calibration_test.B_m : list of float, float
-        [P] 5 heights 2.0–6.0 m at B = 1.0 m.
-    processing.image_noise_dn : float
-        Image noise (DN of 255) [I] 1 DN, a well exposed 12-bit raw scaled to 8 bit.
-    processing.mark_diameter_mm : float
-        Diameter of the printed white disc of each frame mark (on a black plate 2.4 × as wide,
-        :class:`kitegully.stereo.measure.MarkDesign`). [I] 10 mm: ≥ 10 px across at the highest
-        set-up (11.6 px at H 4.7 m, 0.86 mm ground pixel), enough for a centroid of every pixel
-        of the disc (close-range practice asks for ≥ 5 px). Tie points and marks are measured in
-        the photographs (SIFT; template + weighted centroid); their precision is what the images give.
-    processing.mark_sigma_mm : float
-        Accuracy of the surveyed frame-mark coordinates (mm). [I] 0.1 mm.
-    processing.manual_sigma_px : float
-        Precision of manual point matching of a nail head (px). [I] 0.3 px.
-    processing.reorient_each_pair : bool
-        Orient every pair of a series (removals, rain epochs) on its own measurement of the
-        10 frame marks (True) or reuse the first pair's absolute orientation (False). [I] True:
-        each DEM of the paper is made on its own, so its orientation errors (offset and tilt,
-        ∝ L like the matching's) do not cancel in a DEM of difference.
-    processing.cell_mm : float
-        DEM cell (mm). [I] 5 mm: ~10 × 10 matched pixels per cell at L = 9.1 m.
-    processing.matching : mapping
-        :class:`kitegully.stereo.matching.MatchParams` keys (window_px, search_px, min_ncc, sigma_px).
-    dry_box.setups : list of [H, B]
-        The 11 set-ups (m) [P] H 2.4–4.7, B 0.3–1.0 (L 5–35 m); [I] the pairs themselves.
-    dry_box.removals, dry_box.removal_ml, dry_box.bulk_density : int, float, float
-        [P] 16 removals; [I] 50 mL each (METHODS 4.6); [P] ρ_b 1.09 g/cm³ (Table 2).
-    dry_box.removal_H_m, dry_box.removal_B_m : float
-        Geometry of the removals [P] L = 9.1 m (H 2.7, B 0.8).
-    rain.bulk_densities : list of float
-        [P] 0.91 / 0.98 / 1.09 g/cm³.
-    rain.intensity_mm_h, rain.duration_min, rain.slope_deg, rain.H_m, rain.B_m, rain.interval_min : float
-        [P] 60 mm/h, 60 min, 10°, H 2.7 m, B 0.8 m; [I] a pair every 10 min.
-    rain.interrill_erodibility : float
-        WEPP interrill erodibility K_i (kg·s/m⁴) in ``D_i = K_i·I²·S_f``. [I] 1.0e6, the
-        low end of WEPP's range for clay soils (56 % clay, Table 2); the same for all densities.
-    rain.seal_depth_mm, rain.seal_density : float
-        Settlement model [I]: rain compacts the top ``seal_depth_mm`` from ρ_b to
-        ``seal_density`` (g/cm³), exponentially with time constant ``settle_min``, so the
-        settlement per density is ``s = d·(1 − ρ_b/ρ_seal)`` (stated in rain_runs.csv).
-        [I] 10 mm (raindrop compaction and slaking reach a few mm to ~1 cm) and 1.20 g/cm³
-        (a sealed clay crust is denser than the densest packed box, 1.09). Not fitted to the paper.
-    rain.settle_min : float
-        Time constant of the settlement (min). [I] 15 min (most of the slaking happens early).
-    rain.ksat_mm_h, rain.manning_n, rain.rill_erodibility_s_m, rain.critical_shear_pa : float
-        Runoff-accumulation model along the slope (:func:`runoff_detachment_kg_m2_h`): sheet flow
-        ``q(y) = (I − Ksat)·y`` from the upslope wall, Manning depth, shear ``τ = ρ g h sin θ``,
-        WEPP flow detachment ``D_f = K_r (τ − τ_c)`` added to the uniform interrill rate.
-        [P] Ksat 6.7e-5 cm/s = 2.41 mm/h (Table 2); [I] n = 0.03 (bare smoothed soil);
-        [I] WEPP baseline for soils with < 30 % sand (Table 2: 22 %): K_r = 0.0069 + 0.134·exp(−20·clay)
-        = 0.0069 s/m at 56 % clay, τ_c = 3.5 Pa. Not fitted to the paper's 0.49 mm.
-    wind.H_m, wind.B_m, wind.duration_min : float
-        [P] H 0.6 m, B 0.3 m, 45 min.
-    wind.deflation_mm, wind.ripple_mm, wind.ripple_wavelength_mm, wind.sand_density : float
-        [I] Mean deflation 1.0 mm over 45 min at 4.5 m/s (a few g per cm of width per
-        minute for fine sand just above threshold), ripples 1 mm high, 12 mm long, migrating
-        half a wavelength; sand ρ_b 1.5 g/cm³.
-    wind.cell_mm : float
-        DEM cell of the tray (mm). [I] 2 mm: the ground pixel is 0.11 mm at H = 0.6 m.
-    wind.mark_diameter_mm : float
-        Disc diameter of the tray's frame marks (mm). [I] 2 mm: 18 px at H 0.6 m (0.11 mm ground
-        pixel), and the marks with their plates stay inside both frames, which span only ±0.09 m
-        across the base at that height.
-    """
-
-    calibration: Mapping[str, Any]
-    calibration_test: Mapping[str, Any]
-    processing: Mapping[str, Any]
-    dry_box: Mapping[str, Any]
-    rain: Mapping[str, Any]
-    wind: Mapping[str, Any]
-
-    KEYS = {
-        "calibration": ("stations", "weighted_control", "H_m", "target_sigma_px", "field_sigma_mm", "convergent_offset_m", "n_convergent"),
-        "calibration_test": ("H_m", "B_m"),
-        "processing": ("image_noise_dn", "mark_diameter_mm", "mark_sigma_mm", "manual_sigma_px", "reorient_each_pair",
-                       "cell_mm", "matching"),
-        "dry_box": ("setups", "removals", "removal_ml", "bulk_density", "removal_H_m", "removal_B_m"),
-        "rain": ("bulk_densities", "intensity_mm_h", "duration_min", "interval_min", "slope_deg", "H_m", "B_m",
-                 "interrill_erodibility", "seal_depth_mm", "seal_density", "settle_min", "ksat_mm_h", "manning_n",
-                 "rill_erodibility_s_m", "critical_shear_pa"),
-        "wind": ("H_m", "B_m", "duration_min", "deflation_mm", "ripple_mm", "ripple_wavelength_mm", "sand_density", "cell_mm",
-                 "mark_diameter_mm"),
-    }
-
-    #: optional keys (default: targets simulated)
-    OPTIONAL: ClassVar[dict] = {"calibration": ("targets", "target_diameter_mm", "image_noise_dn", "n_corner", "corner_fraction")}
-
-    @classmethod
-    def from_config(cls, cfg: Mapping[str, Any]) -> "StereoParams":
-        """Build from the ``stereo`` section or any subset of its sub-sections (a rule passes only what it uses)."""
-        config_section(cfg, "stereo", (), optional=cls.KEYS)
-        out = {}
-        for sec, keys in cls.KEYS.items():
-            if sec not in cfg:
-                out[sec] = {}
-                continue
-            c = dict(config_section(cfg[sec], f"stereo.{sec}", keys, cls.OPTIONAL.get(sec, ())))
-            out[sec] = c
-        p = cls(**out)
-        p._validate()
-        return p
-
-    def _validate(self) -> None:
-        c = self.calibration
-        if c:
-            if c["stations"] not in STATIONS:
-                raise InputError(f"stereo.calibration.stations: must be one of {', '.join(STATIONS)}, got {c['stations']!r}")
-            if not 0.0 <= float(c.get("corner_fraction", 0.5)) < 1.0:
-                raise InputError(f"stereo.calibration.corner_fraction: must be in [0, 1), got {c['corner_fraction']!r}")
-            _positive("stereo.calibration", H_m=c["H_m"], target_sigma_px=c["target_sigma_px"], field_sigma_mm=c["field_sigma_mm"])
-        if self.calibration_test:
-            _floats(self.calibration_test["H_m"], "stereo.calibration_test.H_m")
-        if self.processing:
-            MatchParams(**self.processing["matching"])
-            _positive("stereo.processing", cell_mm=self.processing["cell_mm"], mark_diameter_mm=self.processing["mark_diameter_mm"])
-        if self.dry_box:
-            for s in self.dry_box["setups"]:
-                H, B = _floats(s, "stereo.dry_box.setups item", 2)
-                _positive("stereo.dry_box.setups", H_m=H, B_m=B)
-        if self.rain:
-            for rho in _floats(self.rain["bulk_densities"], "stereo.rain.bulk_densities"):
-                if not 0 < rho < self.rain["seal_density"]:
-                    raise InputError(f"stereo.rain.bulk_densities: {rho} g/cm³ must lie between 0 and seal_density "
-                                     f"({self.rain['seal_density']}), or the soil would swell under rain")
-
-
-# ----------------------------------------------------------------------------- twin: surfaces and rendering
-BOX = (-0.15, -0.25, 0.15, 0.25)  # 0.30 (x, along the base) × 0.50 m (y)
-TEXTURE_EXTENT = (-0.2, -0.3, 0.2, 0.3)  # box, frame and marks
-
-
-def _relief(x, y):
-    """Dry-box soil surface: a few millimetres of clods and rills (m)."""
-    return 0.004 * np.sin(2 * np.pi * x / 0.12) * np.cos(2 * np.pi * y / 0.2) + 0.002 * np.sin(2 * np.pi * (x + y) / 0.05)
-
-
-def _frame_marks(box=BOX) -> np.ndarray:
-    """The 10 absolute-orientation marks on the box frame (m), 2 cm outside the soil, 1 cm above it.
-
-    Six at the corners and the middle of the long sides, four on the short sides at ±0.2 of the
-    box length from its middle (±0.1 m on the 0.5 m box).
-    """
-    x0, y0, x1, y1 = box
-    yc, dy = 0.5 * (y0 + y1), 0.2 * (y1 - y0)
-    return np.array([[x, y, 0.01] for x in (x0 - 0.02, 0.5 * (x0 + x1), x1 + 0.02) for y in (y0 - 0.02, y1 + 0.02)]
-                    + [[x0 - 0.02, y, 0.01] for y in (yc - dy, yc + dy)] + [[x1 + 0.02, y, 0.01] for y in (yc - dy, yc + dy)])
-
-
-def _nails(rng: np.random.Generator, box=BOX, n: int = 20) -> np.ndarray:
-    """Nail heads (x, y) on a 4 × 5 grid in the central part of the box, jittered by 5 mm."""
-    x0, y0, x1, y1 = box
-    xs = np.linspace(x0, x1, 6)[1:-1]
-    ys = np.linspace(y0, y1, 7)[1:-1]
-    X, Y = np.meshgrid(xs, ys)
-    return np.column_stack([X.ravel(), Y.ravel()])[:n] + rng.normal(0, 0.005, (n, 2))
-
-
-def _window(cam: Camera, pose: Pose, pts: np.ndarray, margin_px: int = 160) -> tuple[int, int, int, int]:
-    uv = cam.project(pts, pose)
-    return (int(np.nanmin(uv[:, 0])) - margin_px, int(np.nanmin(uv[:, 1])) - margin_px,
-            int(np.nanmax(uv[:, 0])) + margin_px, int(np.nanmax(uv[:, 1])) + margin_px)
-
-
-def _render_pair(rig: StereoRig, height: Callable, texture, noise_dn: float, rng, extent_pts: np.ndarray, marks: PrintedMarks):
-    """Twin step: the two photographs of ``height`` with the printed frame marks on their plates.
-
-    Only the window that sees ``extent_pts`` and the mark plates is rendered.
-    """
-    ext = np.vstack([extent_pts, marks.corners()])
-    wl = _window(rig.left, rig.pose_left, ext)
-    wr = _window(rig.right, rig.pose_right, ext)
-    # [I] 5 fixed-point iterations: the ray-surface error shrinks by ~slope·tan(view angle) < 0.1 per iteration
-    L = render_heightfield(rig.left, rig.pose_left, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wl, marks=marks)
-    R = render_heightfield(rig.right, rig.pose_right, height, texture, iterations=5, noise_dn=noise_dn, rng=rng, window=wr, marks=marks)
-    return L, R
-
-
-# ----------------------------------------------------------------------------- processing (observed data only)
-# [I] Margin of the disparity search beyond the tie points' range (px): a coarse pyramid level's step
-# plus the relief between tie points; also the largest step between a tie and its neighbours that is
-# still taken for the surface.
-DISPARITY_MARGIN_PX = 10.0
-# [I] Neighbours a tie's disparity is compared with: enough for a robust median (a false match among
-# them is outvoted), few enough to stay local at the ties' spacing (a few mm on the box).
-TIE_NEIGHBOURS = 8
-
-
-def surface_consistent(uv: np.ndarray, disparity: np.ndarray, max_step_px: float, k: int = TIE_NEIGHBOURS) -> np.ndarray:
-    """Which tie points lie on the surface their neighbours describe (mask).
-
-    A false match along an epipolar line satisfies the coplanarity condition, so the relative
-    orientation keeps it, but its disparity is unlike that of the ties around it: the soil surface is
-    continuous at the ties' spacing. A tie is kept when its disparity is within ``max_step_px`` of the
-    median of its ``k`` nearest neighbours (rectified image positions).
-
-    Parameters
-    ----------
-    uv : ndarray (N, 2)
-        Rectified left-image positions of the ties (px).
-    disparity : ndarray (N,)
-        Their disparities (px).
-    max_step_px : float
-        Largest accepted difference to the neighbours' median (px).
-    k : int
-        Neighbours compared with.
-
-    Returns
-    -------
-    ndarray of bool (N,)
-        True for ties kept. With fewer than ``k + 1`` ties every tie is kept.
-
-    Notes
-    -----
-    Cost: O(N log N) (k-d tree).
-    """
-    from scipy.spatial import cKDTree
-
-    d = np.asarray(disparity, float)
-    if d.size <= k:
-        return np.ones(d.size, bool)
-    _, idx = cKDTree(np.asarray(uv, float)).query(uv, k=k + 1)
-    return np.abs(d - np.median(d[idx[:, 1:]], axis=1)) <= max_step_px
-
-
-class PairProcessor:
-    """The paper's processing of one set-up: relative orientation, rectification, absolute orientation, DEMs.
-
-    Built from what is observed: the calibrated cameras, tie points measured in both images
-    (pixels), the 10 frame marks measured in both images and their surveyed coordinates,
-    the base length and the nominal height. :meth:`from_images` measures the tie points and
-    the marks in the photographs themselves; the constructor takes measured positions.
-
-    Attributes
-    ----------
-    info : dict
-        What the measurement gave: ``ties_matched`` (SIFT matches passing the ratio test),
-        ``ties_inliers`` (kept by the coplanarity RANSAC), ``tie_sampson_rms_px`` (RMS Sampson
-        distance of the inliers to the adjusted coplanarity condition ≈ their per-coordinate
-        precision), ``mark_abs_rms_mm`` (RMS 3-D residual of the similarity on the marks),
-        ``marks_uv`` (left and right positions) and ``mark_sigma_noise_px`` (median centroid
-        precision from the image noise) when measured in images.
-    """
-
-    def __init__(self, cams: Mapping[str, Camera], tie_l, tie_r, marks_l, marks_r, marks_xyz, B_m: float, H_m: float,
-                 match: MatchParams, centre=(0.0, 0.0)):
-        tie_l, tie_r = np.asarray(tie_l, float), np.asarray(tie_r, float)
-        # approximate values: the rig's nominal set-up (base B along x at height H, both cameras aimed at the box)
-        nl, nr = (look_at_pose(np.array([centre[0] + sx, centre[1], H_m]), np.array([centre[0], centre[1], 0.0]))
-                  for sx in (-0.5 * B_m, 0.5 * B_m))
-        R, T, inl = relative_orientation(cams["left"], cams["right"], tie_l, tie_r, B_m,
-                                         approx=relative_orientation_from_poses(nl, nr))
-        if inl.sum() < 8:
-            raise InputError(f"relative orientation: only {int(inl.sum())} of {len(inl)} tie points agree with one coplanarity "
-                             "condition; at least 8 are needed")
-        res = coplanarity_residuals_px(cams["left"], cams["right"], R, T, tie_l[inl], tie_r[inl])
-        self.rect = rectify_pair(cams["left"], cams["right"], R, T, (H_m - 0.3, H_m + 0.3))
-        self.model_pose = Pose(np.eye(3), np.zeros(3))
-        self.marks_xyz = np.asarray(marks_xyz, float)
-        self.to_world, abs_rms = self._absolute(marks_l, marks_r)
-        rl = self.rect.rectify_points(tie_l[inl], "left")
-        dt = rl[:, 0] - self.rect.rectify_points(tie_r[inl], "right")[:, 0]
-        dt = dt[surface_consistent(rl, dt, DISPARITY_MARGIN_PX)]
-        # [I] the search range is the surface's tie disparities ± 10 px, never wider than the depth range
-        # H ± 0.3 m given to the rectification
-        lo, hi = sorted(np.ravel(self.rect.disparity_for_depth(np.array([H_m + 0.3, H_m - 0.3]))))
-        m = DISPARITY_MARGIN_PX
-        self.d_range = (float(max(dt.min() - m, lo)), float(min(dt.max() + m, hi))) if dt.size else (float(lo), float(hi))
-        self.cams = cams
-        self.match = match
-        self.B_m, self.H_m = float(B_m), float(H_m)
-        self.info = {"ties_matched": int(len(inl)), "ties_inliers": int(inl.sum()),
-                     "tie_sampson_rms_px": float(np.sqrt(np.mean(res ** 2))), "mark_abs_rms_mm": abs_rms}
-
-    def _absolute(self, marks_l, marks_r):
-        """Similarity model → world on the frame marks, and the RMS of its 3-D residuals (mm)."""
-        ml, mr = self.rect.rectify_points(marks_l, "left"), self.rect.rectify_points(marks_r, "right")
-        P = triangulate_points(self.rect, ml, mr, self.model_pose)
-        sim = umeyama(P, self.marks_xyz)
-        return sim, 1e3 * float(np.sqrt(np.mean(np.sum((sim.apply(P) - self.marks_xyz) ** 2, axis=1))))
-
-    @staticmethod
-    def measure_marks(cams: Mapping[str, Camera], img_l: np.ndarray, img_r: np.ndarray, marks_xyz: np.ndarray,
-                      diameter_m: float, B_m: float, H_m: float,
-                      centre: tuple[float, float] = (0.0, 0.0)) -> list[MarkMeasurement]:
-        """Locate the printed marks in both photographs, predicted from the rig's nominal pose (H, B, aimed at ``centre``).
-
-        Parameters
-        ----------
-        cams : mapping
-            Calibrated ``left`` and ``right`` cameras.
-        img_l, img_r : ndarray
-            The photographs (0–255, NaN = no data).
-        marks_xyz : ndarray (N, 3)
-            Surveyed coordinates of the marks (m).
-        diameter_m : float
-            Printed disc diameter (m).
-        B_m, H_m : float
-            Nominal base and height of the rig (m).
-        centre : (float, float)
-            Point the rig is aimed at (m).
-
-        Returns
-        -------
-        list of MarkMeasurement
-            The marks in the left image, then in the right image.
-        """
-        cx, cy = centre
-        out = []
-        for side, img, sx in (("left", img_l, -0.5 * B_m), ("right", img_r, 0.5 * B_m)):
-            nominal = look_at_pose(np.array([cx + sx, cy, H_m]), np.array([cx, cy, 0.0]))
-            uv, r = predict_marks(cams[side], nominal, marks_xyz, diameter_m)
-            out.append(locate_marks(img, uv, r, side))
-        return out
-
-    @classmethod
-    def from_images(cls, cams: Mapping[str, Camera], img_l: np.ndarray, img_r: np.ndarray, marks_xyz: np.ndarray,
-                    diameter_m: float, B_m: float, H_m: float, match: MatchParams,
-                    centre: tuple[float, float] = (0.0, 0.0)) -> "PairProcessor":
-        """Measure SIFT tie points and the printed frame marks in a pair of photographs and orient it.
-
-        Parameters
-        ----------
-        cams : mapping
-            Calibrated ``left`` and ``right`` cameras.
-        img_l, img_r : ndarray
-            The photographs (0–255, NaN = no data).
-        marks_xyz : ndarray (N, 3)
-            Surveyed coordinates of the marks (m).
-        diameter_m : float
-            Printed disc diameter (m), for the template and the centroid window.
-        B_m, H_m : float
-            Nominal base and height of the rig (m).
-        match : MatchParams
-        centre : (float, float)
-            Point the rig is aimed at (m).
-
-        Returns
-        -------
-        PairProcessor
-        """
-        tl, tr = sift_tie_points(img_l, img_r)
-        ml, mr = cls.measure_marks(cams, img_l, img_r, marks_xyz, diameter_m, B_m, H_m, centre)
-        pp = cls(cams, tl, tr, ml.uv, mr.uv, marks_xyz, B_m, H_m, match, centre)
-        pp.diameter_m, pp.centre = float(diameter_m), centre
-        pp.info.update(marks_uv=(ml.uv, mr.uv), mark_sigma_noise_px=float(np.median(np.r_[ml.sigma_px, mr.sigma_px])))
-        return pp
-
-    def reoriented(self, marks_l: np.ndarray, marks_r: np.ndarray) -> "PairProcessor":
-        """A copy whose absolute orientation comes from a new image measurement of the frame marks (same survey)."""
-        import copy
-
-        new = copy.copy(self)
-        new.to_world, abs_rms = self._absolute(marks_l, marks_r)
-        new.info = dict(self.info, mark_abs_rms_mm=abs_rms, marks_uv=(np.asarray(marks_l), np.asarray(marks_r)))
-        return new
-
-    def reoriented_from_images(self, img_l: np.ndarray, img_r: np.ndarray) -> "PairProcessor":
-        """A copy oriented on the frame marks located anew in this pair's photographs (same relative orientation)."""
-        ml, mr = self.measure_marks(self.cams, img_l, img_r, self.marks_xyz, self.diameter_m, self.B_m, self.H_m, self.centre)
-        new = self.reoriented(ml.uv, mr.uv)
-        new.info["mark_sigma_noise_px"] = float(np.median(np.r_[ml.sigma_px, mr.sigma_px]))
-        return new
-
-    def points(self, uv_l: np.ndarray, uv_r: np.ndarray) -> np.ndarray:
-        """World coordinates of manually matched points (point measurement)."""
-        a, b = self.rect.rectify_points(uv_l, "left"), self.rect.rectify_points(uv_r, "right")
-        return self.to_world.apply(triangulate_points(self.rect, a, b, self.model_pose))
-
-    def dem(self, img_l: np.ndarray, img_r: np.ndarray, grid: GridSpec, z_range: tuple[float, float] = (-0.05, 0.05),
-            return_disparity: bool = False) -> tuple[Raster, int] | tuple[Raster, int, Disparity]:
-        """Surface measurement: match the rectified pair where it sees ``grid``, triangulate, grid (mean per cell).
-
-        Only the part of the left rectified image that sees the grid (between ``z_range``, world m)
-        is matched: the frame and the walls are not part of the DEM. Returns ``(dem, matched pixels)``,
-        and the :class:`Disparity` as a third item with ``return_disparity``.
-
-        Parameters
-        ----------
-        img_l, img_r : ndarray
-            The photographs (0–255, NaN = no data).
-        grid : GridSpec
-            The DEM grid.
-        z_range : (float, float)
-            Lowest and highest elevation the grid's surface may have (world, m); sets the matched part of the image.
-        return_disparity : bool
-            Also return the disparity.
-
-        Returns
-        -------
-        dem : Raster
-            Mean elevation per cell (m), NaN where fewer than 3 points fall.
-        matched : int
-            Number of matched pixels.
-        disparity : Disparity
-            Only with ``return_disparity``.
-        """
-        Lr, Rr = self.rect.remap(img_l, "left"), self.rect.remap(img_r, "right")
-        x0, y0, x1, y1 = self._roi(grid, z_range, Lr.shape)
-        levels = int(np.clip(np.ceil(np.log2(max(self.d_range[1] - self.d_range[0], 8) / 8)), 2, 5))
-        disp = match_epipolar(Lr, Rr, self.d_range, MatchParams(levels=levels, **{k: v for k, v in self.match.__dict__.items() if k != "levels"}),
-                              roi=(x0, y0, x1, y1))
-        P = self.to_world.apply(disparity_to_points(disp, self.rect, self.model_pose))
-        if return_disparity:
-            return grid_dem(P, grid, min_count=3), int(disp.valid.sum()), disp
-        return grid_dem(P, grid, min_count=3), int(disp.valid.sum())
-
-    def _roi(self, grid: GridSpec, z_range, shape, margin_px: int = 96) -> tuple[int, int, int, int]:
-        """Bounding box (px) in the left rectified image of the grid's corners at both ends of ``z_range``.
-
-        [I] The margin (96 px) is a coarse-level matching window (11 px at level 3 = 88 px): near the
-        edge of the matched region the coarse levels see no data and the fine levels inherit blunders.
-        """
-        x0, y0, x1, y1 = grid.bounds
-        W = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in z_range], float)
-        s = self.to_world
-        Xm = ((W - s.t) @ s.R) / s.scale  # world -> model (= left camera) frame
-        Xr = Xm @ self.rect.R1.T
-        uv = (Xr @ self.rect.P1[:, :3].T + self.rect.P1[:, 3])
-        uv = uv[:, :2] / uv[:, 2:3]
-        h, w = shape
-        return (max(0, int(uv[:, 0].min()) - margin_px), max(0, int(uv[:, 1].min()) - margin_px),
-                min(w, int(uv[:, 0].max()) + margin_px), min(h, int(uv[:, 1].max()) + margin_px))
-
-
-def _survey(marks_xyz: np.ndarray, rng, proc: Mapping[str, Any]) -> np.ndarray:
-    """Twin step: the surveyed coordinates of the frame marks (true + N(0, ``mark_sigma_mm``) per coordinate)."""
-    return marks_xyz + rng.normal(0, proc["mark_sigma_mm"] * 1e-3, marks_xyz.shape)
-
-
-def mark_error_px(pp: "PairProcessor", truth: StereoRig, marks_xyz: np.ndarray) -> float:
-    """Evaluation: RMS (px, per coordinate, both images) of the located marks minus their true projections.
-
-    Parameters
-    ----------
-    pp : PairProcessor
-        Pair built from images; ``info["marks_uv"]`` holds the located marks.
-    truth : StereoRig
-        The true cameras and poses.
-    marks_xyz : ndarray (N, 3)
-        True coordinates of the marks (m).
-
-    Returns
-    -------
-    float
-        RMS error (px).
-    """
-    ml, mr = pp.info["marks_uv"]
-    e = np.r_[ml - truth.left.project(marks_xyz, truth.pose_left), mr - truth.right.project(marks_xyz, truth.pose_right)]
-    return float(np.sqrt(np.mean(e ** 2)))
-
-
-def _pair_columns(pp: "PairProcessor", truth: StereoRig, marks_xyz: np.ndarray) -> dict[str, float]:
-    """The measurement columns of one pair: ties, mark precision from the noise, residuals, error against the truth."""
-    i = pp.info
-    return {"ties_matched": i["ties_matched"], "ties_inliers": i["ties_inliers"], "tie_sampson_rms_px": i["tie_sampson_rms_px"],
-            "mark_sigma_noise_px": i["mark_sigma_noise_px"], "mark_abs_rms_mm": i["mark_abs_rms_mm"],
-            "mark_error_px": mark_error_px(pp, truth, marks_xyz)}
-
-
-def matching_residual_px(rect: Rectification, disp: Disparity, truth: StereoRig, height: Callable, grid: GridSpec,
-                         step_m: float = 0.002) -> dict[str, float]:
-    """Evaluation: the matcher's achieved precision δ (px), measured directly against the twin's surface.
-
-    Points of the true surface (every ``step_m`` over ``grid``) are projected through the true
-    cameras into both photographs and mapped into the *processing's* rectified images; the
-    matched disparity at the left position (bilinear, only where all four neighbours matched)
-    minus ``x_l − x_r`` of those positions is the matching error. It is independent of the
-    calibration and orientation errors (they move both the matched and the true positions
-    alike), so it is the δ of the paper's Eq. 1 as this matcher achieves it on these images.
-
-    Parameters
-    ----------
-    rect : Rectification
-        The processing's rectification (estimated cameras and relative orientation).
-    disp : Disparity
-        The matched disparity of the left rectified image.
-    truth : StereoRig
-        The twin's true cameras and poses (evaluation only).
-    height : callable
-        True surface ``z = h(x, y)`` (m).
-    grid : GridSpec
-        Area to sample (the DEM's grid).
-    step_m : float
-        Sample spacing (m).
-
-    Returns
-    -------
-    dict
-        ``sigma_d_px`` (1.4826·MAD), ``bias_d_px`` (median), ``y_parallax_rms_px`` (RMS of
-        ``y_l − y_r`` of the true points: the rectification's residual vertical parallax) and
-        ``n`` (samples).
-
-    Notes
-    -----
-    Cost: O(samples).
-    """
-    from scipy.ndimage import map_coordinates
-
-    x0, y0, x1, y1 = grid.bounds
-    X, Y = np.meshgrid(np.arange(x0 + step_m / 2, x1, step_m), np.arange(y0 + step_m / 2, y1, step_m))
-    P = np.column_stack([X.ravel(), Y.ravel(), height(X.ravel(), Y.ravel())])
-    a = rect.rectify_points(truth.left.project(P, truth.pose_left), "left")
-    b = rect.rectify_points(truth.right.project(P, truth.pose_right), "right")
-    d = np.where(disp.valid, disp.d, 0.0)
-    coords = np.vstack([a[:, 1], a[:, 0]])
-    dm = map_coordinates(d, coords, order=1, mode="constant", cval=np.nan)
-    ok4 = map_coordinates(disp.valid.astype(float), coords, order=1, mode="constant", cval=0.0) > 0.999
-    err = (dm - (a[:, 0] - b[:, 0]))[ok4]
-    if err.size < 10:
-        return {"sigma_d_px": float("nan"), "bias_d_px": float("nan"), "y_parallax_rms_px": float("nan"), "n": int(err.size)}
-    med = float(np.median(err))
-    return {"sigma_d_px": nmad(err), "bias_d_px": med,
-            "y_parallax_rms_px": float(np.sqrt(np.mean((a[:, 1] - b[:, 1]) ** 2))), "n": int(err.size)}
-
-
-def error_decomposition(dem: np.ndarray, ref: np.ndarray, grid: GridSpec) -> dict[str, float]:
-    """Split a DEM's error into a plane (orientation-type: offset and tilt) and the rest (matching-type).
-
-    Parameters
-    ----------
-    dem, ref : ndarray
-        DEM and reference surface on ``grid`` (m); NaN in ``dem`` = no data.
-    grid : GridSpec
-        Their grid.
-
-    Returns
-    -------
-    dict
-        ``mean_error_mm`` (box-mean DEM − reference), ``tilt_mm_per_m`` (gradient magnitude of
-        the best-fitting plane of the error), ``plane_mae_mm`` (MAE of that plane alone) and
-        ``residual_mae_mm`` (MAE after removing it).
-    """
-    ok = np.isfinite(dem) & np.isfinite(ref)
-    X, Y = np.meshgrid(*grid.cell_centres())
-    e = (dem - ref)[ok]
-    A = np.column_stack([np.ones(e.size), X[ok] - X[ok].mean(), Y[ok] - Y[ok].mean()])
-    c, *_ = np.linalg.lstsq(A, e, rcond=None)
-    plane = A @ c
-    return {"mean_error_mm": 1e3 * float(e.mean()), "tilt_mm_per_m": 1e3 * float(np.hypot(c[1], c[2])),
-            "plane_mae_mm": 1e3 * float(np.mean(np.abs(plane))), "residual_mae_mm": 1e3 * float(np.mean(np.abs(e - plane)))}
-
-
-def _box_grid(cell_m: float, box=BOX, share: float = 0.8) -> GridSpec:
-    """Grid over the central ``share`` of the box area (the walls shade the rest, paper sect. 2)."""
-    s = np.sqrt(share)
-    nx, ny = int(round((box[2] - box[0]) * s / cell_m)), int(round((box[3] - box[1]) * s / cell_m))
-    cx, cy = 0.5 * (box[0] + box[2]), 0.5 * (box[1] + box[3])
-    return GridSpec(cx - nx * cell_m / 2, cy + ny * cell_m / 2, cell_m, nx, ny, "EPSG:32632")
-
-
-def _cell_truth(height: Callable, grid: GridSpec, sub: int = 6) -> np.ndarray:
-    """Reference surface per cell (mean of ``height`` over the cell), as a point gauge traverse would give."""
-    X, Y = np.meshgrid(*grid.cell_centres())
-    off = (np.arange(sub) + 0.5) / sub - 0.5
-    return np.mean([height(X + a * grid.cell, Y + b * grid.cell) for a in off for b in off], axis=0)
 
 
 def _load_cameras(path: str | Path) -> dict[str, Camera]:
@@ -800,7 +185,7 @@ def calibrate_rig(cfg: Mapping[str, Any], seed: int, out: Mapping[str, str]) -> 
                 ("without: centred principal point only", {s: _without_io(cam, False, False, True) for s, cam in cams.items()})]
     rows = []
     sig = c["target_sigma_px"]
-    for H in _floats(ct["H_m"], "stereo.calibration_test.H_m"):
+    for H in as_floats(ct["H_m"], "stereo.calibration_test.H_m"):
         B = float(ct["B_m"])
         rng = rng_for(seed, "stereo", "calibration_test", f"{H}")
         truth = paper_rig(H, B, centre_xy=(0.0, 0.0))
@@ -870,26 +255,26 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     cams = _load_cameras(cameras_json)
     proc, db = params.processing, params.dry_box
     texture = soil_texture(rng_for(seed, "stereo", "texture"), TEXTURE_EXTENT)
-    grid = _box_grid(proc["cell_mm"] * 1e-3)
-    ref = _cell_truth(_relief, grid)
+    grid = box_grid(proc["cell_mm"] * 1e-3)
+    ref = cell_truth(relief, grid)
     extent = np.array([[x, y, z] for x in (BOX[0], BOX[2]) for y in (BOX[1], BOX[3]) for z in (-0.01, 0.01)])  # the soil, not the frame
     diameter = proc["mark_diameter_mm"] * 1e-3
-    marks = PrintedMarks(_frame_marks(), MarkDesign(diameter))
+    marks = PrintedMarks(frame_marks(), MarkDesign(diameter))
     match = MatchParams(**proc["matching"])
     rows = []
     for H, B in (tuple(float(v) for v in s) for s in db["setups"]):
         rng = rng_for(seed, "stereo", "dry_box", f"{H}-{B}")
         truth = paper_rig(H, B)
-        L_img, R_img = _render_pair(truth, _relief, texture, proc["image_noise_dn"], rng, extent, marks)
-        pp = PairProcessor.from_images(cams, L_img, R_img, _survey(marks.xyz, rng, proc), diameter, B, H, match)
+        L_img, R_img = render_pair(truth, relief, texture, proc["image_noise_dn"], rng, extent, marks)
+        pp = PairProcessor.from_images(cams, L_img, R_img, survey_marks(marks.xyz, rng, proc), diameter, B, H, match)
         dem, n, disp = pp.dem(L_img, R_img, grid, return_disparity=True)
         ok = dem.valid
         # evaluation: the achieved matching precision δ (px) and the DEM error split into plane + rest
-        prec = matching_residual_px(pp.rect, disp, truth, _relief, grid)
+        prec = matching_residual_px(pp.rect, disp, truth, relief, grid)
         dec = error_decomposition(dem.data, ref, grid)
         # point measurement: 20 nail heads matched by hand, against the point gauge (±0.01 mm)
-        nails = _nails(rng)
-        heads = np.column_stack([nails, _relief(nails[:, 0], nails[:, 1]) + 0.02])
+        nails = nail_positions(rng)
+        heads = np.column_stack([nails, relief(nails[:, 0], nails[:, 1]) + 0.02])
         gauge = heads[:, 2] + rng.normal(0, 1e-5, len(heads))
         ms = proc["manual_sigma_px"]
         P = pp.points(truth.left.project(heads, truth.pose_left) + rng.normal(0, ms, (20, 2)),
@@ -901,7 +286,7 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
                      "dz_1px_mm": dz_model, "sigma_d_px": prec["sigma_d_px"], "bias_d_px": prec["bias_d_px"],
                      "y_parallax_rms_px": prec["y_parallax_rms_px"], "surface_tilt_error_mm_per_m": dec["tilt_mm_per_m"],
                      "surface_plane_mae_mm": dec["plane_mae_mm"], "surface_residual_mae_mm": dec["residual_mae_mm"],
-                     **_pair_columns(pp, truth, marks.xyz)})
+                     **pair_columns(pp, truth, marks.xyz)})
         log.info("dry box H %.2f B %.2f: point MAE %.3f mm, surface MAE %.3f mm; %d tie points (Sampson RMS %.3f px), "
                  "marks %.4f px from the truth, similarity residual %.3f mm", H, B, rows[-1]["point_mae_mm"], rows[-1]["surface_mae_mm"],
                  pp.info["ties_inliers"], pp.info["tie_sampson_rms_px"], rows[-1]["mark_error_px"], pp.info["mark_abs_rms_mm"])
@@ -953,7 +338,7 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     H, B = float(db["removal_H_m"]), float(db["removal_B_m"])
     rng = rng_for(seed, "stereo", "removals")
     truth = paper_rig(H, B)
-    surveyed = _survey(marks.xyz, rng, proc)
+    surveyed = survey_marks(marks.xyz, rng, proc)
     S_cm2 = (BOX[2] - BOX[0]) * (BOX[3] - BOX[1]) * 1e4
     rho = float(db["bulk_density"])
     V_m3 = float(db["removal_ml"]) * 1e-6
@@ -971,18 +356,18 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
         def h(x, y):
             u, v = 2 * np.pi * x / lx, 2 * np.pi * y / ly
             wsum = k + 0.25 * (np.real(np.exp(1j * (u + v)) * c1) + np.real(np.exp(1j * (u - v)) * c2))
-            return _relief(x, y) - d * wsum
+            return relief(x, y) - d * wsum
         return h
 
     # [I] scraping soil off exposes new soil: each state has its own texture, so the matching
     # errors of two epochs are independent (the same texture would cancel them in the DoD)
-    imgs0 = _render_pair(truth, surface(0), texture, proc["image_noise_dn"], rng, extent, marks)
+    imgs0 = render_pair(truth, surface(0), texture, proc["image_noise_dn"], rng, extent, marks)
     pp = PairProcessor.from_images(cams, *imgs0, surveyed, diameter, B, H, match)
     d0, _ = pp.dem(*imgs0, grid)
     rrows, marks_uv = [], [np.hstack(pp.info["marks_uv"])]
     for k in range(1, int(db["removals"]) + 1):
         tex_k = soil_texture(rng_for(seed, "stereo", "texture_removal", k), TEXTURE_EXTENT)
-        imgs = _render_pair(truth, surface(k), tex_k, proc["image_noise_dn"], rng, extent, marks)
+        imgs = render_pair(truth, surface(k), tex_k, proc["image_noise_dn"], rng, extent, marks)
         ppk = pp.reoriented_from_images(*imgs) if proc["reorient_each_pair"] else pp
         marks_uv.append(np.hstack(ppk.info["marks_uv"]))
         dk, _ = ppk.dem(*imgs, grid)
@@ -998,7 +383,7 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
     # repeatability of the mark measurement: the rig does not move between removals, so each mark's
     # position scatters over the 17 pairs by the measurement alone (std per coordinate, RMS over marks and images)
     rem["mark_repeatability_px"] = float(np.sqrt(np.mean(np.std(np.array(marks_uv), axis=0, ddof=1) ** 2)))
-    for key, v in _pair_columns(pp, truth, marks.xyz).items():
+    for key, v in pair_columns(pp, truth, marks.xyz).items():
         rem[f"first_pair_{key}"] = v
     b, r2 = fit_A_vs_M(rem["M_s_mm"], rem["A_s_mm"])
     rem["b_fit"], rem["r2_fit"] = b, r2
@@ -1017,83 +402,6 @@ def measure_dry_box(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: M
 
 
 # ----------------------------------------------------------------------------- rule: rain
-def settlement_mm(rho_b: float, seal_depth_mm: float, seal_density: float) -> float:
-    """Final settlement of loose soil compacted by rain: ``s = d·(1 − ρ_b/ρ_seal)`` (mm); 0 if ρ_b ≥ ρ_seal.
-
-    Parameters
-    ----------
-    rho_b : float
-        Bulk density of the loose soil (g/cm³).
-    seal_depth_mm : float
-        Depth the rain compacts (mm).
-    seal_density : float
-        Density the compacted layer reaches (g/cm³).
-
-    Returns
-    -------
-    float
-        Settlement s (mm).
-    """
-    return float(seal_depth_mm * max(0.0, 1.0 - rho_b / seal_density))
-
-
-def interrill_rate_kg_m2_h(K_i: float, intensity_mm_h: float, slope_deg: float) -> float:
-    """WEPP interrill detachment ``D_i = K_i·I²·S_f`` with ``S_f = 1.05 − 0.85·exp(−4·sin θ)`` (kg/m²/h).
-
-    Parameters
-    ----------
-    K_i : float
-        Interrill erodibility (kg·s/m⁴).
-    intensity_mm_h : float
-        Rain intensity I (mm/h).
-    slope_deg : float
-        Slope θ (degrees).
-
-    Returns
-    -------
-    float
-        Detachment rate D_i (kg/m²/h).
-    """
-    I = intensity_mm_h * 1e-3 / 3600.0
-    Sf = 1.05 - 0.85 * np.exp(-4 * np.sin(np.radians(slope_deg)))
-    return float(K_i * I * I * Sf * 3600.0)
-
-
-def runoff_detachment_kg_m2_h(y_m: np.ndarray, intensity_mm_h: float, ksat_mm_h: float, slope_deg: float, manning_n: float,
-                              K_r: float, tau_c: float) -> tuple[np.ndarray, np.ndarray]:
-    """Flow shear and WEPP flow detachment of the sheet flow that accumulates down the box.
-
-    Steady runoff per unit width ``q = (I − Ksat)·y`` (``y`` horizontal distance from the
-    upslope wall), Manning depth ``h = (n q / √S)^(3/5)`` with ``S = sin θ``, shear
-    ``τ = ρ g h S`` and detachment ``D_f = K_r·max(τ − τ_c, 0)`` (WEPP's rill equation without
-    the transport-capacity feedback, an upper bound).
-
-    Parameters
-    ----------
-    y_m : ndarray
-        Distance from the upslope wall (m), ≥ 0.
-    intensity_mm_h, ksat_mm_h : float
-        Rain intensity and saturated conductivity (mm/h); no runoff where Ksat ≥ I.
-    slope_deg : float
-        Slope (deg).
-    manning_n : float
-        Manning roughness (s/m^(1/3)).
-    K_r, tau_c : float
-        Flow erodibility (s/m) and critical shear stress (Pa).
-
-    Returns
-    -------
-    (ndarray, ndarray)
-        Shear stress τ (Pa) and detachment D_f (kg/m²/h) at ``y_m``.
-    """
-    r = max(intensity_mm_h - ksat_mm_h, 0.0) * 1e-3 / 3600.0
-    S = np.sin(np.radians(slope_deg))
-    q = r * np.asarray(y_m, float)
-    h = (manning_n * q / np.sqrt(max(S, 1e-12))) ** 0.6
-    tau = 1000.0 * 9.81 * h * S
-    return tau, K_r * np.maximum(tau - tau_c, 0.0) * 3600.0
-
-
 def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapping[str, str]) -> None:
     """Rule ``stereo_rain``: the three bulk densities, a pair every ``interval_min``; MAE, MRE, upstream–downstream.
 
@@ -1111,7 +419,7 @@ def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     proc, rn = params.processing, params.rain
     texture = soil_texture(rng_for(seed, "stereo", "texture_rain"), TEXTURE_EXTENT)
     tan = np.tan(np.radians(rn["slope_deg"]))
-    grid = _box_grid(proc["cell_mm"] * 1e-3)
+    grid = box_grid(proc["cell_mm"] * 1e-3)
     extent = np.array([[x, y, -tan * y + dz] for x in (BOX[0], BOX[2]) for y in (BOX[1], BOX[3]) for dz in (-0.01, 0.01)])
     S_cm2 = (BOX[2] - BOX[0]) * (BOX[3] - BOX[1]) * 1e4
     rate = interrill_rate_kg_m2_h(rn["interrill_erodibility"], rn["intensity_mm_h"], rn["slope_deg"])
@@ -1133,28 +441,28 @@ def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     match = MatchParams(**proc["matching"])
     times = np.arange(0, rn["duration_min"] + 1e-9, rn["interval_min"])
     runs, series = [], []
-    for i, rho in enumerate(_floats(rn["bulk_densities"], "stereo.rain.bulk_densities")):
+    for i, rho in enumerate(as_floats(rn["bulk_densities"], "stereo.rain.bulk_densities")):
         rng = rng_for(seed, "stereo", "rain", f"{rho}")
         s_max = settlement_mm(rho, rn["seal_depth_mm"], rn["seal_density"])
         truth = paper_rig(rn["H_m"], rn["B_m"])
         # the box slopes down towards +y (y = −0.25 m is upstream), 10°
         # the frame slopes with the box: its marks 1 cm above the sloping soil, on plates parallel to it
-        marks = PrintedMarks(_frame_marks() + np.c_[np.zeros((10, 2)), -tan * _frame_marks()[:, 1]], MarkDesign(diameter), dz_dy=-tan)
-        surveyed = _survey(marks.xyz, rng, proc)
+        marks = PrintedMarks(frame_marks() + np.c_[np.zeros((10, 2)), -tan * frame_marks()[:, 1]], MarkDesign(diameter), dz_dy=-tan)
+        surveyed = survey_marks(marks.xyz, rng, proc)
 
         def surface(t_min, rho=rho, s_max=s_max):
             settle = s_max * (1 - np.exp(-t_min / rn["settle_min"])) * 1e-3
             # m of soil at ρ_b: uniform interrill detachment + flow detachment growing with the runoff from the upslope wall
-            return lambda x, y: -tan * y + _relief(x, y) - settle - erosion_rate(y) * t_min / 60.0 / (rho * 1e3)
+            return lambda x, y: -tan * y + relief(x, y) - settle - erosion_rate(y) * t_min / 60.0 / (rho * 1e3)
 
-        imgs0 = _render_pair(truth, surface(0.0), texture, proc["image_noise_dn"], rng, extent, marks)
+        imgs0 = render_pair(truth, surface(0.0), texture, proc["image_noise_dn"], rng, extent, marks)
         pp = PairProcessor.from_images(cams, *imgs0, surveyed, diameter, rn["B_m"], rn["H_m"], match)
         d0, _ = pp.dem(*imgs0, grid)
         Ms, As, up_down = [], [], None
         for t in times[1:]:
             # [I] splash and wash rearrange the surface grains: a new texture per pair
             tex_t = soil_texture(rng_for(seed, "stereo", "texture_rain", f"{rho}", int(t)), TEXTURE_EXTENT)
-            imgs = _render_pair(truth, surface(float(t)), tex_t, proc["image_noise_dn"], rng, extent, marks)
+            imgs = render_pair(truth, surface(float(t)), tex_t, proc["image_noise_dn"], rng, extent, marks)
             ppt = pp.reoriented_from_images(*imgs) if proc["reorient_each_pair"] else pp
             dt_, _ = ppt.dem(*imgs, grid)
             ok = d0.valid & dt_.valid
@@ -1179,7 +487,7 @@ def measure_rain(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
                      "MAE_mm": mae(Ms, As), "MRE_pct": mre(Ms, As),
                      "MAE_paper_mm": PAPER["rain"].get(rho, (np.nan, np.nan))[0], "MRE_paper_pct": PAPER["rain"].get(rho, (np.nan, np.nan))[1],
                      "upstream_minus_downstream_mm": up_down, "upstream_minus_downstream_paper_mm": PAPER["upstream_minus_downstream_mm"],
-                     **{f"first_pair_{k}": v for k, v in _pair_columns(pp, truth, marks.xyz).items()}})
+                     **{f"first_pair_{k}": v for k, v in pair_columns(pp, truth, marks.xyz).items()}})
         log.info("rain ρ_b %.2f: MAE %.3f mm, MRE %.1f %%", rho, runs[-1]["MAE_mm"], runs[-1]["MRE_pct"])
     write_table(pd.DataFrame(runs), out["rain_runs"])
     write_table(pd.DataFrame(series), out["rain_series"])
@@ -1218,17 +526,17 @@ def measure_wind(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     rng = rng_for(seed, "stereo", "wind")
     truth = paper_rig(H, B)
     diameter = wd["mark_diameter_mm"] * 1e-3
-    marks = PrintedMarks(_frame_marks(box), MarkDesign(diameter))
-    grid = _box_grid(wd["cell_mm"] * 1e-3, box)
+    marks = PrintedMarks(frame_marks(box), MarkDesign(diameter))
+    grid = box_grid(wd["cell_mm"] * 1e-3, box)
     extent = np.array([[x, y, z] for x in (box[0], box[2]) for y in (box[1], box[3]) for z in (-0.003, 0.003)])
-    imgs0 = _render_pair(truth, surface(False), texture, proc["image_noise_dn"], rng, extent, marks)
-    pp = PairProcessor.from_images(cams, *imgs0, _survey(marks.xyz, rng, proc), diameter, B, H, MatchParams(**proc["matching"]))
+    imgs0 = render_pair(truth, surface(False), texture, proc["image_noise_dn"], rng, extent, marks)
+    pp = PairProcessor.from_images(cams, *imgs0, survey_marks(marks.xyz, rng, proc), diameter, B, H, MatchParams(**proc["matching"]))
     d0, _ = pp.dem(*imgs0, grid)
     texture1 = soil_texture(rng_for(seed, "stereo", "texture_sand_after"), (-0.12, -0.12, 0.12, 0.12), **sand)  # [I] new grains
-    d1, _ = pp.dem(*_render_pair(truth, surface(True), texture1, proc["image_noise_dn"], rng, extent, marks), grid)
-    nails = _nails(rng, box)
-    gauge_before = _cell_truth(surface(False), grid)
-    gauge_after = _cell_truth(surface(True), grid)
+    d1, _ = pp.dem(*render_pair(truth, surface(True), texture1, proc["image_noise_dn"], rng, extent, marks), grid)
+    nails = nail_positions(rng, box)
+    gauge_before = cell_truth(surface(False), grid)
+    gauge_after = cell_truth(surface(True), grid)
     r, c = grid.index(nails[:, 0], nails[:, 1])
     ok = d0.valid[r, c] & d1.valid[r, c]
     M_i = (gauge_before - gauge_after)[r, c][ok] * 1e3 + rng.normal(0, 0.01, ok.sum())  # micrometer ±0.01 mm
@@ -1240,7 +548,8 @@ def measure_wind(cfg: Mapping[str, Any], cameras_json: str, seed: int, out: Mapp
     row = {"H_m": H, "B_m": B, "L_m": float(stereo_L_m(H, B)), "nails": int(ok.sum()), "MAE_nails_mm": mae(M_i, A_i),
            "M_s_mm": M_s, "A_s_mm": A_s, "surface_abs_error_mm": abs(A_s - M_s),
            "dod_mae_vs_gauge_mm": 1e3 * mae((gauge_before - gauge_after)[both], (d0.data - d1.data)[both]),
-           "MAE_paper_mm": PAPER["wind_mae_mm"], **_pair_columns(pp, truth, marks.xyz)}
+           "MAE_paper_mm": PAPER["wind_mae_mm"], **pair_columns(pp, truth, marks.xyz)}
     write_table(pd.DataFrame([row]), out["wind_run"])
     _dod_figure(d1.data - d0.data, grid, "Wind tunnel, 45 min at 4.5 m/s", out["dod_png"])
     log.info("wind: MAE at nails %.3f mm", row["MAE_nails_mm"])
+
