@@ -60,7 +60,8 @@ from kitegully.io.raster import Raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
 from kitegully.polygons import PolygonParams, measure_polygons  # noqa: E402
 from kitegully.polygons.dem_prep import min_z_resample  # noqa: E402
-from kitegully.polygons.morphometry import _ground_drape, drape, extend_to_rims, section_profile  # noqa: E402
+from kitegully.polygons.morphometry import _ground_drape, extend_to_rims  # noqa: E402
+from kitegully.polygons.profiles import drape, section_profile  # noqa: E402
 
 
 CACHE: Path | None = None

@@ -9,7 +9,8 @@ import shapely
 from kitegully import InputError
 from kitegully.io.raster import GridSpec
 from kitegully.polygons.conditioning import polygons_from_labels
-from kitegully.polygons.morphometry import _bank_drape, bank_reference, measure_sections, section_profile
+from kitegully.polygons.morphometry import _bank_drape, measure_sections
+from kitegully.polygons.profiles import bank_reference, section_profile
 from kitegully.polygons.stage import PolygonParams
 
 from .polygon_synthetic import CRS, true_area

@@ -10,7 +10,8 @@ from skimage.morphology import thin
 
 from kitegully import InputError
 from kitegully.polygons.conditioning import polygons_from_labels
-from kitegully.polygons.morphometry import extend_to_rims, measure_sections, section_profile
+from kitegully.polygons.morphometry import extend_to_rims, measure_sections
+from kitegully.polygons.profiles import section_profile
 from kitegully.polygons.skeleton import branch_paths
 from kitegully.polygons.stage import PolygonParams
 

@@ -8,8 +8,8 @@ import shapely
 
 from kitegully import InputError
 from kitegully.polygons.conditioning import gully_mask, polygons_from_labels
-from kitegully.polygons.morphometry import (axis_gradient, drape, drape_opened_along, ground_profile, measure_sections,
-                                            section_profile)
+from kitegully.polygons.morphometry import measure_sections
+from kitegully.polygons.profiles import axis_gradient, drape, drape_opened_along, ground_profile, section_profile
 from kitegully.polygons.stage import PolygonParams
 
 from .polygon_synthetic import notch_dem, true_area

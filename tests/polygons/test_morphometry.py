@@ -7,7 +7,8 @@ import pytest
 
 from kitegully.config import load_yaml
 from kitegully.polygons.conditioning import polygons_from_labels
-from kitegully.polygons.morphometry import measure_sections, open_at_edges
+from kitegully.polygons.medial import open_at_edges
+from kitegully.polygons.morphometry import measure_sections
 from kitegully.polygons.stage import PolygonParams, measure_polygons
 
 from .polygon_synthetic import notch_dem, true_area

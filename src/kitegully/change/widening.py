@@ -7,7 +7,7 @@ cancels in the difference:
 
 1. each section line is extended by ``margin_m`` at both ends along its own direction
    (room for the banks to move outwards), and both DEMs are draped on it every half cell
-   (:func:`kitegully.polygons.morphometry.drape`);
+   (:func:`kitegully.polygons.profiles.drape`);
 2. per DEM, the reference is the straight line between the profile's two end levels
    (median of the outer ``end_m`` at each end), the depth d(s) = reference − z;
 3. from the deepest point inside the epoch-1 section, the edges are where d first falls
@@ -27,7 +27,7 @@ import pandas as pd
 import shapely
 
 from kitegully.io.raster import GridSpec
-from kitegully.polygons.morphometry import drape
+from kitegully.polygons.profiles import drape
 
 log = logging.getLogger(__name__)
 

@@ -17,8 +17,12 @@ Modules by phase of the method:
 ``conditioning``
     Barriers raised into the DEM, priority-flood fill, fill depth, threshold masks,
     closing, polygons.
+``medial``
+    Medial axes: thinning, longest path or pruned network, snakes, prolonged to the outline.
+``profiles``
+    Profiles draped on the DEM, their ground, and the depth reference surfaces.
 ``morphometry``
-    Medial axis, cross-sections every 10 m: width, depth, area and volume.
+    Cross-sections every 10 m across the medial axes: width, depth, area and volume.
 ``manual``
     Simulated manual operators digitising the gullies on the shaded DEM (twins only).
 ``evaluation``

@@ -158,7 +158,7 @@ def _edge_profiles(z: np.ndarray, cell: float, window: int, rr: np.ndarray, cc: 
     from the quadratic fitted to the 2-D opening of the DEM with a disc of that diameter
     (:func:`ground_opening`; a clump on a rim no longer turns it), the samples from the DEM's
     profile along that direction from -(r + ground_m) to +(r + ground_m), opened in 1-D with
-    a ``ground_m`` segment (:func:`kitegully.polygons.morphometry.ground_profile`'s filter:
+    a ``ground_m`` segment (:func:`kitegully.polygons.profiles.ground_profile`'s filter:
     removes bumps narrower than the segment, keeps a step edge and a straight slope exactly,
     and, being across the edge, is not biased by the edge's own gradient along its length).
     O(m · (r + ground_m) / cell) for m cells.

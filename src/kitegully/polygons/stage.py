@@ -18,7 +18,8 @@ from kitegully.io.raster import GridSpec
 from kitegully.polygons.breaklines import CURVATURES, detect_breaklines, low_sides
 from kitegully.polygons.conditioning import bank_held_depth, barrier_mask, fill_depth, gully_mask, polygons_from_labels, rasterize_lines
 from kitegully.polygons.dem_prep import prepare_dem
-from kitegully.polygons.morphometry import BRANCHES, NO_RIM, REFERENCES, measure_sections
+from kitegully.polygons.morphometry import BRANCHES, NO_RIM, measure_sections
+from kitegully.polygons.profiles import REFERENCES
 from kitegully.polygons.skeleton import skeleton_paths
 from kitegully.polygons.thalweg import thalweg_lines, topographic_convergence_index
 from kitegully.polygons.transects import (clip_transects, make_transects, outlet_ends, station_floor, survey_edge_dams,
@@ -130,7 +131,7 @@ class PolygonParams:
     section_spacing_m : float
         Cross-section spacing (m) [P 10].
     reference : str
-        Depth reference surface (:data:`kitegully.polygons.morphometry.REFERENCES`) [I].
+        Depth reference surface (:data:`kitegully.polygons.profiles.REFERENCES`) [I].
     branches : str
         Medial-axis branches that carry sections: ``all`` (every branch of the pruned medial
         network reaching half a spacing beyond its parent's edge [I]) or ``longest`` (the
@@ -147,12 +148,12 @@ class PolygonParams:
     ground_along_axis : bool
         With ``ground_segment_m``: each section's drape opened along the gully axis too, with
         the same segment, detrended by the floor's gradient
-        (:func:`kitegully.polygons.morphometry.drape_opened_along`) [I]: plants and the
+        (:func:`kitegully.polygons.profiles.drape_opened_along`) [I]: plants and the
         matching window only raise a DSM, and the clumps repeat along the strip as across it.
     bank_fit_m : float
         For ``reference`` ``banks`` / ``bank_lines``: length of ground beyond each reference end
         (m) that the pre-incision surface across the gully is fitted to
-        (:func:`kitegully.polygons.morphometry.bank_reference`) [I: one curvature window, the
+        (:func:`kitegully.polygons.profiles.bank_reference`) [I: one curvature window, the
         scale at which the stage already describes the surface around an edge].
     no_rim : str
         Where a section end that finds no rim within ``rim_search_m`` stays: ``outline`` (the
