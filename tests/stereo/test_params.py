@@ -3,18 +3,9 @@
 import copy
 
 import pytest
-import yaml
 
 from kitegully import InputError
 from kitegully.stereo import StereoParams
-
-SITE = "config/sites/stereo_lab.yaml"
-
-
-@pytest.fixture(scope="module")
-def cfg(request):
-    root = request.config.rootpath
-    return yaml.safe_load((root / SITE).read_text())["stereo"]
 
 
 def test_params_from_site_file_and_bad_keys(cfg):

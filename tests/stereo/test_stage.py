@@ -5,18 +5,9 @@ import json
 
 import pandas as pd
 import pytest
-import yaml
 
 from kitegully import InputError
 from kitegully.stereo import calibrate_rig, measure_dry_box, measure_rain, measure_wind
-
-SITE = "config/sites/stereo_lab.yaml"
-
-
-@pytest.fixture(scope="module")
-def cfg(request):
-    root = request.config.rootpath
-    return yaml.safe_load((root / SITE).read_text())["stereo"]
 
 
 def tiny(cfg):
