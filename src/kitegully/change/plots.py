@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from kitegully.io.figures import new_figure, save_figure
+from kitegully.io.figures import map_axes, new_figure, save_figure
 from kitegully.io.raster import GridSpec
 
 if TYPE_CHECKING:
@@ -46,9 +46,7 @@ def plot_dod_map(dod: np.ndarray, grid: GridSpec, path: str | Path, limit_m: flo
     fig, ax = new_figure(figsize=(7, 5))
     im = ax.imshow(d, cmap="RdBu", vmin=-limit_m, vmax=limit_m, extent=(x0, x1, y0, y1), interpolation="nearest")
     fig.colorbar(im, ax=ax, label="elevation change (m)", shrink=0.8, extend="both")
-    ax.set_xlabel("easting (m)")
-    ax.set_ylabel("northing (m)")
-    ax.ticklabel_format(useOffset=False, style="plain")
+    map_axes(ax)
     ax.set_title(title)
     ax.grid(False)
     save_figure(fig, path, attribution)
@@ -86,7 +84,8 @@ def plot_budget_bars(budget: pd.DataFrame, path: str | Path, masks: list[str] | 
     ax.set_xticks(x, masks_, rotation=30, ha="right")
     ax.set_ylabel("net volume change (m³), ±1σ (correlated + co-registration)")
     ax.set_title("Sediment budget by mask and threshold")
-    ax.legend(ncol=3, fontsize=7)
+    # outside the axes: the site's raw bar and its error bar reach the bottom corner, where a legend inside would lie
+    ax.legend(fontsize=7, title="threshold", title_fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     save_figure(fig, path, attribution)
 
 

@@ -29,7 +29,7 @@ from kitegully.dense.ortho import orthophoto
 from kitegully.dense.shading import openness
 from kitegully.dense.surface import dense_surface
 from kitegully.dense.views import ViewSet, read_offset, views_from_reconstruction
-from kitegully.io.figures import new_figure, save_figure
+from kitegully.io.figures import map_axes, new_figure, save_figure
 from kitegully.io.raster import GridSpec, write_raster
 from kitegully.io.tables import write_table
 from kitegully.terrain.shading import hillshade
@@ -280,18 +280,16 @@ def shading_figures(dsm: np.ndarray, grid: GridSpec, sh: ShadingParams, figure_m
     hs = hillshade(dsm, grid.cell, sh.azimuth_deg, sh.altitude_deg)
     fig, ax = new_figure(figsize=(7, 6))
     im = _show(ax, np.where(np.isfinite(dsm), hs, np.nan), grid, figure_max_px, vmin=0, vmax=1)
-    ax.set(xlabel="Easting (m)", ylabel="Northing (m)",
-           title=f"DSM hillshade (sun az {sh.azimuth_deg:g}°, alt {sh.altitude_deg:g}°), cell {grid.cell:g} m")
-    ax.ticklabel_format(useOffset=False, style="plain")
+    map_axes(ax)
+    ax.set_title(f"DSM hillshade (sun az {sh.azimuth_deg:g}°, alt {sh.altitude_deg:g}°), cell {grid.cell:g} m")
     fig.colorbar(im, ax=ax, shrink=0.7, label="illumination (0–1)")
     save_figure(fig, hill_png)
     op = openness(dsm, grid.cell, sh.openness_radius_m)
     fig, ax = new_figure(figsize=(7, 6))
     lo, hi = np.nanpercentile(op, [2, 98]) if np.isfinite(op).any() else (60, 90)
     im = _show(ax, op, grid, figure_max_px, vmin=lo, vmax=hi)
-    ax.set(xlabel="Easting (m)", ylabel="Northing (m)",
-           title=f"Positive openness within {sh.openness_radius_m:g} m (sky-view-like shading)")
-    ax.ticklabel_format(useOffset=False, style="plain")
+    map_axes(ax)
+    ax.set_title(f"Positive openness within {sh.openness_radius_m:g} m (sky-view-like shading)")
     fig.colorbar(im, ax=ax, shrink=0.7, label="openness (°); low = hollows, gullies")
     save_figure(fig, open_png)
 

@@ -496,13 +496,6 @@ def codes_of(names: dict[int, str], wanted: Sequence[str]) -> list[int]:
     return [c for c, n in names.items() if n in set(wanted)]
 
 
-def _map_axes(ax):
-    ax.set_xlabel("Easting (m)")
-    ax.set_ylabel("Northing (m)")
-    ax.ticklabel_format(useOffset=False, style="plain")
-    ax.set_aspect("equal")
-
-
 def checkpoint_figures(errors: pd.DataFrame, hist_png: str | Path, map_png: str | Path, bins: int,
                        limit_m: float, stats: dict[str, float]) -> None:
     """Histogram (Table 3 style annotation) and map of checkpoint errors (diverging colours).
@@ -520,7 +513,7 @@ def checkpoint_figures(errors: pd.DataFrame, hist_png: str | Path, map_png: str 
     stats : dict
         Error statistics (:func:`error_stats`); ``n, mean, sd, nmad`` go in the histogram title.
     """
-    from kitegully.io.figures import new_figure, save_figure
+    from kitegully.io.figures import map_axes, new_figure, save_figure
 
     e = errors["error_m"].to_numpy()
     ok = np.isfinite(e)
@@ -536,9 +529,10 @@ def checkpoint_figures(errors: pd.DataFrame, hist_png: str | Path, map_png: str 
                     edgecolors="k", linewidths=0.2, label="checkpoint")
     if (~ok).any():
         ax.scatter(errors["x_m"][~ok], errors["y_m"][~ok], marker="x", c="0.5", s=12, label="no DSM value")
-    fig.colorbar(sc, ax=ax, shrink=0.8, label="error (m)")
-    ax.legend(loc="best")
-    _map_axes(ax)
+    fig.colorbar(sc, ax=ax, shrink=0.8, label="error z_DSM − z_checkpoint (m)")
+    map_axes(ax)
+    # below the map: checkpoints cover the whole site, so no corner of it is free for a legend
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     ax.set_title("Checkpoint errors of the DSM")
     save_figure(fig, map_png)
 
@@ -643,7 +637,7 @@ def validate_against_truth(dsm_path: str | Path, truth_dsm_path: str | Path, tru
     """
     import logging
 
-    from kitegully.io.figures import new_figure, save_figure
+    from kitegully.io.figures import map_axes, new_figure, save_figure
     from kitegully.io.raster import read_raster, write_raster
     from kitegully.io.tables import write_table
 
@@ -668,7 +662,7 @@ def validate_against_truth(dsm_path: str | Path, truth_dsm_path: str | Path, tru
     im = ax.imshow(err[::step, ::step], extent=(xmin, xmax, ymin, ymax), cmap="RdBu_r", vmin=-lim, vmax=lim,
                    interpolation="nearest")
     fig.colorbar(im, ax=ax, shrink=0.8, label="DSM − truth DSM (m)")
-    _map_axes(ax)
+    map_axes(ax)
     ax.set_title("DSM error against the twin's true surface")
     save_figure(fig, out["error_map"])
     # profile (Feurer et al. 2018 Fig. 10 / Table 5)

@@ -24,7 +24,7 @@ from shapely.geometry import Point
 from kitegully.georef.bundle import Block
 from kitegully.georef.geometry import camera_centres, rotvec_to_matrix
 from kitegully.georef.model import ModelIndex, write_block_to_reconstruction
-from kitegully.io.figures import new_figure, save_figure
+from kitegully.io.figures import map_axes, new_figure, save_figure
 from kitegully.io.tables import write_table
 
 if TYPE_CHECKING:
@@ -269,9 +269,7 @@ def residual_figure(
         p = np.array([survey[g][:2] for g in lo["gcp_id"]])
         ax.quiver(p[:, 0], p[:, 1], lo["dx_m"] * scale, lo["dy_m"] * scale, angles="xy", scale_units="xy", scale=1,
                   color="tab:orange", width=0.004, linestyle="--", zorder=4, label="leave-one-out plan residual")
-    ax.set_xlabel("easting (m)")
-    ax.set_ylabel("northing (m)")
-    ax.set_aspect("equal")
+    map_axes(ax)
     ax.set_title(f"GCP residuals (arrows exaggerated ×{scale:.3g})")
     ax.legend(loc="best", fontsize=7)
     save_figure(fig, path, attribution=attribution)

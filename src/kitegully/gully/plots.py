@@ -10,7 +10,7 @@ from matplotlib.colors import ListedColormap
 from shapely.geometry.base import BaseGeometry
 
 from kitegully.gully.network import GullyNetwork
-from kitegully.io.figures import new_figure
+from kitegully.io.figures import map_axes, new_figure
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.shading import hillshade
 
@@ -208,10 +208,8 @@ def validation_map(
             ax.plot(xs, ys, color=color, lw=lw, label=label if first else None)
             first = False
     ax.plot([], [], color="tab:orange", lw=6, alpha=0.45, label="mapped gully area")
-    ax.set_xlabel("easting (m)")
-    ax.set_ylabel("northing (m)")
+    map_axes(ax)
     ax.set_title(f"Gully network validation (tolerance {tolerance_m:g} m)")
     # below the map (the tight bounding box takes it in): inside, it hid the gullies of a corner
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=7, frameon=False)
-    ax.ticklabel_format(useOffset=False, style="plain")
     return fig

@@ -36,6 +36,28 @@ def new_figure(*args: Any, **kwargs: Any) -> tuple[Figure, Any]:
         return plt.subplots(*args, **kwargs)
 
 
+def map_axes(ax: Any, extent: tuple[float, float, float, float] | None = None) -> None:
+    """Axes of a map in projected coordinates: easting and northing in metres, written in full, one metre per metre.
+
+    Matplotlib's default writes UTM northings as an offset (``+4.081e6``) that a reader has to add
+    back; every map of the project uses this instead.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The map's axes.
+    extent : (xmin, xmax, ymin, ymax) or None
+        Limits of the axes (m); None keeps what the plotted data set.
+    """
+    ax.set_xlabel("easting (m)")
+    ax.set_ylabel("northing (m)")
+    if extent is not None:
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+    ax.ticklabel_format(useOffset=False, style="plain")
+    ax.set_aspect("equal")
+
+
 def save_figure(fig: Figure, path: str | Path, attribution: str | None = None) -> None:
     """Save ``fig`` as PNG at print resolution and close it; add an attribution line if given.
 

@@ -9,7 +9,7 @@ import pandas as pd
 from matplotlib import colormaps
 from matplotlib.lines import Line2D
 
-from kitegully.io.figures import new_figure, save_figure
+from kitegully.io.figures import map_axes, new_figure, save_figure
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.shading import hillshade
 
@@ -101,10 +101,7 @@ def polygon_map(dem: np.ndarray, grid: GridSpec, tci: np.ndarray, tci_threshold:
     ax[1].legend(handles=handles, loc="lower left", fontsize=7)
     ax[1].set_title("(b) gully polygons by fill-depth threshold over the hillshade")
     for a in ax[:2]:
-        a.set_xlabel("easting (m)")
-        a.set_ylabel("northing (m)")
-        a.set_xlim(ext[0], ext[1])
-        a.set_ylim(ext[2], ext[3])
+        map_axes(a, ext)
     a = ax[2]
     if pid is not None:
         s = sections[sections["polygon_id"] == pid]
@@ -168,9 +165,6 @@ def comparison_map(dem: np.ndarray, grid: GridSpec, auto: gpd.GeoDataFrame, manu
                        Line2D([], [], color="tab:orange", lw=6, label="manual intersection"),
                        Line2D([], [], color="lime", label="true gully outline"),
                        Line2D([], [], color="magenta", label="automatic, FD ≥ 0.5 m")], loc="lower left", fontsize=7)
-    ax.set_xlabel("easting (m)")
-    ax.set_ylabel("northing (m)")
-    ax.set_xlim(ext[0], ext[1])
-    ax.set_ylim(ext[2], ext[3])
+    map_axes(ax, ext)
     ax.set_title("Automatic polygons vs simulated manual outlines and the truth")
     save_figure(fig, path, attribution)

@@ -11,7 +11,7 @@ import rasterio
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.patches import Patch
 
-from kitegully.io.figures import new_figure, save_figure
+from kitegully.io.figures import map_axes, new_figure, save_figure
 from kitegully.twin.landcover import CLASSES
 from kitegully.twin.texture import hillshade
 
@@ -33,13 +33,8 @@ def _read_decimated(path: Path, max_px: int):
 
 
 def _axes(ax, extent):
-    ax.set_xlabel("Easting (m)")
-    ax.set_ylabel("Northing (m)")
-    ax.set_xlim(extent[0], extent[1])
-    ax.set_ylim(extent[2], extent[3])
-    ax.ticklabel_format(useOffset=False, style="plain")
+    map_axes(ax, extent)
     ax.tick_params(axis="x", labelrotation=30)
-    ax.set_aspect("equal")
 
 
 def hillshade_gullies(dtm: Path, centrelines: Path, out: Path, max_px: int = 1500, attribution: str | None = None) -> None:

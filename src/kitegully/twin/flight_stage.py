@@ -21,7 +21,7 @@ import pandas as pd
 from scipy import ndimage
 
 from kitegully import InputError
-from kitegully.io.figures import new_figure
+from kitegully.io.figures import map_axes, new_figure
 from kitegully.io.raster import GridSpec
 from kitegully.seeds import epoch_rng, epoch_seed
 from kitegully.twin.camera import Camera, camera_from_config
@@ -392,10 +392,7 @@ def flight_map(
                 arrowprops=dict(arrowstyle="->", color="tab:blue", lw=1.5))
     ax.text(xmin + 0.1 * (xmax - xmin), ymax - 0.06 * (ymax - ymin), f"wind {cfg['wind_speed_m_s']:g} m/s",
             color="tab:blue", fontsize=7)
-    ax.set_aspect("equal")
-    ax.ticklabel_format(useOffset=False, style="plain")
-    ax.set_xlabel("easting (m)")
-    ax.set_ylabel("northing (m)")
+    map_axes(ax)
     ax.set_title(f"Simulated kite flight: {len(poses)} images, line {', '.join(f'{v:g}' for v in cfg['line_lengths_m'])} m")
     ax.legend(loc="lower left", fontsize=6, framealpha=0.9)
     return fig
