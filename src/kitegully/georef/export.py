@@ -263,15 +263,23 @@ def residual_figure(
                         linewidths=0.6, zorder=3, label="GCP (colour: dz after adjustment)")
         cb = fig.colorbar(sc, ax=ax, shrink=0.8)
         cb.set_label("vertical residual dz (m)")
-        ax.quiver(p[:, 0], p[:, 1], res["dx_m"] * scale, res["dy_m"] * scale, angles="xy", scale_units="xy", scale=1,
-                  color="k", width=0.006, zorder=4, label="plan residual after adjustment")
+        q = ax.quiver(p[:, 0], p[:, 1], res["dx_m"] * scale, res["dy_m"] * scale, angles="xy", scale_units="xy", scale=1,
+                      color="k", width=0.006, zorder=4, label="plan residual after adjustment")
+        # a reference arrow at the same exaggeration: the largest round length (1, 2 or 5 x 10^k m) up to the largest arrow
+        decade = 10.0 ** np.floor(np.log10(max(big, 1e-9)))
+        ref = float(max(m * decade for m in (1, 2, 5) if m * decade <= max(big, decade)))
+        times = f"{scale:.0f}" if scale >= 10 else f"{scale:.3g}"
+        ax.quiverkey(q, 0.62, 1.04, ref * scale, f"{ref:g} m (arrows × {times})", labelpos="E", coordinates="axes",
+                     fontproperties={"size": 7})
     if len(lo):
         p = np.array([survey[g][:2] for g in lo["gcp_id"]])
         ax.quiver(p[:, 0], p[:, 1], lo["dx_m"] * scale, lo["dy_m"] * scale, angles="xy", scale_units="xy", scale=1,
                   color="tab:orange", width=0.004, linestyle="--", zorder=4, label="leave-one-out plan residual")
     map_axes(ax)
-    ax.set_title(f"GCP residuals (arrows exaggerated ×{scale:.3g})")
-    ax.legend(loc="best", fontsize=7)
+    ax.tick_params(axis="x", labelrotation=30)
+    ax.set_title("GCP residuals", loc="left")
+    # below the map: GCPs lie all over the site, so no corner inside is free
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, fontsize=7, frameon=False)
     save_figure(fig, path, attribution=attribution)
 
 
