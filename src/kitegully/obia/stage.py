@@ -399,7 +399,10 @@ def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: T
         ax.axvline(thr.otsu, color="#2b8cbe", ls="--", label=f"Otsu {thr.otsu:.3f}")
     ax.set_xlabel(f"{name}, Gaussian-blurred (-)")
     ax.set_ylabel("cells")
-    ax.set_title("bimodal" if thr.bimodal else f"not bimodal: {thr.reason}", fontsize=8)
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
+    ax.set_title(f"{name} histogram: " + ("bimodal" if thr.bimodal else f"not bimodal, {thr.reason}"),
+                 fontsize=None if thr.bimodal else 8)
+    ax.set_box_aspect(1.0)  # as tall as the maps beside it, not the whole row
     ax.legend(fontsize=7)
     return fig
 
