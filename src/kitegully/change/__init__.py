@@ -14,16 +14,13 @@ and ``example`` (the synthetic epoch 2 of the controlled check). Cells matched b
 correlation are voids (``dod.matching_voids``).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
-    "detect_change": "stage", "ChangeParams": "params", "THRESHOLD_METHODS": "params",
-    "evaluate_change": "evaluation",
-}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": ["detect_change"],
+        "params": ["ChangeParams", "THRESHOLD_METHODS"],
+        "evaluation": ["evaluate_change"],
+    },
+)

@@ -12,17 +12,14 @@ trimmed-mean DEM and mean-colour orthophoto, cropped by the ring of camera posit
 ``foldrule`` (the rule's legs measured in the orthophoto + DEM) and ``stage`` (entry points).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
-    "CloseRangeParams": "stage", "photograph_scene": "stage", "photogrammetric_orthophoto": "stage",
-    "closerange_tables": "stage", "CloseRangeTables": "stage",
-    "failed_scene_record": "stage", "scene_succeeded": "stage",
-}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": [
+            "CloseRangeParams", "photograph_scene", "photogrammetric_orthophoto", "closerange_tables",
+            "CloseRangeTables", "failed_scene_record", "scene_succeeded",
+        ],
+    },
+)

@@ -11,14 +11,12 @@ correlation, SGM, occlusion, openness), ``matching`` (one tile, coarse to fine),
 orthophoto), ``shading`` (hillshade, openness).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {"match_dense_surface": "stage", "DenseParams": "stage", "OrthoParams": "stage", "ShadingParams": "stage",
-            "MatchParams": "matching"}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": ["match_dense_surface", "DenseParams", "OrthoParams", "ShadingParams"],
+        "matching": ["MatchParams"],
+    },
+)

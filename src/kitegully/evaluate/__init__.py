@@ -5,14 +5,14 @@ and :func:`validate_against_truth` with their parameters :class:`CheckpointParam
 :class:`TruthParams` (all in ``dem``). Imported lazily.
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {"validate_checkpoints": "dem", "validate_against_truth": "dem", "CheckpointParams": "dem",
-            "TruthParams": "dem", "ProfileParams": "dem"}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "dem": [
+            "validate_checkpoints", "validate_against_truth", "CheckpointParams", "TruthParams",
+            "ProfileParams",
+        ],
+    },
+)

@@ -13,17 +13,13 @@ has none), ``model`` (moving data between pycolmap models and arrays), ``export`
 (products) and ``evaluate`` (twin evaluation against the flight truth).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
-    "georeference": "stage", "GeorefParams": "stage", "GeorefQA": "stage",
-    "georeference_block": "control", "GeorefResult": "control",
-    "evaluate_against_flight_truth": "evaluate",
-}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": ["georeference", "GeorefParams", "GeorefQA"],
+        "control": ["georeference_block", "GeorefResult"],
+        "evaluate": ["evaluate_against_flight_truth"],
+    },
+)

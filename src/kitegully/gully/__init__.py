@@ -12,17 +12,17 @@ Entry points (docs/architecture.md), exported here lazily: :func:`map_gullies` w
 and :func:`score_gully_areas` (``validation``), :func:`gully_sensitivity` (``sensitivity``).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {"GullyParams": "pipeline", "map_gullies": "pipeline", "gully_summary": "pipeline", "map_raster": "pipeline",
-            "tracing_surface": "pipeline",
-            "ValidationParams": "validation", "score_network": "validation", "score_gully_areas": "validation",
-            "check_reference": "validation", "catchment_outline": "validation",
-            "gully_sensitivity": "sensitivity", "write_map_products": "products", "score_networks": "validation"}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "pipeline": ["GullyParams", "map_gullies", "gully_summary", "map_raster", "tracing_surface"],
+        "validation": [
+            "ValidationParams", "score_network", "score_gully_areas", "check_reference", "catchment_outline",
+            "score_networks",
+        ],
+        "sensitivity": ["gully_sensitivity"],
+        "products": ["write_map_products"],
+    },
+)

@@ -16,17 +16,15 @@ pair) and :mod:`~kitegully.lowcost.products` (TIN DSM, views in the site CRS, wh
 balance). The tape scale and Horn's method live in :mod:`kitegully.georef.similarity`.
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
-    "measure_spectral_response": "stage", "survey_lowcost": "stage", "SurveyParams": "stage",
-    "map_bare_soil": "bare_soil", "BareSoilParams": "bare_soil", "adjust_rtk_bundle": "rtk",
-    "evaluate_lowcost": "evaluation", "make_lowcost_twin": "twin_site",
-}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": ["measure_spectral_response", "survey_lowcost", "SurveyParams"],
+        "bare_soil": ["map_bare_soil", "BareSoilParams"],
+        "rtk": ["adjust_rtk_bundle"],
+        "evaluation": ["evaluate_lowcost"],
+        "twin_site": ["make_lowcost_twin"],
+    },
+)

@@ -18,15 +18,16 @@ Modules, one job each:
                  and accuracy; the parameters are ``scene.ObiaParams``.
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {"ObiaParams": "scene", "classify_scene_products": "stage", "evaluate_scene": "stage",
-            "scene_figure": "stage", "summarise_scenes": "stage", "summary_figure": "stage",
-            "bare_soil_map": "kite", "kite_map_figure": "stage", "kite_accuracy": "stage"}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "scene": ["ObiaParams"],
+        "stage": [
+            "classify_scene_products", "evaluate_scene", "scene_figure", "summarise_scenes",
+            "summary_figure", "kite_map_figure", "kite_accuracy",
+        ],
+        "kite": ["bare_soil_map"],
+    },
+)

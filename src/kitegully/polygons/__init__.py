@@ -38,16 +38,12 @@ Entry points (docs/architecture.md): :func:`measure_polygons` with its parameter
 module stays light.
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
-    "measure_polygons": "stage", "PolygonParams": "stage", "PolygonResult": "stage",
-    "regenerate_table1": "evaluation", "evaluate_against_truth": "evaluation",
-}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": ["measure_polygons", "PolygonParams", "PolygonResult"],
+        "evaluation": ["regenerate_table1", "evaluate_against_truth"],
+    },
+)

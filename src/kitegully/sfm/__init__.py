@@ -11,13 +11,11 @@ matching and incremental mapping with one shared self-calibrated camera) and ``s
 (model statistics written to ``summary.json``).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {"reconstruct_model": "stage", "SfmParams": "stage", "SfmMatching": "stage", "load_image_infos": "stage"}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": ["reconstruct_model", "SfmParams", "SfmMatching", "load_image_infos"],
+    },
+)

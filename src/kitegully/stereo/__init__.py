@@ -16,16 +16,12 @@ pair from observed data (:mod:`.processing`), the evaluation against the twin
 (:mod:`.evaluation`) and the rain runs' process models (:mod:`.erosion`).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
-    "calibrate_rig": "stage", "measure_dry_box": "stage", "measure_rain": "stage", "measure_wind": "stage",
-    "StereoParams": "params",
-}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": ["calibrate_rig", "measure_dry_box", "measure_rain", "measure_wind"],
+        "params": ["StereoParams"],
+    },
+)

@@ -7,14 +7,14 @@ synthetic logs), ``config`` (building the model objects from a site config), ``p
 ``synthetic_gps_logs``, ``observed_flight_angles``; exported here lazily).
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {"simulate_tether": "stage", "plan_flights": "stage", "synthetic_gps_logs": "stage",
-            "observed_flight_angles": "stage", "TetherParams": "stage"}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "stage": [
+            "simulate_tether", "plan_flights", "synthetic_gps_logs", "observed_flight_angles",
+            "TetherParams",
+        ],
+    },
+)

@@ -15,16 +15,15 @@ with their parameters :class:`TwinParams` (all in ``site``). They are imported l
 importing a submodule stays light.
 """
 
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {"TwinParams": "site", "build_site": "site", "generate_epoch": "site", "write_site_json": "site",
-            "PLAN_KEYS": "site", "EPOCH_KEYS": "site", "EPOCH2_KEYS": "site",
-            "fly_kite": "flight_stage", "photograph_flight": "flight_stage", "flight_map": "flight_stage",
-            "sample_images": "flight_stage"}
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "site": [
+            "TwinParams", "build_site", "generate_epoch", "write_site_json", "PLAN_KEYS", "EPOCH_KEYS",
+            "EPOCH2_KEYS",
+        ],
+        "flight_stage": ["fly_kite", "photograph_flight", "flight_map", "sample_images"],
+    },
+)
