@@ -50,7 +50,9 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
-from kitegully.georef.control import collect_observations, select_gcps, solve, triangulate_gcps  # noqa: E402
+from kitegully.georef.control import solve  # noqa: E402
+from kitegully.georef.observations import collect_observations, triangulate_gcps  # noqa: E402
+from kitegully.georef.quality import select_gcps  # noqa: E402
 from kitegully.georef.gcp_io import read_gcps  # noqa: E402
 from kitegully.georef.geometry import camera_centres  # noqa: E402
 from kitegully.georef.model import block_from_reconstruction, retriangulate_all  # noqa: E402

@@ -242,7 +242,7 @@ def test_placeholder_heights_give_a_plan_only_block_that_says_so():
     assert np.sqrt(np.mean(res["dx_m"] ** 2 + res["dy_m"] ** 2)) <= 2 * GSD  # plan position still from the GCPs
     assert np.isnan(r.report["gcp_rmse_z_m"])
     # heights are relative: up to a constant, the block's GCP heights follow the terrain to the levelling error
-    from kitegully.georef.control import triangulate_gcps, collect_observations
+    from kitegully.georef.observations import triangulate_gcps, collect_observations
     obs = collect_observations(gcps, infos, rows, "stored", "stored", 1.0, 0.05)
     X, _ = triangulate_gcps(r.block, obs)
     dz = X[:, 2] - (true_z - true_z.mean())
@@ -252,7 +252,8 @@ def test_placeholder_heights_give_a_plan_only_block_that_says_so():
 def test_heights_in_feet_are_refused_from_the_photos_alone(monkeypatch):
     import georef.test_bundle as tb
     monkeypatch.setattr(tb, "_ground", _hilly)
-    from kitegully.georef.control import collect_observations, height_ratio, triangulate_gcps
+    from kitegully.georef.heights import height_ratio
+    from kitegully.georef.observations import collect_observations, triangulate_gcps
     model, gcps, infos, rows = _setup()
     obs = collect_observations(gcps, infos, rows, "stored", "stored", 1.0, 0.05)
     X, _ = triangulate_gcps(model, obs)

@@ -13,7 +13,7 @@ import pytest
 
 from kitegully.georef.gcp_io import read_gcps
 from kitegully.georef.model import block_from_reconstruction
-from kitegully.georef.control import collect_observations, triangulate_gcps
+from kitegully.georef.observations import collect_observations, triangulate_gcps
 from kitegully.sfm import SfmParams, load_image_infos, reconstruct_model
 
 PARAMS = {
