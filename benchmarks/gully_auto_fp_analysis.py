@@ -37,7 +37,8 @@ from gully_ensemble_misses import member_cfg  # noqa: E402
 from twin_ensemble import BASE, members  # noqa: E402
 
 from kitegully.evaluate.dem import read_checkpoints  # noqa: E402
-from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints, head_scale_relief  # noqa: E402
+from kitegully.gully.heads import HeadDetectionParams  # noqa: E402
+from kitegully.gully.relief import dsm_noise_at_checkpoints, head_scale_relief  # noqa: E402
 from kitegully.gully.pipeline import GullyParams, map_gullies, tracing_surface  # noqa: E402
 from kitegully.io.raster import read_raster  # noqa: E402
 from kitegully.io.tables import write_table  # noqa: E402

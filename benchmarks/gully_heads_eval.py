@@ -20,7 +20,8 @@ import yaml
 
 from kitegully.evaluate.gully_run import score_gully_run
 from kitegully.evaluate.dem import read_checkpoints
-from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints
+from kitegully.gully.heads import HeadDetectionParams
+from kitegully.gully.relief import dsm_noise_at_checkpoints
 from kitegully.gully.inputs import read_heads
 from kitegully.gully.pipeline import GullyParams, map_gullies
 from kitegully.gully.standin import noisy_dem

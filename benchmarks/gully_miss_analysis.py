@@ -45,7 +45,8 @@ from scipy.spatial import cKDTree
 from kitegully.evaluate.dem import read_checkpoints
 from kitegully.evaluate.gully_run import score_gully_run
 from kitegully.evaluate.network import footprint, scored_reference
-from kitegully.gully.heads import HeadDetectionParams, dsm_noise_at_checkpoints
+from kitegully.gully.heads import HeadDetectionParams
+from kitegully.gully.relief import dsm_noise_at_checkpoints
 from kitegully.gully.inputs import read_heads
 from kitegully.gully.network import topological_order
 from kitegully.gully.pipeline import GullyParams, map_gullies, tracing_surface

@@ -83,28 +83,6 @@ def test_from_config_names_the_missing_key():
         HeadDetectionParams.from_config(dict(P.__dict__, relief_k=0))
 
 
-def test_dsm_noise_from_checkpoints_feeds_a_null_sigma():
-    import pandas as pd
-
-    from kitegully.gully.heads import dsm_noise_at_checkpoints
-
-    grid = _grid(100)
-    rng = np.random.default_rng(3)
-    dsm = np.zeros((100, 100), np.float32)
-    pts = pd.DataFrame({"id": np.arange(400), "x": rng.uniform(1, 19, 400), "y": rng.uniform(1, 19, 400)})
-    pts["z"] = rng.normal(0, 0.2, len(pts))
-    sz = dsm_noise_at_checkpoints(dsm, grid, pts)
-    assert sz == pytest.approx(0.2, rel=0.15)
-    # two checkpoints on gross matching errors (metres) are blunders, not the DSM's noise: left out
-    pts.loc[[0, 1], "z"] = [5.3, -2.8]
-    assert dsm_noise_at_checkpoints(dsm, grid, pts) == pytest.approx(sz, rel=0.05)
-    assert dsm_noise_at_checkpoints(dsm, grid, pts, outlier_nmad=None) > 1.5 * sz  # the plain SD would take them
-    p = HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None), sz)
-    assert p.dsm_sigma_z_m == pytest.approx(sz)
-    with pytest.raises(InputError, match="dsm_sigma_z_m: null needs checkpoints"):
-        HeadDetectionParams.from_config(dict(P.__dict__, dsm_sigma_z_m=None))
-
-
 def test_no_head_at_the_foot_of_a_hedgerow_on_a_dsm():
     # a hedgerow (3 m wide, 2 m high) across the 10 % slope, ending 10 m from the DEM edges: a
     # Gaussian of sigma 2 m spreads it, so the ground at its foot looks incised; the ground surface does not
@@ -119,33 +97,6 @@ def test_no_head_at_the_foot_of_a_hedgerow_on_a_dsm():
     heads, _ = _detect((zv + 2.0 * np.clip(1 - np.abs(Xv - 20.0) / 1.5, 0, None) ** 0.3).astype(np.float32), gv)
     assert len(heads) >= 1 and np.hypot(heads[:, 0] - 40.0, heads[:, 1] - 60.0).min() < 2.0
     assert np.all(np.abs(heads[:, 0] - 40.0) < 3.0)
-
-
-def test_ground_surface_removes_a_shrub_and_keeps_a_sloping_plane_and_a_valley():
-    from kitegully.gully.heads import ground_surface
-
-    grid = _grid(300)
-    X, Y = np.meshgrid(*grid.cell_centres())
-    ground = 0.1 * Y + 0.02 * X - 0.5 * np.clip(1 - np.abs(X - 40.0) / 1.0, 0, None)
-    shrub = 1.5 * (np.hypot(X - 20.0, Y - 30.0) < 1.5)
-    z = (ground + shrub).astype(np.float32)
-    z[:5, :5] = np.nan
-    g = ground_surface(z, CELL, 2.0, 0.0)
-    assert np.all(np.isnan(g[:5, :5]))
-    inner = (slice(60, 240), slice(60, 240))
-    err = np.abs(g - ground)[inner]
-    assert np.nanmax(err) < 0.12  # the shrub is gone; the valley and the slope stay (smoothing of Z_L aside)
-    assert np.nanmax(g[inner][np.hypot(X - 20.0, Y - 30.0)[inner] < 1.5] - ground[inner][np.hypot(X - 20.0, Y - 30.0)[inner] < 1.5]) < 0.12
-
-
-def test_surface_roughness_is_the_spread_of_the_ungullied_surface():
-    from kitegully.gully.heads import surface_roughness
-
-    rng = np.random.default_rng(5)
-    relief = rng.normal(0, 0.07, 100_000)
-    relief[:3000] = 1.0  # 3 % of the cells in gullies do not move it
-    assert surface_roughness(relief) == pytest.approx(0.07, rel=0.05)
-    assert surface_roughness(np.array([np.nan])) == 0.0
 
 
 def test_rough_surface_raises_the_incision_threshold():
@@ -197,7 +148,6 @@ def test_one_head_per_incision_keeps_the_first_of_each_cluster_in_order():
     assert one_head_per_incision(idx, grid, 0.1).tolist() == idx.tolist()
 
 
-
 def test_what_the_dsm_did_not_observe_does_not_change_the_incision_map():
     # a 3 m gap (a crown the matcher lost) 6 m beside the channel head, interpolated low, flat or high:
     # the incised cells, the roughness and the heads are those of the observed cells alone
@@ -218,57 +168,6 @@ def test_what_the_dsm_did_not_observe_does_not_change_the_incision_map():
     assert seen["incised_cells"] != s0["incised_cells"]
 
 
-def _crown_row(z, X, Y, radius=3.0, height=6.0, y=30.0):
-    """A row of tree crowns (7 m apart) across the slope at ``y``; the DSM and each cell's distance to a crown."""
-    crowns = np.zeros(X.shape, bool)
-    dist = np.full(X.shape, np.inf)
-    for cx in np.arange(10.0, 55.0, 7.0):
-        d = np.hypot(X - cx, Y - y)
-        crowns |= d < radius
-        dist = np.minimum(dist, d - radius)
-    cap = height * np.sqrt(np.clip(1 - ((dist + radius) / radius) ** 2, 0, 1))
-    return np.where(crowns, z + cap, z).astype(np.float32), dist
-
-
-@pytest.mark.parametrize("size", [(10.0, 8.0, 4.0), (16.0, 10.0, 4.0)])
-def test_no_ring_of_incision_around_a_building_with_tall_objects_left_out(size):
-    from kitegully.gully.heads import head_scale_relief, incision_map
-
-    length, width, height = size
-    grid = _grid(300)
-    X, Y = np.meshgrid(*grid.cell_centres())
-    z = 0.1 * Y + np.random.default_rng(5).normal(0, 0.01, X.shape)
-    inside = (np.abs(X - 30) < length / 2) & (np.abs(Y - 30) < width / 2)
-    dsm = np.where(inside, 0.1 * (30 + width / 2) + height, z).astype(np.float32)
-    beside = np.maximum(np.abs(X - 30) - length / 2, np.abs(Y - 30) - width / 2)
-    ring = (beside > 0) & (beside < 4)
-    # the noise smoothing's skirt around the walls lifts the reference: incised cells on a ring
-    incised, threshold, _ = incision_map(dsm, CELL, P)
-    assert incised[ring].sum() > 0
-    assert not incision_map(dsm, CELL, P, tall_objects_out=True)[0][ring].any()
-    assert np.nanmax(head_scale_relief(dsm, CELL, P, tall_objects_out=True)[0][ring]) < 0.5 * threshold
-
-
-def test_tall_objects_out_clear_a_crown_row_and_leave_a_channel_beside_a_shrub_alone():
-    from kitegully.gully.heads import head_scale_relief
-
-    grid = _grid(300)
-    X, Y = np.meshgrid(*grid.cell_centres())
-    z = 0.1 * Y + np.random.default_rng(5).normal(0, 0.01, X.shape)
-    dsm, dist = _crown_row(z, X, Y)
-    ring = (dist > 0) & (dist < 4) & (X > 12) & (X < 50)
-    plain = np.nanmax(head_scale_relief(dsm, CELL, P)[0][ring])
-    out = np.nanmax(head_scale_relief(dsm, CELL, P, tall_objects_out=True)[0][ring])
-    assert plain > 0.1 and out < 0.05
-    # a 0.6 m channel with a 1 m shrub on its bank: the shrub is below tall_object_m, nothing changes
-    chan = 0.6 * np.clip(1 - np.abs(X - 30.0) / 1.0, 0, None) * (Y < 40)
-    shrub = 1.0 * (np.hypot(X - 31.5, Y - 35.0) < 1.2)
-    zc = (z - chan + shrub).astype(np.float32)
-    a = head_scale_relief(zc, CELL, P)[0]
-    b = head_scale_relief(zc, CELL, P, tall_objects_out=True)[0]
-    np.testing.assert_array_equal(a, b)
-
-
 def test_the_detector_finds_the_channel_and_no_head_at_a_building_upslope_of_it():
     # the valley test's channel with a 14 x 9 m, 5 m high building 15 m beside it on the slope
     z, grid = _valley()
@@ -282,7 +181,7 @@ def test_the_detector_finds_the_channel_and_no_head_at_a_building_upslope_of_it(
 
 def test_a_shared_ground_surface_gives_the_same_reliefs_and_heads_bit_for_bit():
     # the gully map makes the ground surface once for the snapping's plain relief and hands it to the detector
-    from kitegully.gully.heads import head_scale_ground, head_scale_relief
+    from kitegully.gully.relief import head_scale_ground, head_scale_relief
 
     z, grid = _valley()
     X, Y = np.meshgrid(*grid.cell_centres())

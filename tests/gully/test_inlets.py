@@ -120,7 +120,7 @@ def test_a_channel_starting_inside_the_dem_and_a_scour_at_the_edge_give_none():
 
 
 def test_a_concave_slope_foot_is_no_inlet_once_incision_is_asked_for():
-    from kitegully.gully.heads import head_scale_relief
+    from kitegully.gully.relief import head_scale_relief
 
     grid, z = slope_foot()
     relief, rough = head_scale_relief(z, grid.cell, IP)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import geopandas as gpd
 import numpy as np
 import pytest
-import scipy.ndimage as ndi
 import shapely
 
 from kitegully import InputError

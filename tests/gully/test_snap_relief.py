@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kitegully.gully.heads import (HeadDetectionParams, automatic_head_params, channel_entries, detect_heads,
-                                   head_scale_relief, incision_map, matched_cells, visible_incisions)
+from kitegully.gully.heads import HeadDetectionParams, automatic_head_params, channel_entries, detect_heads
+from kitegully.gully.relief import head_scale_relief, incision_map, matched_cells, visible_incisions
 from kitegully.gully.network import snap_heads
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.fill import priority_flood_fill

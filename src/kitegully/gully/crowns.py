@@ -130,7 +130,7 @@ def crown_mask(z: np.ndarray, exg: np.ndarray, ground: np.ndarray, height_thresh
 
     Crowns are green cells (ExG above :func:`green_threshold`) standing more than
     ``height_threshold_m`` above ``ground`` (the ground surface of
-    :func:`kitegully.gully.heads.ground_surface`), opened with a disc of diameter
+    :func:`kitegully.gully.relief.ground_surface`), opened with a disc of diameter
     ``params.window_m`` (pieces the DSM cannot resolve) and widened by ``params.window_m``
     (cells within a matching window of a crown carry its height). Grass is green but lies on
     the ground; bare gully rims stand above the ground surface but are not green. O(n·k) for

@@ -18,7 +18,7 @@ a channel enters; this module finds those points from the data:
   inward (the channel carries water into the DEM: a channel leaving it drains back to the
   edge, a pit or a short scour at the edge does not reach the band's end), and at least half
   of that stretch is *incised* at the head scale (the operator's visibility rule,
-  :func:`kitegully.gully.heads.head_scale_relief` >= k·max(σ_z, ρ)), as the automatic head
+  :func:`kitegully.gully.relief.head_scale_relief` >= k·max(σ_z, ρ)), as the automatic head
   detector asks of a channel. The σ-scale depth map alone also marks the concave foot of a
   steep slope (1-1.7 m deep on a valley side of ensemble twin ens1, where the DSM equals the
   true DTM); only 0-32 % of such stretches are incised, 100 % of the wadi's;

@@ -69,8 +69,8 @@ def snap_heads(
         an incision is low, and vegetation (above the plane) never is, unlike ``deepest``;
         but in a concave hollow every cell at the radius lies about κr²/2 below the tangent
         plane, so ``plane`` is pulled to the radius there. ``incision``: the *nearest* cell
-        of a visible incision (``incised``, :func:`kitegully.gully.heads.incision_map` and
-        :func:`~kitegully.gully.heads.visible_incisions`), or the digitised cell itself when
+        of a visible incision (``incised``, :func:`kitegully.gully.relief.incision_map` and
+        :func:`~kitegully.gully.relief.visible_incisions`), or the digitised cell itself when
         no incision lies within reach. [I] The operator digitised a head on an incision seen
         on the hillshade, with an isotropic Gaussian error of SD radius/3; of the cells where
         the DSM shows an incision, the nearest one is the most likely true position (the
@@ -81,7 +81,7 @@ def snap_heads(
         reach nothing in the data says where to move the head, and its error is
         zero-mean: it stays where it was digitised.
         ``relief``: the cell of greatest head-scale depth below the ground surface
-        (``relief``, :func:`kitegully.gully.heads.head_scale_relief`, σ 2 m). [I] Within the
+        (``relief``, :func:`kitegully.gully.relief.head_scale_relief`, σ 2 m). [I] Within the
         99 % error circle of a digitised head, the cell where the DSM is most incised at the
         scale of a head is in the channel: the Gaussian keeps a plane exactly (no r·S slope
         bias), a field's curvature adds only κσh² ≈ 0.04 m (not κr²/2 ≈ 0.2 m at r 6 m), and

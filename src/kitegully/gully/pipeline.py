@@ -16,8 +16,8 @@ from scipy.spatial import cKDTree
 
 from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden_reaches, interpolate_under
 from kitegully.gully.depth import depth_map
-from kitegully.gully.heads import (HeadDetectionParams, channel_entries, detect_heads, head_scale_ground,
-                                   head_scale_relief, incision_map, standing_above, visible_incisions)
+from kitegully.gully.heads import HeadDetectionParams, channel_entries, detect_heads
+from kitegully.gully.relief import head_scale_ground, head_scale_relief, incision_map, standing_above, visible_incisions
 from kitegully.gully.inlets import edge_inlets, route_courses
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
 from kitegully import InputError
@@ -86,7 +86,7 @@ class GullyParams:
     trace_ground : bool
         Trace on the ground, not on the objects standing on it ([I] ``true`` on a
         photogrammetric DSM): cells of the tracing surface standing more than
-        ``relief_k``·max(σ_z, ρ) above the ground surface (:func:`kitegully.gully.heads.ground_surface`,
+        ``relief_k``·max(σ_z, ρ) above the ground surface (:func:`kitegully.gully.relief.ground_surface`,
         the automatic detector's; σ_z the DSM noise at the checkpoints, ρ the surface's
         head-scale micro-relief) are shrubs, trees or hedgerows and take the ground
         surface's elevation (a progressive-morphological-filter step, Zhang et al. 2003,
@@ -315,18 +315,18 @@ def map_gullies(
         hidden = crowns_on(dem, grid, params, ip, ortho, workers)
         t["crowns_s"] = time.perf_counter() - tc
 
-    def flow_branch() -> tuple:
-        """Steps f-i before the heads: tracing surface, depression fill, flow directions."""
+    def flow_branch(given_filled: np.ndarray | None) -> tuple:
+        """Steps f-i before the heads: tracing surface, depression fill, flow directions (``given_filled``: a fill made elsewhere)."""
         tb = time.perf_counter()
         if trace_surface is None:
             z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip, hidden=hidden)
         else:
             (z_heads, n_holes), zi = hole_filled(dem, grid, params), (
                 read_raster(trace_surface)[0] if trace_surface_file else trace_surface)
-        if filled is None:
+        if given_filled is None:
             fz, n_raised = priority_flood_fill(zi, params.fill_epsilon_m if params.flat_routing == "epsilon" else 0.0)
         else:
-            fz = np.asarray(filled, dtype=np.float64)  # as priority_flood_fill returns it (same values)
+            fz = np.asarray(given_filled, dtype=np.float64)  # as priority_flood_fill returns it (same values)
             n_raised = int(np.count_nonzero(fz > zi))
             log.info("filled DEM: given (tiled priority flood), not filled here")
         dirs, n_flat, n_left = (None, 0, 0)
@@ -341,7 +341,7 @@ def map_gullies(
     # the depth map's FFTs, the patch labelling and ``on_depth`` (the rule's writing of the
     # depth rasters) run beside them: both cores are busy.
     with ThreadPoolExecutor(max_workers=1) as pool:
-        flow = pool.submit(flow_branch) if workers > 1 else None
+        flow = pool.submit(flow_branch, filled) if workers > 1 else None
         if smoothed is None:
             smoothed, depth = depth_map(dem, grid.cell, params.sigma_m, params.truncate_sigmas, workers)
         t["smoothing_s"] = time.perf_counter() - t0
@@ -358,7 +358,7 @@ def map_gullies(
             t["on_depth_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         z_heads, n_holes, filled, n_raised, dirs, n_flat, n_left, t_flow = (flow.result() if flow is not None
-                                                                             else flow_branch())
+                                                                             else flow_branch(filled))
     # time spent waiting for the fill after the depth map and patches (its own time: t_flow)
     t["fill_s"] = time.perf_counter() - t0
     t["fill_branch_s"] = t_flow
@@ -631,8 +631,8 @@ def remove_objects(z: np.ndarray, z_trace: np.ndarray, cell_m: float, params: He
     """The tracing surface with objects standing on the ground replaced by the ground surface.
 
     A cell is an object where ``z_trace`` stands more than ``relief_k``·max(σ_z, ρ) above
-    :func:`kitegully.gully.heads.ground_surface` of ``z`` (σ_z = ``dsm_sigma_z_m``, ρ the
-    head-scale micro-relief of ``z``, :func:`kitegully.gully.heads.surface_roughness`): the
+    :func:`kitegully.gully.relief.ground_surface` of ``z`` (σ_z = ``dsm_sigma_z_m``, ρ the
+    head-scale micro-relief of ``z``, :func:`kitegully.gully.relief.surface_roughness`): the
     same threshold above the ground as the detector's incision threshold below it (a step
     of 3 noise SDs, out of the furrows and crop rows). There the ground surface replaces it.
     O(n log n).
