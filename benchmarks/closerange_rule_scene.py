@@ -19,7 +19,9 @@ import yaml
 
 from kitegully.closerange import CloseRangeParams
 from kitegully.closerange.model import read_oriented_photos
-from kitegully.closerange.stage import _original_photos, _read_photos, georeference_on_spheres, scene_walk
+from kitegully.closerange.markers import georeference_on_spheres
+from kitegully.closerange.photos import original_photos, read_photos
+from kitegully.closerange.stage import scene_walk
 from kitegully.georef.similarity import Similarity
 from kitegully.io.raster import read_raster
 
@@ -77,13 +79,13 @@ def load_scene(results: Path, scene: str, cache: Path, site: str = "kamech_twin"
         s = json.loads(cf.read_text())
         sim = Similarity(s["scale"], np.array(s["rotation"]), np.array(s["translation_m"]))
     else:
-        prepared = _read_photos(d / "sfm_work" / "images", [p.name for p in photos])
-        # the stage's own sphere georeferencing (closerange.stage.georeference_on_spheres)
+        prepared = read_photos(d / "sfm_work" / "images", [p.name for p in photos])
+        # the stage's own sphere georeferencing (closerange.markers.georeference_on_spheres)
         sim = georeference_on_spheres(photos, prepared, sparse, pd.read_csv(od / "markers.csv"), params, str(d), scene).sim
         cf.write_text(json.dumps(sim.as_dict()))
     if prepared is None:
         prepared = {p.name: None for p in photos}
-    images = _original_photos(photo_dir or (d / "photos"), d / "image_info.json", {k: v if v is not None else _shape_probe(d, k) for k, v in prepared.items()})
+    images = original_photos(photo_dir or (d / "photos"), d / "image_info.json", {k: v if v is not None else _shape_probe(d, k) for k, v in prepared.items()})
     dem, grid = read_raster(d / "dem.tif")
     dem = np.asarray(dem, float).squeeze()
     record = json.loads((d / "closerange.json").read_text())

@@ -196,7 +196,8 @@ def test_no_photo_sees_the_rule():
 
 def test_stage_falls_back_to_the_orthophoto_and_records_not_found():
     """Neither the photos nor the orthophoto show the rule: (None, None, the photos' reason), a table row without a scale error."""
-    from kitegully.closerange.stage import CloseRangeParams, closerange_tables, measure_rule
+    from kitegully.closerange import CloseRangeParams, closerange_tables
+    from kitegully.closerange.foldrule import measure_rule
 
     rng = np.random.default_rng(4)
     photos = _photos(n=3)
@@ -230,7 +231,7 @@ def test_rule_is_looked_for_in_the_original_photos_where_they_are_the_sfm_grid(t
 
     import cv2
 
-    from kitegully.closerange.stage import _original_photos
+    from kitegully.closerange.photos import original_photos
 
     orig = np.zeros((20, 30, 3), np.uint8)
     orig[10, :] = (237, 204, 51)  # a 1 px yellow strip (RGB)
@@ -240,6 +241,6 @@ def test_rule_is_looked_for_in_the_original_photos_where_they_are_the_sfm_grid(t
     info = [{"name": "IMG_0000.png", "sfm_name": "0000_a.jpg", "orientation": 1, "scale": 1.0},
             {"name": "IMG_0001.png", "sfm_name": "0001_b.jpg", "orientation": 6, "scale": 1.0}]  # rotated: not the SfM's grid
     (tmp_path / "info.json").write_text(json.dumps(info))
-    got = _original_photos(tmp_path, tmp_path / "info.json", prepared)
+    got = original_photos(tmp_path, tmp_path / "info.json", prepared)
     assert np.array_equal(got["0000_a.jpg"], orig)
     assert np.array_equal(got["0001_b.jpg"], prepared["0001_b.jpg"])

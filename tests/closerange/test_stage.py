@@ -83,19 +83,19 @@ def test_tables_put_the_paper_next_to_ours():
 
 
 def test_mismatched_points_are_dropped_and_small_holes_filled():
-    from kitegully.closerange.stage import _fill_holes, _near_median_surface
+    from kitegully.closerange.gridding import fill_holes, near_median_surface
 
     grid = GridSpec(0.0, 1.0, 0.02, 50, 50, "EPSG:32632")
     rng = np.random.default_rng(0)
     xyz = np.column_stack([rng.uniform(0, 1, 20000), rng.uniform(0, 1, 20000), rng.normal(0, 0.005, 20000)])
     xyz[:500, 2] += 2.0  # matched onto the far hillside
-    keep = _near_median_surface(xyz, grid, 0.1, 0.15)
+    keep = near_median_surface(xyz, grid, 0.1, 0.15)
     assert not keep[:500].any() and keep[500:].mean() > 0.99
     dem = np.zeros((50, 50), np.float32)
     dem[10:12, 10:12] = np.nan  # 4-cell hole
     dem[30:50, 30:50] = np.nan  # 400-cell gap
     ortho = np.full((3, 50, 50), 100, np.uint8)
-    dem2, ortho2, filled = _fill_holes(dem, ortho, np.ones((50, 50), bool), 100)
+    dem2, ortho2, filled = fill_holes(dem, ortho, np.ones((50, 50), bool), 100)
     assert filled == 4 and np.isfinite(dem2[10:12, 10:12]).all() and np.isnan(dem2[30:, 30:]).all()
 
 

@@ -22,10 +22,18 @@ Cost: O(cells) for the colour test, O(iterations · yellow cells) for RANSAC.
 
 from __future__ import annotations
 
+import logging
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
 import numpy as np
 from scipy import ndimage
 
 from kitegully.io.raster import GridSpec
+
+if TYPE_CHECKING:
+    from kitegully.closerange.stage import CloseRangeParams
+
+log = logging.getLogger(__name__)
 
 
 def _hsv(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -242,3 +250,58 @@ def measure_folding_rule(
         "corner_xy": xy(corner).tolist(), "end_a_xy": xy(ends[0]).tolist(), "end_b_xy": xy(ends[1]).tolist(),
         "angle_deg": float(np.degrees(np.arccos(min(cosang, 1.0)))),
     }
+
+
+def measure_rule(
+    photos: Sequence[Any], images: Mapping[str, np.ndarray], sim: Any, ortho: np.ndarray, dem: np.ndarray, grid: GridSpec,
+    params: CloseRangeParams, rng_photos: np.random.Generator, rng_ortho: np.random.Generator,
+) -> tuple[dict | None, str | None, str]:
+    """The folding rule's legs: measured in the photos (triangulated), else in the orthophoto; (rule, method, note).
+
+    ``method`` is ``"photos"``, ``"orthophoto"`` or None (not found); ``note`` says why the
+    photos gave no rule (empty when they did).  The photo method is the primary one: the
+    2 cm strip is 1–5 px wide in the photos and smeared below any defensible paint share in
+    the 2 cm orthophoto (README, closerange); the orthophoto's own threshold (a 1-cell strip
+    covers at least half a cell) stays principled, so it is kept as the fallback.
+
+    Parameters
+    ----------
+    photos : sequence of OrientedPhoto
+        Oriented photos of the scene (model frame).
+    images : mapping
+        RGB photo (rows, cols, 3) uint8 of each photo name.
+    sim : Similarity
+        Model → survey frame (the sphere similarity).
+    ortho : ndarray (3, rows, cols) uint8
+        Photogrammetric orthophoto.
+    dem : ndarray (rows, cols) float
+        Photogrammetric DEM (m, NaN = no data).
+    grid : GridSpec
+        Grid of ``ortho`` and ``dem``.
+    params : CloseRangeParams
+        Stage settings; reads the ``rule_*`` settings, ``pole_height_m`` and ``outlier_tolerance_m``.
+    rng_photos : Generator
+        Random stream for the measurement in the photos.
+    rng_ortho : Generator
+        Random stream for RANSAC in the orthophoto.
+
+    Returns
+    -------
+    rule : dict or None
+        The legs' measurement; None when the rule is not found.
+    method : str or None
+        ``"photos"``, ``"orthophoto"`` or None.
+    note : str
+        Why the photos gave no rule; empty when they did.
+    """
+    from kitegully.closerange.rule_photos import measure_rule_in_photos
+
+    rule, why = measure_rule_in_photos(photos, images, sim, dem, grid, params.rule_paint_rgb, params.rule_strip_width_m,
+                                       params.pole_height_m, params.outlier_tolerance_m, rng_photos)
+    if rule is not None:
+        log.info("folding rule measured in the photos: legs %.3f m, %.3f m (corner in %d photos, ends in %d, %d; %.2f px rms)",
+                 rule["leg_a_m"], rule["leg_b_m"], rule["photos_corner"], rule["photos_a"], rule["photos_b"], rule["rms_px"])
+        return rule, "photos", ""
+    log.info("folding rule not measured in the photos (%s); trying the orthophoto", why)
+    rule = measure_folding_rule(ortho, dem, grid, rng_ortho, params.rule_paint_rgb, params.rule_min_paint_fraction)
+    return rule, (None if rule is None else "orthophoto"), why

@@ -20,8 +20,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from matplotlib.path import Path as MplPath
+from scipy import ndimage
 from scipy.spatial import ConvexHull
 
 from kitegully import InputError
@@ -182,3 +184,41 @@ def grid_points(
         ortho = np.rint(np.nan_to_num(col_mean)).clip(0, 255).astype(np.uint8).T.reshape(-1, *shape)
         ortho[:, np.isnan(dem)] = 0
     return GriddedSurface(grid, dem, ortho, count.reshape(shape).astype(np.int32))
+
+
+def fill_holes(dem: np.ndarray, ortho: np.ndarray, inside: np.ndarray, max_cells: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Fill nodata holes inside the crop up to ``max_cells`` from their rim; return the count filled."""
+    holes = ~np.isfinite(dem) & inside
+    lab, n = ndimage.label(holes)
+    if n == 0:
+        return dem, ortho, 0
+    sizes = np.bincount(lab.ravel())
+    small = (sizes <= max_cells)
+    small[0] = False
+    fill = small[lab]
+    if not fill.any():
+        return dem, ortho, 0
+    known = np.isfinite(dem)
+    idx = ndimage.distance_transform_edt(~known, return_distances=False, return_indices=True)
+    dem2 = dem.copy()
+    dem2[fill] = dem[tuple(i[fill] for i in idx)]
+    mask = fill.astype(np.uint8)
+    img = np.ascontiguousarray(np.moveaxis(ortho, 0, -1))
+    img = cv2.inpaint(img, mask, 3, cv2.INPAINT_TELEA)
+    ortho2 = ortho.copy()
+    ortho2[:, fill] = np.moveaxis(img, -1, 0)[:, fill]
+    return dem2, ortho2, int(fill.sum())
+
+
+def near_median_surface(xyz: np.ndarray, grid: GridSpec, cell_m: float, tolerance_m: float) -> np.ndarray:
+    """Points within ``tolerance_m`` of the per-cell median height on a coarse grid (mismatches, sky, the far hillside)."""
+    k = max(1, int(round(cell_m / grid.cell)))
+    w, h = -(-grid.width // k), -(-grid.height // k)
+    col = np.floor((xyz[:, 0] - grid.x0) / (grid.cell * k)).astype(np.int64)
+    row = np.floor((grid.y0 - xyz[:, 1]) / (grid.cell * k)).astype(np.int64)
+    inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+    idx = np.where(inside, row * w + col, 0)
+    med, _, _ = trimmed_cell_means(idx[inside], xyz[inside, 2], w * h, 0.45)
+    dev = np.full(len(xyz), np.inf)
+    dev[inside] = np.abs(xyz[inside, 2] - med[idx[inside]])
+    return dev <= tolerance_m

@@ -47,7 +47,7 @@ strip is 1–5 px wide and its black decimetre marks are visible.  So:
 
 The photos are the photographer's files (4:4:4 JPEG) where they are the SfM's pixel grid,
 not the SfM's prepared 4:2:0 copies, whose halved chroma erases the colour of a 1–2 px strip
-(:func:`kitegully.closerange.stage._original_photos`).
+(:func:`kitegully.closerange.photos.original_photos`).
 
 Known bias: the twin draws a 5 mm black half-mark at each leg's end (the decimetre marks
 are centred on the decimetres), so the paint ends 5 mm before the rule: the legs measure up
@@ -68,7 +68,7 @@ import numpy as np
 from scipy import ndimage
 
 from kitegully.closerange.foldrule import unmix_paint
-from kitegully.closerange.model import OrientedPhoto, _least_squares_point, _ray_point_distance, detection_rays, triangulate_spheres
+from kitegully.closerange.model import OrientedPhoto, _ray_point_distance, detection_rays, triangulate_spheres
 from kitegully.georef.similarity import Similarity
 from kitegully.io.raster import GridSpec
 

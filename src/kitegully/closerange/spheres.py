@@ -43,7 +43,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-import cv2
 import numpy as np
 import pandas as pd
 from scipy import ndimage

@@ -8,34 +8,38 @@
   triangulated, similarity to the survey, dense points by pairwise SGM, 2 cm DEM and
   orthophoto by the 25 % trimmed mean cropped by the camera circle, holes filled, the
   folding rule's legs measured.
-* :func:`closerange_tables` (rule ``closerange_summary``): Table 1 next to the paper's and
-  the OBIA accuracy on these orthophotos next to the direct renders' and the paper's.
+* :func:`~kitegully.closerange.tables.closerange_tables` (rule ``closerange_summary``):
+  Table 1 next to the paper's and the OBIA accuracy on these orthophotos next to the direct
+  renders' and the paper's.
+
+The parts :func:`photogrammetric_orthophoto` calls: the photographs (:mod:`.photos`), the
+sphere georeferencing (:mod:`.markers`), dense points (:mod:`.dense`), gridding, outlier
+removal and hole filling (:mod:`.gridding`) and the folding rule (:mod:`.foldrule`,
+:mod:`.rule_photos`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import time
 from dataclasses import dataclass, field, fields
 from datetime import datetime, timedelta
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping
 
-import cv2
 import numpy as np
 import pandas as pd
-from scipy import ndimage
 
 from kitegully import InputError
 from kitegully.closerange.dense import PairMatching, dense_points
-from kitegully.closerange.foldrule import measure_folding_rule
-from kitegully.closerange.gridding import grid_points
-from kitegully.closerange.model import detection_rays, match_markers, read_oriented_photos, triangulate_spheres, verify_spheres
-from kitegully.closerange.spheres import SphereDetection, detect_spheres
+from kitegully.closerange.foldrule import measure_rule
+from kitegully.closerange.gridding import fill_holes, grid_points, near_median_surface
+from kitegully.closerange.markers import georeference_on_spheres
+from kitegully.closerange.model import read_oriented_photos
+from kitegully.closerange.photos import original_photos, read_photos
+from kitegully.closerange.spheres import SphereDetection
 from kitegully.config import config_section
-from kitegully.georef.similarity import Similarity
 from kitegully.io.raster import GridSpec, write_raster
 
 if TYPE_CHECKING:
@@ -43,18 +47,6 @@ if TYPE_CHECKING:
     from kitegully.twin.polewalk import PoleScene, PoleWalk
 
 log = logging.getLogger(__name__)
-
-#: 001 Table 1 (scenes 1-10): images used / aligned, marker error (m), scale error (%; None: no rule in scene 6).
-PAPER_TABLE1 = pd.DataFrame({
-    "scene": [f"scene_{i:02d}" for i in range(1, 11)],
-    "paper_images_used": [613, 539, 676, 480, 342, 243, 179, 279, 406, 251],
-    "paper_images_aligned": [546, 484, 505, 342, 234, 233, 143, 275, 399, 250],
-    "paper_marker_error_m": [0.03, 0.03, 0.01, 0.08, 0.16, 0.04, 0.02, 0.03, 0.03, 0.03],
-    "paper_scale_error_pct": [1, 2, 3, 1, 6, np.nan, 1, 1, 2, 2],
-})
-#: 001 Table 3 overall accuracy per scene (%) and over all scenes.
-PAPER_OA = dict(zip([f"scene_{i:02d}" for i in range(1, 11)], [95.4, 95.4, 92.8, 94.5, 90.7, 94.3, 92.6, 94.3, 93.3, 95.5]))
-PAPER_OA["all"] = 94.3
 
 
 @dataclass(frozen=True)
@@ -151,7 +143,7 @@ class CloseRangeParams:
     on_scene_failure : str
         ``stop`` (default): a scene that cannot be georeferenced stops the run with its one
         sentence (InputError). ``record`` (``make closerange``): the sentence is logged and
-        written as the scene's record (:func:`failed_scene_record`), the scene is skipped
+        written as the scene's record (:func:`~kitegully.closerange.tables.failed_scene_record`), the scene is skipped
         downstream and listed as ``failed`` in the summary. [I] in a 10-scene study a scene
         that cannot be georeferenced is a result (001 reports per-scene numbers); a single
         scene run has nothing to summarise, so it stops.
@@ -339,242 +331,6 @@ def photograph_scene(
     }
 
 
-# --------------------------------------------------------------------------- closerange_sfm
-def _read_photos(photo_dir: Path, names: Sequence[str]) -> dict[str, np.ndarray]:
-    out = {}
-    for n in names:
-        img = cv2.imread(str(photo_dir / n), cv2.IMREAD_COLOR)
-        if img is None:
-            raise InputError(f"{photo_dir / n}: cannot read the photo")
-        out[n] = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-    return out
-
-
-def _original_photos(photo_dir: Path, image_info_path: str | Path, prepared: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The photographer's files where they are the SfM's pixel grid (orientation 1, scale 1), else the prepared copies.
-
-    The prepared copies (:func:`kitegully.sfm.images.prepare_images`) are re-encoded with
-    4:2:0 chroma subsampling, which halves the colour resolution: a 1–2 px yellow strip
-    loses most of its colour there (scene 09: no L in any prepared copy, L's in the
-    originals), while the originals (4:4:4 at quality 95) keep it.  The sphere detection
-    keeps the prepared copies (not changed here).
-    """
-    with open(image_info_path, encoding="utf-8") as fh:
-        info = {r["sfm_name"]: r for r in json.load(fh)}
-    out = {}
-    for name, img in prepared.items():
-        r = info.get(name)
-        if r is not None and int(r.get("orientation", 1)) == 1 and float(r.get("scale", 1.0)) == 1.0:
-            orig = cv2.imread(str(photo_dir / r["name"]), cv2.IMREAD_COLOR)
-            if orig is not None and orig.shape[:2] == img.shape[:2]:
-                out[name] = cv2.cvtColor(orig, cv2.COLOR_BGR2RGB)
-                continue
-        out[name] = img
-    return out
-
-
-def _fill_holes(dem: np.ndarray, ortho: np.ndarray, inside: np.ndarray, max_cells: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Fill nodata holes inside the crop up to ``max_cells`` from their rim; return the count filled."""
-    holes = ~np.isfinite(dem) & inside
-    lab, n = ndimage.label(holes)
-    if n == 0:
-        return dem, ortho, 0
-    sizes = np.bincount(lab.ravel())
-    small = (sizes <= max_cells)
-    small[0] = False
-    fill = small[lab]
-    if not fill.any():
-        return dem, ortho, 0
-    known = np.isfinite(dem)
-    idx = ndimage.distance_transform_edt(~known, return_distances=False, return_indices=True)
-    dem2 = dem.copy()
-    dem2[fill] = dem[tuple(i[fill] for i in idx)]
-    mask = fill.astype(np.uint8)
-    img = np.ascontiguousarray(np.moveaxis(ortho, 0, -1))
-    img = cv2.inpaint(img, mask, 3, cv2.INPAINT_TELEA)
-    ortho2 = ortho.copy()
-    ortho2[:, fill] = np.moveaxis(img, -1, 0)[:, fill]
-    return dem2, ortho2, int(fill.sum())
-
-
-def _near_median_surface(xyz: np.ndarray, grid: GridSpec, cell_m: float, tolerance_m: float) -> np.ndarray:
-    """Points within ``tolerance_m`` of the per-cell median height on a coarse grid (mismatches, sky, the far hillside)."""
-    from kitegully.closerange.gridding import trimmed_cell_means
-
-    k = max(1, int(round(cell_m / grid.cell)))
-    w, h = -(-grid.width // k), -(-grid.height // k)
-    col = np.floor((xyz[:, 0] - grid.x0) / (grid.cell * k)).astype(np.int64)
-    row = np.floor((grid.y0 - xyz[:, 1]) / (grid.cell * k)).astype(np.int64)
-    inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
-    idx = np.where(inside, row * w + col, 0)
-    med, _, _ = trimmed_cell_means(idx[inside], xyz[inside, 2], w * h, 0.45)
-    dev = np.full(len(xyz), np.inf)
-    dev[inside] = np.abs(xyz[inside, 2] - med[idx[inside]])
-    return dev <= tolerance_m
-
-
-def measure_rule(
-    photos: Sequence[Any], images: Mapping[str, np.ndarray], sim: Any, ortho: np.ndarray, dem: np.ndarray, grid: GridSpec,
-    params: CloseRangeParams, rng_photos: np.random.Generator, rng_ortho: np.random.Generator,
-) -> tuple[dict | None, str | None, str]:
-    """The folding rule's legs: measured in the photos (triangulated), else in the orthophoto; (rule, method, note).
-
-    ``method`` is ``"photos"``, ``"orthophoto"`` or None (not found); ``note`` says why the
-    photos gave no rule (empty when they did).  The photo method is the primary one: the
-    2 cm strip is 1–5 px wide in the photos and smeared below any defensible paint share in
-    the 2 cm orthophoto (README, closerange); the orthophoto's own threshold (a 1-cell strip
-    covers at least half a cell) stays principled, so it is kept as the fallback.
-
-    Parameters
-    ----------
-    photos : sequence of OrientedPhoto
-        Oriented photos of the scene (model frame).
-    images : mapping
-        RGB photo (rows, cols, 3) uint8 of each photo name.
-    sim : Similarity
-        Model → survey frame (the sphere similarity).
-    ortho : ndarray (3, rows, cols) uint8
-        Photogrammetric orthophoto.
-    dem : ndarray (rows, cols) float
-        Photogrammetric DEM (m, NaN = no data).
-    grid : GridSpec
-        Grid of ``ortho`` and ``dem``.
-    params : CloseRangeParams
-        Stage settings; reads the ``rule_*`` settings, ``pole_height_m`` and ``outlier_tolerance_m``.
-    rng_photos : Generator
-        Random stream for the measurement in the photos.
-    rng_ortho : Generator
-        Random stream for RANSAC in the orthophoto.
-
-    Returns
-    -------
-    rule : dict or None
-        The legs' measurement; None when the rule is not found.
-    method : str or None
-        ``"photos"``, ``"orthophoto"`` or None.
-    note : str
-        Why the photos gave no rule; empty when they did.
-    """
-    from kitegully.closerange.rule_photos import measure_rule_in_photos
-
-    rule, why = measure_rule_in_photos(photos, images, sim, dem, grid, params.rule_paint_rgb, params.rule_strip_width_m,
-                                       params.pole_height_m, params.outlier_tolerance_m, rng_photos)
-    if rule is not None:
-        log.info("folding rule measured in the photos: legs %.3f m, %.3f m (corner in %d photos, ends in %d, %d; %.2f px rms)",
-                 rule["leg_a_m"], rule["leg_b_m"], rule["photos_corner"], rule["photos_a"], rule["photos_b"], rule["rms_px"])
-        return rule, "photos", ""
-    log.info("folding rule not measured in the photos (%s); trying the orthophoto", why)
-    rule = measure_folding_rule(ortho, dem, grid, rng_ortho, params.rule_paint_rgb, params.rule_min_paint_fraction)
-    return rule, (None if rule is None else "orthophoto"), why
-
-
-@dataclass
-class SphereGeoreference:
-    """The similarity model → survey from the marker spheres found in the oriented photos.
-
-    Attributes
-    ----------
-    sim : Similarity
-        Model → site coordinates.
-    found_all, found : list
-        Triangulated sphere candidates, and those that passed :func:`verify_spheres` (one radius from
-        every side), each ``(xyz, photo indices, ...)``.
-    checks : list of dict
-        The verification of each kept candidate (``radius``, ``height`` in model units).
-    rows, perm : sequence of int
-        Kept candidates paired with the survey (indices into ``found``) and their survey rows.
-    res : ndarray (n, 3)
-        Residuals of the paired spheres after the similarity (m).
-    ids : list of str
-        Survey ids (``gcp_id``).
-    detections : list of (str, float, float)
-        Every sphere detection (photo, u, v).
-    centres : ndarray (n_photos, 3)
-        Camera centres in the model.
-    """
-
-    sim: Similarity
-    found_all: list
-    found: list
-    checks: list
-    rows: Sequence[int]
-    perm: Sequence[int]
-    res: np.ndarray
-    ids: list
-    detections: list
-    centres: np.ndarray
-
-
-def georeference_on_spheres(photos: Sequence, images: Mapping[str, np.ndarray], sparse: np.ndarray, survey: pd.DataFrame,
-                            params: "CloseRangeParams", source: str, scene: str) -> SphereGeoreference:
-    """Detect the white marker spheres in the oriented photos, triangulate them and fit the similarity to the survey.
-
-    Parameters
-    ----------
-    photos : sequence
-        Oriented photos (:func:`read_oriented_photos`).
-    images : mapping
-        The photographs SfM saw, by name.
-    sparse : ndarray (n, 3)
-        Tie points of the model (the spheres stand above them).
-    survey : DataFrame
-        Surveyed sphere centres: ``gcp_id, x, y, z``.
-    params : CloseRangeParams
-    source, scene : str
-        Named in messages and the log.
-
-    Returns
-    -------
-    SphereGeoreference
-
-    Notes
-    -----
-    Cost: the sphere detector over every photo, O(pixels); triangulation and pairing are small.
-    """
-    O, D, pid, alpha, det_rows = [], [], [], [], []
-    for k, ph in enumerate(photos):
-        det = detect_spheres(images[ph.name], ph.camera, params.spheres)
-        if len(det):
-            o, d = detection_rays(ph, det[["u_px", "v_px"]].to_numpy())
-            O.append(o)
-            D.append(d)
-            pid += [k] * len(det)
-            alpha += det["alpha_rad"].tolist()
-            det_rows += [(ph.name, u, v) for u, v in det[["u_px", "v_px"]].to_numpy()]
-    if not O:
-        raise InputError(f"{source}: no white sphere was found in any of the {len(photos)} oriented photos")
-    O, D, pid, alpha = np.concatenate(O), np.concatenate(D), np.array(pid), np.array(alpha)
-    centres = np.array([p.centre for p in photos])
-    ring = float(np.median(np.linalg.norm(centres - centres.mean(axis=0), axis=1)))
-    tol = params.sphere_tolerance_m * ring / 5.0 if ring > 0 else params.sphere_tolerance_m
-    # the model's scale is arbitrary: express the tolerance via the ring radius (~5 m at the walk's size)
-    found_all = triangulate_spheres(O, D, pid, tol)
-    checks_all = verify_spheres(found_all, O, alpha, sparse)
-    found = [f for f, c in zip(found_all, checks_all) if c["sphere"]]
-    checks = [c for c in checks_all if c["sphere"]]
-    log.info("%s: %d sphere detections in %d photos, %d triangulated, %d with one radius from every side (radius spread <= 15 %%)",
-             scene, len(O), len(photos), len(found_all), len(found))
-    model_xyz = np.array([f[0] for f in found]).reshape(-1, 3)
-    radii = np.array([c["radius"] for c in checks])
-    sxyz = survey[["x", "y", "z"]].to_numpy(float)
-    ids = survey["gcp_id"].astype(str).tolist()
-    # plausibility: with the similarity the cameras stand at the pole's height above the
-    # ground, here the plane through the surveyed spheres lowered by their radius (a scale or
-    # an orientation from false candidates puts them metres too high, or under the ground)
-    A = np.column_stack([sxyz[:, 0] - sxyz[:, 0].mean(), sxyz[:, 1] - sxyz[:, 1].mean(), np.ones(len(sxyz))])
-    plane = np.linalg.lstsq(A, sxyz[:, 2], rcond=None)[0]
-
-    def cameras_on_poles(sim_) -> bool:
-        c = sim_.apply(centres)
-        ground = plane[0] * (c[:, 0] - sxyz[:, 0].mean()) + plane[1] * (c[:, 1] - sxyz[:, 1].mean()) + plane[2] - params.sphere_radius_m
-        h = float(np.median(c[:, 2] - ground))
-        return 0.5 * params.pole_height_m <= h <= 2.0 * params.pole_height_m
-
-    sim, rows, perm, res = match_markers(model_xyz, sxyz, ids, params.marker_budget_m, plausible=cameras_on_poles,
-                                         radii=radii, radius_m=params.sphere_radius_m)
-    return SphereGeoreference(sim, found_all, found, checks, rows, perm, res, ids, det_rows, centres)
-
-
 def photogrammetric_orthophoto(
     photo_dir: str | Path, survey: pd.DataFrame, survey_path: str, grid: GridSpec, sfm_cfg: Mapping[str, Any],
     params: CloseRangeParams, seed: int, threads: int, scene: str, work_dir: str | Path, out: Mapping[str, str],
@@ -628,7 +384,7 @@ def photogrammetric_orthophoto(
         summary = sfm(True)
     t_sfm = time.perf_counter() - t0
     photos, sparse = read_oriented_photos(out["model"])
-    images = _read_photos(Path(work_dir) / "images", [p.name for p in photos])  # the prepared copies SfM saw
+    images = read_photos(Path(work_dir) / "images", [p.name for p in photos])  # the prepared copies SfM saw
     # spheres: detect, rays, triangulate, pair with the survey, similarity
     geo = georeference_on_spheres(photos, images, sparse, survey, params, f"{photo_dir}", scene)
     sim, rows, perm, res, found, checks, ids = geo.sim, geo.rows, geo.perm, geo.res, geo.found, geo.checks, geo.ids
@@ -649,7 +405,7 @@ def photogrammetric_orthophoto(
     t2 = time.perf_counter()
     if len(xyz) < params.min_dense_points:
         raise InputError(f"{photo_dir}: dense matching gave {len(xyz)} points (< {params.min_dense_points}); the photos overlap too little")
-    keep = _near_median_surface(xyz, grid, params.outlier_cell_m, params.outlier_tolerance_m)
+    keep = near_median_surface(xyz, grid, params.outlier_cell_m, params.outlier_tolerance_m)
     log.info("%s: %d of %d dense points kept within %.2f m of the %.2f m median surface", scene, keep.sum(), len(keep),
              params.outlier_tolerance_m, params.outlier_cell_m)
     xyz, rgb = xyz[keep], rgb[keep]
@@ -659,10 +415,10 @@ def photogrammetric_orthophoto(
 
     inside = periphery_mask(grid, cams_w[:, :2], params.periphery)
     holes_before = int((~np.isfinite(surf.dem) & inside).sum())
-    dem, ortho, filled = _fill_holes(surf.dem, surf.ortho, inside, params.fill_holes_cells)
+    dem, ortho, filled = fill_holes(surf.dem, surf.ortho, inside, params.fill_holes_cells)
     from kitegully.seeds import rng_for
 
-    rule_images = _original_photos(photo_dir, out["image_info"], images)
+    rule_images = original_photos(photo_dir, out["image_info"], images)
     rule, rule_method, rule_note = measure_rule(photos, rule_images, sim, ortho, dem, grid, params,
                                                 rng_for(seed, "closerange", scene, "rule_photos"),
                                                 rng_for(seed, "closerange", scene, "rule_ransac"))
@@ -693,142 +449,3 @@ def photogrammetric_orthophoto(
     return record
 
 
-# --------------------------------------------------------------------------- closerange_summary
-def failed_scene_record(scene: str, reason: str) -> dict:
-    """The record of a scene that could not be georeferenced (``on_scene_failure: record``).
-
-    Parameters
-    ----------
-    scene : scene name.
-    reason : the InputError's one sentence.
-
-    Returns
-    -------
-    dict
-        ``{"scene", "status": "failed", "reason"}``; :func:`closerange_tables` lists it as a
-        row without numbers and leaves it out of the means and the overall accuracy.
-    """
-    return {"scene": scene, "status": "failed", "reason": str(reason)}
-
-
-def scene_succeeded(record: Mapping[str, Any]) -> bool:
-    """Whether a ``closerange.json`` record is a georeferenced scene (records without ``status`` are)."""
-    return record.get("status", "ok") == "ok"
-
-
-@dataclass
-class CloseRangeTables:
-    """Products of :func:`closerange_tables`."""
-
-    table1: pd.DataFrame
-    accuracy: pd.DataFrame
-
-
-def closerange_tables(
-    records: Sequence[dict], confusion_sfm: Sequence[dict], confusion_direct: Sequence[dict],
-    same_cells: Sequence[tuple[str, str, str]] = (),
-) -> CloseRangeTables:
-    """001 Table 1 per scene next to the paper's, and OBIA accuracy on the photogrammetric vs the direct orthophotos.
-
-    ``records`` are the :func:`photogrammetric_orthophoto` records of all requested scenes,
-    failed ones included (:func:`failed_scene_record`); the confusions are the obia stage's
-    ``confusion.json`` records of the scenes that succeeded (photogrammetric and direct
-    renders).  Both tables have ``status`` and ``reason`` columns: a failed scene is a row
-    with its sentence and no numbers.  Each table ends with an ``all`` row over the scenes
-    that succeeded (means for Table 1, the paper's too, over the same scenes; summed
-    confusion matrices for the accuracy), whose ``status`` states the count ("8 of 10
-    scenes").  ``same_cells`` gives per succeeded scene the paths of the direct and the
-    photogrammetric classification and the truth mask: the direct classification is then
-    also scored on the cells the photogrammetric one covers (``oa_direct_same_cells_pct``),
-    which separates the effect of the crop from that of the SfM defects.
-
-    Parameters
-    ----------
-    records : sequence of dict
-        Scene records, failed ones included.
-    confusion_sfm, confusion_direct : sequence of dict
-        Confusion records of the succeeded scenes on the photogrammetric and the direct orthophotos.
-    same_cells : sequence of (str, str, str)
-        Paths of the direct classification, the photogrammetric classification and the truth mask, in the order
-        of ``confusion_sfm``; empty to skip the same-cells score.
-
-    Returns
-    -------
-    CloseRangeTables
-        ``table1`` (Table 1 per scene) and ``accuracy`` (OBIA accuracy per scene), each with an ``all`` row.
-    """
-    from kitegully.io.raster import read_raster
-    from kitegully.obia.accuracy import accuracies, confusion_matrix
-
-    ok_recs = [r for r in records if scene_succeeded(r)]
-    failed = [r for r in records if not scene_succeeded(r)]
-    count = f"{len(ok_recs)} of {len(records)} scenes"
-    failed_note = "" if not failed else "failed: " + ", ".join(r["scene"] for r in failed)
-    t1 = pd.DataFrame([{
-        "scene": r["scene"], "status": "ok", "reason": "", "images_used": r["images_used"], "images_aligned": r["images_aligned"],
-        "marker_error_m": r["marker_error_m"], "spheres_measured": r["spheres_measured"],
-        "scale_error_pct": np.nan if r["scale_error_pct"] is None else r["scale_error_pct"],
-        "leg_a_m": np.nan if r["rule"] is None else r["rule"]["leg_a_m"],
-        "leg_b_m": np.nan if r["rule"] is None else r["rule"]["leg_b_m"],
-        "rule_method": r.get("rule_method") or ("" if r["rule"] is None else "orthophoto"),
-        "sift": r.get("sift", "plain").split(" ")[0],
-        "tie_points": r["tie_points"], "dense_points": r["dense_points"], "holes_pct": r["holes_pct"],
-        "time_s": r["timings_s"]["total"],
-    } if scene_succeeded(r) else {"scene": r["scene"], "status": "failed", "reason": r["reason"]} for r in records])
-    if len(t1):
-        t1 = t1.merge(PAPER_TABLE1, on="scene", how="left")
-        ok = t1["status"] == "ok"
-        mean = {c: t1.loc[ok, c].mean() for c in t1.columns if c not in ("scene", "status", "reason", "rule_method", "sift")}
-        n_affine = int((t1.loc[ok, "sift"] == "affine").sum())
-        t1.loc[len(t1)] = {"scene": "all", "status": count, "reason": failed_note, "sift": f"affine in {n_affine}", **mean}
-        t1 = t1[[c for c in t1.columns if c != "reason"] + ["reason"]]  # the sentence last: the .md stays readable
-
-    def acc_row(scene, conf):
-        a = accuracies(np.asarray(conf))
-        return {"oa": 100 * a["overall"], "ua_eroded": 100 * a["users"][1], "pa_eroded": 100 * a["producers"][1]}
-
-    direct = {c["scene"]: c for c in confusion_direct}
-    sfm = {c["scene"]: c for c in confusion_sfm}
-    same = {}
-    for (direct_path, sfm_path, truth_path), c in zip(same_cells, confusion_sfm):
-        dc, _ = read_raster(direct_path)
-        sc, _ = read_raster(sfm_path)
-        tr, _ = read_raster(truth_path)
-        same[c["scene"]] = confusion_matrix(dc, tr, valid=(sc != 255) & (dc != 255))
-    rows, tot_s, tot_d, tot_x = [], np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2))
-    for r in records:
-        if not scene_succeeded(r):
-            rows.append({"scene": r["scene"], "status": "failed", "reason": r["reason"], "oa_paper_pct": PAPER_OA.get(r["scene"])})
-            continue
-        c, d = sfm[r["scene"]], direct[r["scene"]]
-        tot_s += np.asarray(c["confusion"])
-        tot_d += np.asarray(d["confusion"])
-        x_ = acc_row(c["scene"], same[c["scene"]])["oa"] if c["scene"] in same else np.nan
-        if c["scene"] in same:
-            tot_x += same[c["scene"]]
-        s_, d_ = acc_row(c["scene"], c["confusion"]), acc_row(c["scene"], d["confusion"])
-        rows.append({"scene": c["scene"], "status": "ok", "reason": "",
-                     "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"], "oa_direct_same_cells_pct": x_,
-                     "oa_paper_pct": PAPER_OA.get(c["scene"]),
-                     "ua_eroded_sfm_pct": s_["ua_eroded"], "pa_eroded_sfm_pct": s_["pa_eroded"],
-                     "ua_eroded_direct_pct": d_["ua_eroded"], "pa_eroded_direct_pct": d_["pa_eroded"],
-                     "area_sfm_m2": c["area_auto_m2"], "area_ref_in_crop_m2": c["area_ref_m2"],
-                     "area_direct_m2": d["area_auto_m2"], "area_ref_full_m2": d["area_ref_m2"]})
-    if ok_recs:
-        s_, d_ = acc_row("all", tot_s), acc_row("all", tot_d)
-        rows.append({"scene": "all", "status": count, "reason": failed_note,
-                     "oa_sfm_pct": s_["oa"], "oa_direct_pct": d_["oa"],
-                     "oa_direct_same_cells_pct": acc_row("all", tot_x)["oa"] if same else np.nan, "oa_paper_pct": PAPER_OA["all"],
-                     "ua_eroded_sfm_pct": s_["ua_eroded"], "pa_eroded_sfm_pct": s_["pa_eroded"],
-                     "ua_eroded_direct_pct": d_["ua_eroded"], "pa_eroded_direct_pct": d_["pa_eroded"]})
-    acc = pd.DataFrame(rows)
-    if len(acc):
-        acc = acc[[c for c in acc.columns if c != "reason"] + ["reason"]]
-    for r in failed:
-        log.info("%s: failed, not in the overall accuracy: %s", r["scene"], r["reason"])
-    if ok_recs:
-        log.info("OBIA: OA %.1f %% over %s on the photogrammetric orthophotos, %.1f %% on the direct renders of the same "
-                 "scenes (paper 94.3 %% over 10)", acc["oa_sfm_pct"].iloc[-1], count, acc["oa_direct_pct"].iloc[-1])
-    else:
-        log.info("OBIA: no scene of %d was georeferenced; no overall accuracy", len(records))
-    return CloseRangeTables(t1, acc)
