@@ -227,7 +227,7 @@ def test_dry_straw_is_mapped_vegetated(tmp_path):
     assert np.mean(~wrong) > 0.95
 
 
-def test_pond_is_left_out_of_the_histogram(tmp_path, monkeypatch):
+def test_pond_is_left_out_of_the_histogram_and_of_the_map(tmp_path, monkeypatch):
     # green grass site with a pond whose ExG (0.08) lies between soil and grass: with the
     # water cells in the histogram the pond would be split off as a mode above soil
     grid, rgb, dsm, cover = _dry_site(pond=True, grass=(26.0, 56.0, 18.0))
@@ -237,6 +237,10 @@ def test_pond_is_left_out_of_the_histogram(tmp_path, monkeypatch):
     assert len(thr.valleys) == 1 and thr.valley > 0.2
     land = cover != 3
     assert np.mean(classes[land] == (cover[land] == 0)) > 0.95
+    # the pond (ExG below the valley: "bare" by ExG alone) is not classified, and counted
+    pond = cover == 3
+    assert np.mean(classes[pond] == NODATA) > 0.97 and np.mean(classes[land] == NODATA) < 0.005
+    assert thr.water_cells == pytest.approx(pond.sum(), rel=0.05)
     import kitegully.obia.kite as kite
 
     monkeypatch.setattr(kite, "blue_dominant", lambda r, g, b: np.zeros(np.shape(r), dtype=bool))
@@ -253,3 +257,18 @@ def test_map_figure_names_the_thresholded_index(site_files, index, name):
     fig = kite_map_figure(d / "orthophoto.tif", classes, grid, thr, 200, index)
     assert fig.axes[2].get_xlabel() == f"{name}, Gaussian-blurred (-)"
     assert fig.axes[1].get_legend().get_texts()[0].get_text() == f"bare soil ({name} below the valley)"
+
+
+def test_scattered_blue_cells_do_not_unclassify_land(tmp_path, site_files):
+    # one cell in five of the grass made blue-brightest (glints, sky reflections): a segment is
+    # left unclassified only when most of its cells are blue-dominant
+    d, grid, rgb, dsm, truth = site_files
+    rng = np.random.default_rng(5)
+    spots = (rng.random(truth.shape) < 0.2) & (truth == 0)
+    speckled = rgb.copy()
+    speckled[:, spots] = np.array([60, 110, 125], np.uint8)[:, None]
+    write_raster(tmp_path / "orthophoto.tif", speckled, grid, nodata=None)
+    write_raster(tmp_path / "dsm.tif", dsm, grid)
+    thr, classes, _ = _run(tmp_path, "speckled", tile=N)
+    assert np.mean(classes == NODATA) < 0.005 and thr.water_cells < 0.005 * truth.size
+

@@ -72,12 +72,15 @@ def test_kite_accuracy_against_landcover(tmp_path):
     classes = pd.DataFrame({"code": [1, 3, 8], "name": ["bare_eroded", "grass", "water"]})
     bare = (lc == 1).astype(np.uint8)
     bare[5, 7] = 1  # one grass cell mapped bare
+    bare[0, :4] = 255  # four water cells left unclassified (not in the confusion matrix either way)
     acc = kite_accuracy(bare, grid, str(tmp_path / "lc.tif"), classes, "classes.csv", ["bare_eroded"], ["water"], "site")
     assert set(acc.accuracy["class"]) == {"vegetated", "bare"}
     assert acc.accuracy["overall_accuracy"].iloc[0] == pytest.approx(100 * 89 / 90)
     assert acc.areas["area_ref_m2"].iloc[0] == pytest.approx(45.0) and acc.areas["area_auto_m2"].iloc[0] == pytest.approx(46.0)
     per = acc.per_class.set_index("landcover_class")
     assert per.loc["water", "reference"] == "excluded" and per.loc["grass", "mapped_bare_pct"] == pytest.approx(100 / 45)
+    assert per.loc["water", "area_m2"] == 10.0 and per.loc["water", "not_classified_pct"] == pytest.approx(40.0)
+    assert per.loc["grass", "not_classified_pct"] == 0.0
     with pytest.raises(InputError, match=r"^classes.csv: land-cover classes \['rock'\] named in obia.kite_scale"):
         kite_accuracy(bare, grid, str(tmp_path / "lc.tif"), classes, "classes.csv", ["rock"], [], "site")
     with pytest.raises(InputError, match="^classes.csv: needs columns code, name$"):

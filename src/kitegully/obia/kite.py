@@ -262,7 +262,8 @@ def classify_block(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader 
     classes : ndarray (core rows, core cols) uint8
         0 vegetated, 1 bare, 255 no data.
     water_cells : int
-        Core cells masked as open water.
+        Core cells masked as open water (segments mostly blue-dominant, or of blurred NDVI below
+        ``water_ndvi_below``), left unclassified (255).
     """
     rgb, dem, valid = _read_tile(ortho, dsm, read)
     nir_band = _read_nir(nir, read, valid)
@@ -278,9 +279,14 @@ def classify_block(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader 
         feature = blur if params.segment_feature == "blurred" else raw
         means = segment_means(feature, segments, nseg)
         out = classify_segments(means, segments, valley, unimodal)
+        # [I] a segment most of whose cells have blue as their brightest band (open water, shade lit by
+        # the blue sky) is neither soil nor plant (indices.blue_dominant): it left the threshold's histogram
+        # and is not classified either; on an RGB orthophoto ExG alone would call open water bare soil
+        blue = segment_means(blue_dominant(*rgb).astype(np.float32), segments, nseg) > 0.5
+        wet = blue[segments] & (segments > 0)
         if params.water_ndvi_below is not None:
-            wet = (segment_means(blur, segments, nseg) < params.water_ndvi_below)[segments] & (segments > 0)
-            out[wet] = NODATA
+            wet |= (segment_means(blur, segments, nseg) < params.water_ndvi_below)[segments] & (segments > 0)
+        out[wet] = NODATA
         out = remove_small_eroded(out, cell, params.min_area_m2)
         out[~valid] = NODATA
     r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
@@ -307,7 +313,8 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
     nir_path : path, optional
         NIR orthophoto (band 1) on the RGB orthophoto's grid, where the survey has one: it
         joins the segmentation features and is required by ``index: ndvi``. The returned
-        result's ``water_cells`` counts cells masked by ``water_ndvi_below``.
+        result's ``water_cells`` counts the cells left unclassified as open water (segments
+        mostly blue-dominant, or below ``water_ndvi_below``).
 
     Raises
     ------
@@ -334,7 +341,7 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
                 dst.write(out, 1, window=core)
                 log.info("classification: tile %d/%d", i + 1, len(tiles))
             dst.descriptions = ("bare_soil (0 vegetated, 1 bare, 255 no data)",)
-    if params.water_ndvi_below is not None:
-        thr.water_cells = water_cells
-        log.info("open water (blurred NDVI < %g): %d cells masked", params.water_ndvi_below, water_cells)
+    thr.water_cells = water_cells
+    log.info("open water (segments mostly blue-dominant%s): %d cells not classified", "" if params.water_ndvi_below is None
+             else f" or of blurred NDVI < {params.water_ndvi_below:g}", water_cells)
     return thr

@@ -217,7 +217,7 @@ def merge_kite_tiles(tile_files: Sequence[str | Path], hist_files: Sequence[str 
     Returns
     -------
     ThresholdResult
-        The global threshold; ``water_cells`` is set only with ``water_ndvi_below``.
+        The global threshold, with ``water_cells`` (cells left unclassified as open water).
 
     Raises
     ------
@@ -244,8 +244,7 @@ def merge_kite_tiles(tile_files: Sequence[str | Path], hist_files: Sequence[str 
         dst.descriptions = ("bare_soil (0 vegetated, 1 bare, 255 no data)",)
     if not seen.all():
         raise InputError(f"{out_tif}: the kite-map tiles leave {int((~seen).sum())} orthophoto cells uncovered")
-    if params.water_ndvi_below is not None:
-        thr.water_cells = water
+    thr.water_cells = water
     log.info("kite map merged from %d tiles", len(tile_files))
     return thr
 

@@ -23,7 +23,7 @@ from kitegully import InputError
 from kitegully.io.figures import new_figure
 from kitegully.io.raster import GridSpec
 from kitegully.obia.accuracy import accuracies, accuracy_rows, area_error, confusion_matrix
-from kitegully.obia.classify import eroded_polygons
+from kitegully.obia.classify import NODATA, eroded_polygons
 from kitegully.obia.scene import ObiaParams, SceneResult, classify_scene, marker_mask
 from kitegully.obia.threshold import ThresholdResult
 
@@ -380,8 +380,11 @@ def kite_map_figure(ortho_path: str, classes: np.ndarray, grid: GridSpec, thr: T
     axes[1].imshow(img, extent=ext)
     overlay = np.ma.masked_where(cls_small != 1, cls_small)
     axes[1].imshow(overlay, extent=ext, cmap=ListedColormap(["#d7301f"]), alpha=0.75, interpolation="nearest")
-    axes[1].legend(handles=[Patch(color="#d7301f", label=f"bare soil ({name} below the valley)")], loc="lower right",
-                   fontsize=7)
+    unclassified = np.ma.masked_where(cls_small != NODATA, cls_small)
+    axes[1].imshow(unclassified, extent=ext, cmap=ListedColormap(["#6baed6"]), alpha=0.9, interpolation="nearest")
+    axes[1].legend(handles=[Patch(color="#d7301f", label=f"bare soil ({name} below the valley)"),
+                            Patch(color="#6baed6", label="not classified (open water, no DSM)")],
+                   loc="lower right", fontsize=7)
     axes[1].set_title("bare-soil map")
     for ax in axes[:2]:
         ax.set_xlabel(f"easting from {x0:.0f} m")
@@ -432,8 +435,9 @@ def kite_accuracy(
     ExG separates vegetated from non-vegetated ground, so the reference "bare" class is the
     set of land-cover classes without plant cover (``bare_classes``); classes an analyst
     would mask before mapping (water, roofs: ``excluded_classes``) are left out of the
-    confusion matrix. ``per_class`` gives, per land-cover class, the share of its cells
-    mapped as bare. The land cover is resampled (nearest) onto the map's grid.
+    confusion matrix. ``per_class`` gives, per land-cover class, its area, the share of its
+    cells the map leaves unclassified (open water, no DSM or orthophoto data) and the share of the classified
+    ones mapped as bare. The land cover is resampled (nearest) onto the map's grid.
 
     Parameters
     ----------
@@ -487,14 +491,16 @@ def kite_accuracy(
     mapped = bare != 255
     per_class = []
     for code, name in zip(classes["code"], classes["name"]):
-        cells = (lc == code) & mapped
-        if not cells.any():
+        here = lc == code
+        if not here.any():
             continue
+        cells = here & mapped
         per_class.append({
             "landcover_class": name,
             "reference": "excluded" if code in excluded_codes else ("bare" if code in bare_codes else "vegetated"),
-            "area_m2": float(cells.sum() * cell2),
-            "mapped_bare_pct": 100.0 * float(np.mean(bare[cells] == 1)),
+            "area_m2": float(here.sum() * cell2),
+            "not_classified_pct": 100.0 * float(np.mean(~mapped[here])),
+            "mapped_bare_pct": 100.0 * float(np.mean(bare[cells] == 1)) if cells.any() else float("nan"),
         })
     acc = 100.0 * np.trace(conf) / max(conf.sum(), 1)
     log.info("kite-scale bare-soil map: OA %.1f %% over %d cells; per class: %s", acc, int(conf.sum()),

@@ -73,8 +73,8 @@ class ThresholdResult:
     counts, centres : numpy.ndarray
         The (unsmoothed) histogram.
     water_cells : int or None
-        Cells masked as open water before the histogram (NDVI maps with
-        ``water_ndvi_below``); None when no water mask was applied.
+        Cells of a kite-scale map left unclassified as open water (segments mostly
+        blue-dominant, or of blurred NDVI below ``water_ndvi_below``); None where no map was made.
     """
 
     valley: float | None
