@@ -159,12 +159,12 @@ def main(argv=None) -> int:
 
     numba.set_num_threads(1)
     (ne, t_k_normal, m_k_normal) = timed(lambda: _normal_equations(pb, *state, w, r))
-    (step_k, t_k_step, m_k_step) = timed(lambda: _damped_step(pb, ne, lam))
+    (step_k, t_k_step, m_k_step) = timed(lambda ne=ne: _damped_step(pb, ne, lam))
     del ne
     threads = max(1, min(a.threads, numba.config.NUMBA_NUM_THREADS))
     numba.set_num_threads(threads)
     (ne, t_p_normal, _) = timed(lambda: _normal_equations(pb, *state, w, r))
-    (step_p, t_p_step, _) = timed(lambda: _damped_step(pb, ne, lam))
+    (step_p, t_p_step, _) = timed(lambda ne=ne: _damped_step(pb, ne, lam))
     del ne
     diff_threads = max(np.abs(step_k[0] - step_p[0]).max() / np.abs(step_k[0]).max(), np.abs(step_k[1] - step_p[1]).max() / np.abs(step_k[1]).max())
     t0 = time.perf_counter()

@@ -107,7 +107,6 @@ def main() -> None:
                 sub = Camera(width=u1 - u0 + 1, height=v1 - v0 + 1, f=cam.f, cx=cam.cx - u0, cy=cam.cy - v0)
                 refl, depth = render_reflectance(ps.render, sub, pose, (0, 1, 2), walk.supersampling, (0.55, 0.65, 0.8))
                 composite_spheres(refl, depth, sub, pose, ps.spheres, ps.sphere_radius_m, ps.sphere_dn, ps.sun, ps.diffuse_fraction)
-                plain = refl.copy()
                 composite_rule(refl, depth, sub, pose, ps.rule, ps.sun, ps.diffuse_fraction)
                 full[v0:v1 + 1, u0:u1 + 1] = refl
             img, _ = photograph(full, cam, fx, rng)  # the photo's own stream: same exposure and noise
@@ -123,7 +122,6 @@ def main() -> None:
                     diffs.append(float(np.sqrt(np.mean((new[far].astype(float) - photo[v0:v1 + 1, u0:u1 + 1][far].astype(float)) ** 2))))
                 photo[v0:v1 + 1, u0:u1 + 1] = new
                 boxes.append((u1 - u0 + 1) * (v1 - v0 + 1))
-                del plain
             buf = io.BytesIO()
             Image.fromarray(photo).save(buf, format="JPEG", quality=95, subsampling=0)
             (out / name).write_bytes(buf.getvalue())

@@ -267,7 +267,6 @@ def extrapolate(cfg: dict, rows: pd.DataFrame, counts: dict) -> pd.DataFrame:
     n_line = len(np.arange(-p["flight"]["overrun_m"], p["length_m"] + p["flight"]["overrun_m"] + 1e-9, p["flight"]["spacing_m"]))
     n_photos = 2 * n_line * len(p["flight"]["lines_y_frac"])
     pairs = n_photos * (n_photos - 1) // 2
-    unit = {r["step"].split(" (")[0].split(",")[0]: r for r in rows.to_dict("records")}
 
     def per(key_start: str) -> float:
         return float(np.mean([r["cpu_per_unit_s"] for r in rows.to_dict("records") if r["step"].startswith(key_start)]))

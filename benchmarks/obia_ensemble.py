@@ -123,7 +123,6 @@ def diagnosis_figure(site_dir: Path, new_bare: Path, params: ObiaParams, cfg: di
 
     from kitegully.io.figures import new_figure, save_figure
     from kitegully.io.raster import grid_of, iter_tiles
-    from kitegully.obia.indices import EXG_RANGE
     from kitegully.obia.kite import _read_tile
     from kitegully.obia.scene import blurred_exg
 

@@ -1,6 +1,11 @@
 """Session-10 evidence (issue 19): the 32 calibration targets rendered as 10 mm printed discs into the 14 photographs per camera, located (measure_targets), weighted bundle; errors against the twin truth. PYTHONPATH=src python benchmarks/stereo_rendered_calibration.py (about 12 s CPU)."""
-import time, sys, logging, numpy as np
-from kitegully.stereo.calibration import *
+import time
+
+import numpy as np
+
+from kitegully.stereo.calibration import (ControlField, calibrate_camera_weighted, calibration_field, calibration_poses,
+                                          calibration_targets, convergent_poses, distortion_precision, measure_targets,
+                                          projected_disc_offset_px, render_calibration_image)
 from kitegully.stereo.measure import PrintedMarks
 from kitegully.stereo.rig import paper_cameras, D2H_NOMINAL_F_MM, D2H_PIXEL_MM
 from kitegully.seeds import rng_for

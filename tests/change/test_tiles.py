@@ -17,7 +17,6 @@ import geopandas as gpd
 
 import numpy as np
 import pandas as pd
-import pytest
 import rasterio
 from shapely.geometry import LineString, Point, box
 

@@ -60,7 +60,6 @@ def test_pair_against_the_tie_points_is_dropped_when_they_disagree():
 
 
 def test_ring_pairs_skip_a_step_along_the_view():
-    tex = _texture()
     photos = []
     for k in range(8):
         ang = 2 * np.pi * k / 8

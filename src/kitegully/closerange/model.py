@@ -360,7 +360,7 @@ def match_markers(
             pairs = tuple(sorted(zip(mi.tolist(), si.tolist())))
             if np.linalg.norm(res, axis=1).max() <= budget_m and pairs not in hyps:
                 hyps[pairs] = ((-len(si), rms), (sim2, [int(x) for x in mi], [int(x) for x in si], res))
-    best, n_implausible, rivals = None, 0, 0
+    best, best_key, n_implausible, rivals = None, None, 0, 0
     for key, h in sorted(hyps.values(), key=lambda kv: kv[0]):
         if best is not None and key[0] > best_key[0]:
             break

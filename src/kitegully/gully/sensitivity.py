@@ -176,12 +176,12 @@ def gully_sensitivity(
     DataFrame
         As :func:`sensitivity_table`.
     """
-    domain = None
-    if reference is not None:
+    def near_lines_footprint():
         # DEM footprint near the lines only: same clipping as the whole footprint, far cheaper;
         # made beside the depth maps (sensitivity_table calls it once they have started)
-        def domain():
-            return footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(network, grid).geometry])
+        return footprint(np.isfinite(dem), grid, near=[*reference.geometry, *network_lines(network, grid).geometry])
+
+    domain = near_lines_footprint if reference is not None else None
     return sensitivity_table(
         dem, grid, network, sigmas_m, thresholds_m, mapping.min_patch_volume_m3, mapping.buffer_m, mapping.connectivity,
         mapping.truncate_sigmas, reference=reference, tolerance_m=tolerance_m, domain=domain, truth_mask=truth_mask,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rasterio
@@ -12,6 +13,9 @@ from rasterio.enums import Resampling
 from kitegully import InputError
 from kitegully.inputs.crs import crs_label
 from kitegully.inputs.findings import Findings
+
+if TYPE_CHECKING:
+    from kitegully.io.raster import GridSpec
 
 # Values that software writes for "no data" when it declares none (ESRI/GDAL, SRTM int16,
 # float32 max of ArcGIS): found in the data they are refused unless declared.
@@ -96,7 +100,7 @@ def check_raster(path: str | Path, site_crs: CRS, declared_nodata: float | None,
 
 
 def read_dem_file(path: str | Path, site_crs: str, declared_nodata: float | None, key: str,
-                  nodata_key: str | None = None) -> tuple[np.ndarray, "GridSpec"]:
+                  nodata_key: str | None = None) -> tuple[np.ndarray, GridSpec]:
     """A DEM GeoTIFF a site hands in (LiDAR, TLS, another software's DSM), checked and read as float32.
 
     Parameters
