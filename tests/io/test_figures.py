@@ -30,3 +30,22 @@ def test_save_figure_writes_print_resolution_with_the_attribution(tmp_path):
     save_figure(fig, tmp_path / "g.png")
     with Image.open(tmp_path / "g.png") as im:
         assert im.size[1] < height                                         # the attribution line adds height below
+
+
+def test_attribution_sits_under_a_map_that_leaves_the_figure_bottom_empty(tmp_path):
+    # a wide map in a tall figure: equal aspect leaves the lower half of the figure empty
+    heights = {}
+    for name, text in (("plain", None), ("attributed", "Photos CC-BY 3.0 somebody")):
+        fig, ax = new_figure(figsize=(4, 8))
+        ax.plot([0.0, 600.0], [0.0, 100.0])
+        map_axes(ax, (0.0, 600.0, 0.0, 100.0))
+        save_figure(fig, tmp_path / f"{name}.png", text)
+        with Image.open(tmp_path / f"{name}.png") as im:
+            heights[name] = im.size[1]
+            if text:
+                rows = np.asarray(im.convert("L"))
+    extra = heights["attributed"] - heights["plain"]
+    assert 0 < extra < 0.15 * PRINT_DPI  # one 6 pt line, not the empty half of an 8 in figure
+    ink = np.flatnonzero((rows < 250).any(axis=1))
+    assert ink[-1] >= rows.shape[0] - 0.15 * PRINT_DPI  # the line is at the bottom of the image (0.1 in pad)
+

@@ -316,7 +316,7 @@ def map_gullies(
         t["crowns_s"] = time.perf_counter() - tc
 
     def flow_branch(given_filled: np.ndarray | None) -> tuple:
-        """Steps f-i before the heads: tracing surface, depression fill, flow directions (``given_filled``: a fill made elsewhere)."""
+        """Steps f-i before the heads: tracing surface, fill (``given_filled`` if made elsewhere), flow directions."""
         tb = time.perf_counter()
         if trace_surface is None:
             z_heads, zi, n_holes = tracing_surface(dem, grid, params, 1, ip, hidden=hidden)

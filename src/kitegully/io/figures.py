@@ -72,10 +72,14 @@ def save_figure(fig: Figure, path: str | Path, attribution: str | None = None) -
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if attribution:
-        # hung below the figure edge; the tight bounding box grows to include it, so it never
-        # overlaps axis labels
-        fig.text(0.99, 0.0, attribution, ha="right", va="top", fontsize=6, color="0.35")
     with plt.rc_context(STYLE):
+        if attribution:
+            # hung below what the figure draws, at its right edge: the tight bounding box grows to
+            # include it, so it never overlaps axis labels, and a map whose equal aspect leaves the
+            # figure's lower part empty gets no blank band above the line
+            fig.draw_without_rendering()
+            drawn = fig.get_tightbbox()  # inches
+            w, h = fig.get_size_inches()
+            fig.text(drawn.x1 / w, drawn.y0 / h, attribution, ha="right", va="top", fontsize=6, color="0.35")
         fig.savefig(path, dpi=PRINT_DPI)
     plt.close(fig)

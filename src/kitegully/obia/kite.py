@@ -10,6 +10,7 @@ the valley that bounds its lowest mode, bare soil
 bins over the fixed range, as before, then again on the finer re-binned part below it
 while that part is bimodal).  Segmentation and classification then run per
 tile (segments do not cross tile borders [I]); the tile core is written to the output.
+Segments most of whose cells are blue-dominant (open water) are left unclassified (255).
 Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T cells.
 """
 
