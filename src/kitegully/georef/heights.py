@@ -15,7 +15,7 @@ import numpy as np
 from kitegully import InputError
 from kitegully.georef.bundle import Block
 from kitegully.georef.geometry import rotvec_to_matrix
-from kitegully.georef.observations import GcpObs
+from kitegully.georef.observations import GcpObs, triangulated
 from kitegully.georef.similarity import plan_similarity
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,7 @@ def height_ratio(block: Block, obs: list[GcpObs], X_model: np.ndarray, survey_lo
         Ratio, its standard error and the number of GCPs; NaN ratio when fewer than 5
         triangulated GCPs or less than ``MIN_RELIEF_FOR_UNITS_M`` of relief.
     """
-    ok = np.array([len(o.rows) >= 2 and np.all(np.isfinite(X_model[k])) for k, o in enumerate(obs)])
+    ok = triangulated(obs, X_model)
     n = int(ok.sum())
     if n < 5:
         return float("nan"), float("nan"), n
@@ -157,7 +157,7 @@ def plan_only_heights(
     info : dict
         ``z0`` (the placeholder), ``levelling_sd_deg``, ``n_cameras``, ``n_gcps``.
     """
-    ok = np.array([len(o.rows) >= 2 and np.all(np.isfinite(X_model[k])) for k, o in enumerate(obs)])
+    ok = triangulated(obs, X_model)
     z0 = float(survey_local[0, 2])
     out = survey_local.copy()
     if ok.sum() < 2:

@@ -94,6 +94,11 @@ def collect_observations(
     return out
 
 
+def triangulated(obs: list[GcpObs], X: np.ndarray) -> np.ndarray:
+    """GCPs seen in at least two registered images whose intersection ``X`` is finite (bool, one per GCP)."""
+    return np.array([len(o.rows) >= 2 and bool(np.all(np.isfinite(X[k]))) for k, o in enumerate(obs)], dtype=bool)
+
+
 def triangulate_gcps(block: Block, obs: list[GcpObs]) -> tuple[np.ndarray, np.ndarray]:
     """Each GCP intersected from its rays in the block's frame, and its RMS reprojection error (px)."""
     X = np.full((len(obs), 3), np.nan)

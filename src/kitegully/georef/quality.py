@@ -12,7 +12,7 @@ import pandas as pd
 
 from kitegully import InputError
 from kitegully.georef.bundle import Block
-from kitegully.georef.observations import GcpObs, gcp_triangulation_covariance, reprojection_of
+from kitegully.georef.observations import GcpObs, gcp_triangulation_covariance, reprojection_of, triangulated
 from kitegully.georef.similarity import robust_similarity
 
 if TYPE_CHECKING:
@@ -52,7 +52,7 @@ def select_gcps(obs: list[GcpObs], X_model: np.ndarray, rp_model: np.ndarray, su
     ndarray (n,) bool
         True for the GCPs the solution uses.
     """
-    cand = np.array([len(o.rows) >= 2 and np.all(np.isfinite(X_model[k])) for k, o in enumerate(obs)])
+    cand = triangulated(obs, X_model)
     for k, o in enumerate(obs):
         if cand[k] and rp_model[k] > qa.max_triangulation_px:
             o.flags.append("ray_miss")
