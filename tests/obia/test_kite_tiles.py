@@ -46,3 +46,12 @@ def test_more_tiles_than_blocks_is_refused():
         kite_tiles((240, 240), 60, TilingParams(1.0, 12.0, 12.0))
     tiles = kite_tiles((250, 130), 60, TilingParams(6.0, 12.0, 12.0))
     assert [(t.r0, t.c0, t.h, t.w) for t in tiles] == [(0, 0, 120, 60), (0, 60, 120, 70), (120, 0, 130, 60), (120, 60, 130, 70)]
+
+
+def test_histogram_tile_of_an_older_version_is_named(tmp_path):
+    from kitegully.obia.kite_tiles import merged_threshold
+
+    old = tmp_path / "h_r000_c000.npz"
+    np.savez(old, counts=np.zeros(256 * 64, np.int64), r0=0, c0=0, h=60, w=60)  # counts only, as before session 42
+    with pytest.raises(InputError, match=r"h_r000_c000.npz: histogram tile without local ranges .* rerun rule obia_kite_histogram"):
+        merged_threshold([old], PARAMS)

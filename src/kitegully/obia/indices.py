@@ -3,6 +3,11 @@
 ExG follows Woebbecke et al. (1995) as used by Mayr et al. (2016, eq. 1-4):
 ``ExG = 2g - r - b`` with ``r = R/(R+G+B)`` etc.  Because ``r + g + b = 1``,
 ``ExG = 3g - 1`` and lies in [-1, 2].  NDVI = (NIR - red)/(NIR + red) (Bryson et al. 2013).
+
+Both are ratios of quantised bands: on an 8-bit orthophoto one digital number (DN) moves
+ExG by about 2 / (R + G + B), 0.004 on soil of DN sum 500 (:func:`exg_step`,
+:func:`ndvi_step`); a histogram binned finer than that shows the lattice of attainable
+values, not the cover.
 """
 
 from __future__ import annotations
@@ -37,6 +42,68 @@ def excess_green(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.nda
         exg = (2.0 * g - r - b) / total
     exg[total == 0] = 0.0
     return exg.astype(np.float32)
+
+
+def dn_step(dtype: np.dtype | str) -> float:
+    """Smallest change a band of this data type can record: 1 DN for integer types, 0 for
+    floating point (no quantisation known) [I]."""
+    return 1.0 if np.issubdtype(np.dtype(dtype), np.integer) else 0.0
+
+
+def exg_step(red: np.ndarray, green: np.ndarray, blue: np.ndarray, step: float = 1.0) -> np.ndarray:
+    """Largest change of ExG that one ``step`` of a single band makes, per cell (float32).
+
+    With S = R + G + B, dExG/dG = (2 - ExG)/S and dExG/dR = dExG/dB = -(1 + ExG)/S, so
+    the step is ``step * max(2 - ExG, 1 + ExG) / S``: about 2 / S on soil (ExG near 0).
+    O(N).
+
+    Parameters
+    ----------
+    red, green, blue : ndarray
+        Bands of equal shape in DN.
+    step : float
+        One quantisation step of the bands (:func:`dn_step`; 0 for unquantised data).
+
+    Returns
+    -------
+    ndarray float32
+        The ExG step; 0 where S == 0, NaN where a band is NaN.
+    """
+    r = np.asarray(red, dtype=np.float32)
+    g = np.asarray(green, dtype=np.float32)
+    b = np.asarray(blue, dtype=np.float32)
+    total = r + g + b
+    e = excess_green(r, g, b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = step * np.maximum(2.0 - e, 1.0 + e) / total
+    out[total == 0] = 0.0
+    return out.astype(np.float32)
+
+
+def ndvi_step(nir: np.ndarray, red: np.ndarray, nir_step: float = 1.0, red_step: float = 1.0) -> np.ndarray:
+    """Largest change of NDVI that one quantisation step of NIR or red makes, per cell (float32).
+
+    dNDVI/dNIR = 2 red / (NIR + red)^2 and dNDVI/dred = -2 NIR / (NIR + red)^2. O(N).
+
+    Parameters
+    ----------
+    nir, red : ndarray
+        Bands of equal shape in DN.
+    nir_step, red_step : float
+        One quantisation step of each band (:func:`dn_step`).
+
+    Returns
+    -------
+    ndarray float32
+        The NDVI step; 0 where NIR + red == 0, NaN where a band is NaN.
+    """
+    n = np.asarray(nir, dtype=np.float32)
+    r = np.asarray(red, dtype=np.float32)
+    total = n + r
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = 2.0 * np.maximum(nir_step * r, red_step * n) / (total * total)
+    out[total == 0] = 0.0
+    return out.astype(np.float32)
 
 
 def blue_dominant(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.ndarray:
@@ -75,6 +142,32 @@ def ndvi(nir: np.ndarray, red: np.ndarray) -> np.ndarray:
         out = (n - r) / total
     out[total == 0] = 0.0
     return out.astype(np.float32)
+
+
+def local_range(values: np.ndarray, size: int) -> np.ndarray:
+    """Max minus min of ``values`` over each cell's ``size`` x ``size`` neighbourhood (float32).
+
+    A cell with a NaN neighbour gets +inf (its neighbourhood is not known whole). O(N * size).
+
+    Parameters
+    ----------
+    values : ndarray (H, W)
+        Values; NaN = no data.
+    size : int
+        Window side (cells, odd).
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        The local range; NaN where ``values`` is NaN.
+    """
+    v = np.asarray(values, dtype=np.float32)
+    valid = np.isfinite(v)
+    hi = ndimage.maximum_filter(np.where(valid, v, np.inf), size=size, mode="nearest")
+    lo = ndimage.minimum_filter(np.where(valid, v, -np.inf), size=size, mode="nearest")
+    out = (hi - lo).astype(np.float32)
+    out[~valid] = np.nan
+    return out
 
 
 def gaussian_blur(values: np.ndarray, sigma_cells: float, radius_cells: int) -> np.ndarray:

@@ -8,7 +8,9 @@ water above all, are left out: :func:`kitegully.obia.indices.blue_dominant`) and
 the valley that bounds its lowest mode, bare soil
 (:func:`kitegully.obia.threshold.find_bare_threshold`: the first valley on ``hist_bins``
 bins over the fixed range, as before, then again on the finer re-binned part below it
-while that part is bimodal).  Segmentation and classification then run per
+while that part is bimodal, with bins no narrower than the index's one-DN step on those
+cells and each side made of unmixed cells: the fine histogram also sums each cell's step and
+counts cells by their local range, :class:`kitegully.obia.threshold.IndexHistogram`).  Segmentation and classification then run per
 tile (segments do not cross tile borders [I]); the tile core is written to the output.
 Segments most of whose cells are blue-dominant (open water) are left unclassified (255).
 Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T cells.
@@ -29,9 +31,9 @@ from rasterio.warp import reproject
 from kitegully import InputError
 from kitegully.io.raster import _profile, grid_of, iter_tiles
 from kitegully.obia.classify import NODATA, classify_segments, remove_small_eroded, segment_means
-from kitegully.obia.indices import blue_dominant
-from kitegully.obia.scene import ObiaParams, blurred_index, segment
-from kitegully.obia.threshold import FINE_BINS_PER_BIN, ThresholdResult, find_bare_threshold
+from kitegully.obia.indices import blue_dominant, dn_step
+from kitegully.obia.scene import ObiaParams, blurred_index, index_step, mixing_range, segment
+from kitegully.obia.threshold import FINE_BINS_PER_BIN, IndexHistogram, ThresholdResult, find_bare_threshold
 
 if TYPE_CHECKING:
     from rasterio.io import DatasetReader
@@ -175,13 +177,20 @@ def histogram_edges(params: ObiaParams) -> np.ndarray:
     return np.linspace(*params.index_range, params.hist_bins * FINE_BINS_PER_BIN + 1)
 
 
-def global_threshold(counts: np.ndarray, params: ObiaParams) -> ThresholdResult:
-    """The valley threshold of the whole site's fine histogram ``counts`` (:func:`find_bare_threshold`)."""
-    thr = find_bare_threshold(counts, histogram_edges(params), params.hist_bins, params.min_class_fraction,
-                              params.max_valley_ratio)
-    log.info("global %s threshold: valley %s (valleys %s), Otsu %s (%s)", params.index, thr.valley, thr.valleys,
-             thr.otsu, thr.reason)
+def global_threshold(hist: IndexHistogram, params: ObiaParams) -> ThresholdResult:
+    """The valley threshold of the whole site's fine histogram (:func:`find_bare_threshold`, with the
+    one-DN steps where the bands are integers and the mixed-cell test)."""
+    thr = find_bare_threshold(hist.counts, histogram_edges(params), params.hist_bins, params.min_class_fraction,
+                              params.max_valley_ratio, fine_steps=hist.step_sums if hist.quantised else None,
+                              fine_by_range=hist.by_range)
+    log.info("global %s threshold: valley %s (valleys %s; one-DN index step below the first %s; %s), Otsu %s (%s)",
+             params.index, thr.valley, thr.valleys, thr.index_step, thr.stop_reason, thr.otsu, thr.reason)
     return thr
+
+
+def band_steps(ortho: DatasetReader, nir: DatasetReader | None) -> tuple[float, float]:
+    """One quantisation step of the colour bands and of the NIR band (0 without one or for floats)."""
+    return dn_step(ortho.dtypes[0]), 0.0 if nir is None else dn_step(nir.dtypes[0])
 
 
 def unimodal_code(params: ObiaParams) -> int:
@@ -190,12 +199,13 @@ def unimodal_code(params: ObiaParams) -> int:
 
 
 def block_histogram(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader | None, read: Window, core: Window,
-                    params: ObiaParams, src: str, edges: np.ndarray) -> np.ndarray:
-    """Fine-histogram counts of the blurred index over one block's core (``read`` = core + halo).
+                    params: ObiaParams, src: str, edges: np.ndarray) -> IndexHistogram:
+    """Fine histogram of the blurred index over one block's core (``read`` = core + halo), by
+    local range, with the cells' summed one-DN index steps.
 
     Open datasets ``ortho``, ``dsm`` (and ``nir`` or None); cells whose blue band is the
-    brightest are left out (:func:`kitegully.obia.indices.blue_dominant`). The counts of all
-    blocks sum to the global histogram whatever the order (integers). O(block cells).
+    brightest are left out (:func:`kitegully.obia.indices.blue_dominant`). The histograms of
+    all blocks add up to the global one whatever the order (integers). O(block cells).
 
     Parameters
     ----------
@@ -216,16 +226,23 @@ def block_histogram(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader
 
     Returns
     -------
-    ndarray int64 (len(edges) - 1,)
-        Cell counts per fine bin.
+    IndexHistogram
+        Counts by local range (:func:`kitegully.obia.scene.mixing_range`) and one-DN step sums
+        (zeros and ``quantised`` False for floating-point bands).
     """
     rgb, dem, valid = _read_tile(ortho, dsm, read)
     nir_band = _read_nir(nir, read, valid)
     _, blur, _ = _tile_index(rgb, nir_band, valid, params, src)
     r0, c0 = core.row_off - read.row_off, core.col_off - read.col_off
-    inner = blur[r0:r0 + core.height, c0:c0 + core.width]
-    land = ~blue_dominant(*(b[r0:r0 + core.height, c0:c0 + core.width] for b in rgb))
-    return np.histogram(inner[np.isfinite(inner) & land], bins=edges)[0]
+    core_of = (slice(r0, r0 + core.height), slice(c0, c0 + core.width))
+    inner = blur[core_of]
+    counted = np.isfinite(inner) & ~blue_dominant(*(b[core_of] for b in rgb))
+    rgb_step, nir_step = band_steps(ortho, nir)
+    steps = index_step(*(b[core_of] for b in rgb), params, rgb_step,
+                       nir=None if nir_band is None else nir_band[core_of], nir_step=nir_step)
+    ranges = mixing_range(blur, params)[core_of]
+    quantised = rgb_step > 0 and (params.index == "exg" or nir_step > 0)
+    return IndexHistogram.of(inner[counted], steps[counted], ranges[counted], edges, quantised)
 
 
 def classify_block(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader | None, read: Window, core: Window,
@@ -294,8 +311,24 @@ def classify_block(ortho: DatasetReader, dsm: DatasetReader, nir: DatasetReader 
     return out[r0:r0 + core.height, c0:c0 + core.width], int(wet[r0:r0 + core.height, c0:c0 + core.width].sum())
 
 
+def site_histogram(ortho_path: str | Path, dsm_path: str | Path, params: ObiaParams, tile_cells: int,
+                   nir_path: str | Path | None = None) -> IndexHistogram:
+    """The whole site's fine histogram of the blurred index, block by block (:func:`block_histogram`).
+
+    Parameters and errors as :func:`bare_soil_map`. O(N) time, memory a few blocks.
+    """
+    with open_kite_inputs(ortho_path, dsm_path, nir_path, params, tile_cells) as (ortho, dsm, nir, grid, halo):
+        hist = IndexHistogram.zeros(params.hist_bins * FINE_BINS_PER_BIN)
+        edges = histogram_edges(params)
+        tiles = list(iter_tiles(grid, tile_cells, halo))
+        for i, (read, core) in enumerate(tiles):
+            hist += block_histogram(ortho, dsm, nir, read, core, params, str(ortho_path), edges)
+            log.info("histogram: tile %d/%d", i + 1, len(tiles))
+    return hist
+
+
 def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | Path, params: ObiaParams, tile_cells: int,
-                  nir_path: str | Path | None = None) -> ThresholdResult:
+                  nir_path: str | Path | None = None, threshold: ThresholdResult | None = None) -> ThresholdResult:
     """Classify a site orthophoto into grass/vegetated (0) and bare (1); 255 = no data.
 
     Writes a uint8 GeoTIFF on the orthophoto grid and returns the global threshold.
@@ -316,22 +349,20 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
         joins the segmentation features and is required by ``index: ndvi``. The returned
         result's ``water_cells`` counts the cells left unclassified as open water (segments
         mostly blue-dominant, or below ``water_ndvi_below``).
+    threshold : ThresholdResult, optional
+        Classify at this threshold instead of the site's own (evaluation of other thresholds on
+        the same orthophoto); its ``water_cells`` is set.
 
     Raises
     ------
     InputError
         Unreadable files, grids that do not fit, ``index: ndvi`` without ``nir_path``.
     """
+    thr = threshold if threshold is not None else global_threshold(site_histogram(ortho_path, dsm_path, params, tile_cells, nir_path), params)
     with open_kite_inputs(ortho_path, dsm_path, nir_path, params, tile_cells) as (ortho, dsm, nir, grid, halo):
         src = str(ortho_path)
-        counts = np.zeros(params.hist_bins * FINE_BINS_PER_BIN, dtype=np.int64)
-        edges = histogram_edges(params)
         tiles = list(iter_tiles(grid, tile_cells, halo))
         water_cells = 0
-        for i, (read, core) in enumerate(tiles):
-            counts += block_histogram(ortho, dsm, nir, read, core, params, src, edges)
-            log.info("histogram: tile %d/%d", i + 1, len(tiles))
-        thr = global_threshold(counts, params)
         unimodal = unimodal_code(params)
         profile = _profile(grid, 1, "uint8", NODATA, cog=True)
         Path(out_path).parent.mkdir(parents=True, exist_ok=True)

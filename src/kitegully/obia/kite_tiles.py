@@ -5,8 +5,9 @@ read with a halo of the index blur plus the slope window; segments never cross a
 and one global threshold from the fine histogram of every block. A tiled site splits
 those same blocks into ``tiling`` tile jobs of whole blocks (:func:`kite_tiles`):
 
-1. ``obia_kite_histogram`` (per tile): the fine-histogram counts of the tile's blocks;
-2. ``obia_kite_tile`` (per tile): the global threshold from the sum of all tiles' counts
+1. ``obia_kite_histogram`` (per tile): the fine histogram of the tile's blocks (counts by
+   local range and one-DN index steps, :class:`kitegully.obia.threshold.IndexHistogram`);
+2. ``obia_kite_tile`` (per tile): the global threshold from the sum of all tiles' histograms
    (integers: exact in any order), then each block segmented and classified exactly as
    the untiled map does it;
 3. ``obia_kite_merge``: the tiles' cores written into the map, the polygons, the figure
@@ -35,7 +36,7 @@ from kitegully.obia.classify import NODATA
 from kitegully.obia.kite import (block_histogram, classify_block, global_threshold, histogram_edges, open_kite_inputs,
                                  unimodal_code)
 from kitegully.obia.scene import ObiaParams
-from kitegully.obia.threshold import FINE_BINS_PER_BIN, ThresholdResult
+from kitegully.obia.threshold import FINE_BINS_PER_BIN, IndexHistogram, ThresholdResult
 from kitegully.terrain.tiled_fill import Tile
 from kitegully.terrain.tiling import TilingParams, whole_block_tiles
 
@@ -93,7 +94,7 @@ def _tile_of(name: str, shape: tuple[int, int], tile_cells: int, tiling: TilingP
 
 def kite_histogram_tile(ortho_path: str | Path, dsm_path: str | Path, out_npz: str | Path, params: ObiaParams,
                         tile_cells: int, tiling: TilingParams, name: str, nir_path: str | Path | None = None) -> int:
-    """Fine-histogram counts of tile ``name``'s blocks, saved as ``counts`` in ``out_npz``; returns the cells counted.
+    """Fine histogram of tile ``name``'s blocks, saved in ``out_npz`` (:meth:`IndexHistogram.save`); returns the cells counted.
 
     O(tile cells).
 
@@ -125,24 +126,30 @@ def kite_histogram_tile(ortho_path: str | Path, dsm_path: str | Path, out_npz: s
         shape = (grid.height, grid.width)
         tile = _tile_of(name, shape, tile_cells, tiling)
         edges = histogram_edges(params)
-        counts = np.zeros(params.hist_bins * FINE_BINS_PER_BIN, dtype=np.int64)
+        hist = IndexHistogram.zeros(params.hist_bins * FINE_BINS_PER_BIN)
         for read, core in _blocks(tile, shape, tile_cells, halo):
-            counts += block_histogram(ortho, dsm, nir, read, core, params, str(ortho_path), edges)
+            hist += block_histogram(ortho, dsm, nir, read, core, params, str(ortho_path), edges)
     Path(out_npz).parent.mkdir(parents=True, exist_ok=True)
-    np.savez(out_npz, counts=counts, r0=tile.r0, c0=tile.c0, h=tile.h, w=tile.w)
-    log.info("tile %s: histogram of %d cells", name, int(counts.sum()))
-    return int(counts.sum())
+    hist.save(out_npz, r0=tile.r0, c0=tile.c0, h=tile.h, w=tile.w)
+    n = int(hist.by_range.sum())
+    log.info("tile %s: histogram of %d cells", name, n)
+    return n
 
 
 def merged_threshold(hist_files: Sequence[str | Path], params: ObiaParams) -> ThresholdResult:
-    """The global threshold from the sum of the tiles' histogram counts (exact: integer sums)."""
-    counts = np.zeros(params.hist_bins * FINE_BINS_PER_BIN, dtype=np.int64)
+    """The global threshold from the sum of the tiles' histograms (exact: integer sums)."""
+    hist = IndexHistogram.zeros(params.hist_bins * FINE_BINS_PER_BIN)
     for f in hist_files:
-        with np.load(f) as z:
-            if z["counts"].shape != counts.shape:
-                raise InputError(f"{f}: histogram of {z['counts'].shape[0]} bins, expected {counts.shape[0]} (obia parameters changed?)")
-            counts += z["counts"]
-    return global_threshold(counts, params)
+        try:
+            tile = IndexHistogram.load(f)
+        except KeyError:
+            raise InputError(f"{f}: histogram tile without local ranges and one-DN index steps (written by an older "
+                             "version); rerun rule obia_kite_histogram") from None
+        if tile.by_range.shape != hist.by_range.shape:
+            raise InputError(f"{f}: histogram of {tile.by_range.shape[0]} bins, expected {hist.by_range.shape[0]} "
+                             "(obia parameters changed?)")
+        hist += tile
+    return global_threshold(hist, params)
 
 
 def kite_map_tile(ortho_path: str | Path, dsm_path: str | Path, hist_files: Sequence[str | Path], out_npz: str | Path,

@@ -25,11 +25,12 @@ from kitegully.config import config_section
 from kitegully.io.raster import GridSpec
 from kitegully.obia.classify import ERODED, GRASS, NODATA, classify_segments, remove_small_eroded, segment_means
 from kitegully.obia.features import normalise_features
-from kitegully.obia.indices import EXG_RANGE, NDVI_RANGE, blue_dominant, excess_green, gaussian_blur, ndvi
+from kitegully.obia.indices import (EXG_RANGE, NDVI_RANGE, blue_dominant, dn_step, excess_green, exg_step, gaussian_blur,
+                                    local_range, ndvi, ndvi_step)
 from kitegully.obia.seeds import generate_seeds
 from kitegully.obia.slope import wood_slope
 from kitegully.obia.srg import seeded_region_growing
-from kitegully.obia.threshold import ThresholdResult, find_bare_threshold, fine_histogram
+from kitegully.obia.threshold import IndexHistogram, ThresholdResult, find_bare_threshold, fine_histogram
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -311,6 +312,42 @@ def blurred_index(red: np.ndarray, green: np.ndarray, blue: np.ndarray, valid: n
     return v, gaussian_blur(v, params.blur_sigma_cells, params.blur_radius_cells)
 
 
+def mixing_range(blur: np.ndarray, params: ObiaParams) -> np.ndarray:
+    """Local range of the blurred index over the cells within one blur sigma of each cell
+    (a (2 round(sigma) + 1)-cell square, at least 3 x 3; :func:`kitegully.obia.indices.local_range`).
+
+    A cell next to a boundary between two covers has neighbours that far off on the other side
+    (the mixed-cell test of :func:`kitegully.obia.threshold.find_bare_threshold`). O(N).
+    """
+    return local_range(blur, 2 * max(1, int(round(params.blur_sigma_cells))) + 1)
+
+
+def index_step(red: np.ndarray, green: np.ndarray, blue: np.ndarray, params: ObiaParams, rgb_step: float,
+               nir: np.ndarray | None = None, nir_step: float = 0.0) -> np.ndarray:
+    """Each cell's one-DN step of the thresholded index (ExG or NDVI, ``params.index``). O(N).
+
+    Parameters
+    ----------
+    red, green, blue : ndarray (H, W)
+        Colour bands in DN.
+    params : ObiaParams
+        Method parameters (the index).
+    rgb_step, nir_step : float
+        One quantisation step of the colour bands and of the NIR band
+        (:func:`kitegully.obia.indices.dn_step` of their data types).
+    nir : ndarray (H, W) or None
+        NIR band (``index: ndvi``).
+
+    Returns
+    -------
+    ndarray (H, W) float32
+        :func:`kitegully.obia.indices.exg_step` or :func:`kitegully.obia.indices.ndvi_step`.
+    """
+    if params.index == "exg":
+        return exg_step(red, green, blue, rgb_step)
+    return ndvi_step(nir, red, nir_step, rgb_step)
+
+
 def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaParams, valid: np.ndarray | None = None, source: str = "scene") -> SceneResult:
     """Run the OBIA chain on one scene.
 
@@ -341,6 +378,7 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
                          f"for them, got {params.index!r}")
     t = {}
     t0 = time.perf_counter()
+    rgb_step = dn_step(rgb.dtype)
     red, green, blue = (rgb[i].astype(np.float32) for i in range(3))
     ok = np.isfinite(dem) & np.isfinite(red) & np.isfinite(green) & np.isfinite(blue)
     if valid is not None:
@@ -353,8 +391,13 @@ def classify_scene(rgb: np.ndarray, dem: np.ndarray, cell: float, params: ObiaPa
     t0 = time.perf_counter()
     exg, exg_blur = blurred_exg(red, green, blue, ok, params)
     land = ~blue_dominant(red, green, blue)
-    fine, edges = fine_histogram(exg_blur[land] if land.any() else exg_blur, params.hist_bins)
-    thr = find_bare_threshold(fine, edges, params.hist_bins, params.min_class_fraction, params.max_valley_ratio)
+    counted = (land if land.any() else np.ones(land.shape, dtype=bool)) & np.isfinite(exg_blur)
+    values = exg_blur[counted]
+    _, edges = fine_histogram(values, params.hist_bins)
+    hist = IndexHistogram.of(values, exg_step(red, green, blue, rgb_step)[counted], mixing_range(exg_blur, params)[counted],
+                             edges, quantised=rgb_step > 0)
+    thr = find_bare_threshold(hist.counts, edges, params.hist_bins, params.min_class_fraction, params.max_valley_ratio,
+                              fine_steps=hist.step_sums if hist.quantised else None, fine_by_range=hist.by_range)
     feature = exg_blur if params.segment_feature == "blurred" else exg
     means = segment_means(feature, segments, nseg)
     unimodal = GRASS if params.unimodal_class == "grass" else ERODED

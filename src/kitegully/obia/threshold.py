@@ -32,15 +32,50 @@ first histogram's bins apart), with the same bimodality tests plus a 3-sigma Poi
 test of the dip, as long as that lower part is itself bimodal; the last valley found
 bounds the lowest mode.  A two-class scene (grass over soil) has a unimodal lower part
 and keeps the first valley.
+
+Index resolution [I]: the bands of an orthophoto are quantised (8 bits as a rule), so the
+index takes a lattice of values whose spacing is the change one digital number makes, about
+2 / (R + G + B) for ExG on soil (:func:`kitegully.obia.indices.exg_step`): 0.004 on soil of
+DN sum 500.  The 5 x 5 blur does not dissolve it, because neighbouring cells of smooth soil
+carry the same DN.  Re-binned finer than that, the histogram of one soil is a comb whose
+beat pattern reads as two modes (a 600 x 400 m corner of the full-size Kamech twin, GSD
+9.6 cm, split its ploughed soil 0.0066 apart and lost half of it to "vegetation", session
+41).  Where the one-DN steps of the cells are known (``fine_steps``), no re-binned bin is
+narrower than their mean over the part re-binned: two modes closer than what one DN can
+express are not told apart.  The first histogram (``bins`` bins over the whole range, the
+paper's) is left as it is: its bins are several steps wide over the kite's fixed range.
+
+Mixed cells [I]: the blur turns a sharp boundary between two covers into a ramp of cells
+whose values lie between the two modes, and on clean boundaries those cells cluster at the
+few values the 5 x 5 kernel can give (a bump 1-2 % of a small scene; the descent took such a
+bump for a third cover on synthetic scenes).  A cover type is made of cells whose neighbours
+carry nearly their own value; a boundary cell has neighbours on both sides.  A further split
+is therefore kept only where each side holds ``min_class_fraction`` of all cells among the
+cells whose local range (max - min of the blurred index over the cells within one blur sigma,
+:func:`kitegully.obia.indices.local_range`) is at most half the distance between the two
+peaks: a cell spanning more than that mixes them.  On the dry-straw twins 13-18 % of all cells
+pass on the straw side; on the synthetic scenes' edge bumps none do.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 from skimage.filters import threshold_otsu
+
+STEP_UNIT = 1e-7
+"""Fixed-point unit of the summed one-DN index steps per fine bin (:attr:`IndexHistogram.step_sums`) [I]:
+integer sums are exact, so a site's histogram tiles add up to the same threshold in any order, and
+1e-7 is more than two orders below the one-DN step of a 16-bit orthophoto's ExG on soil (2 / 60 000)."""
+
+RANGE_EDGES = np.concatenate([[0.0], np.geomspace(1e-4, 3.0, 48)])
+"""Bin edges of a cell's local range in :class:`IndexHistogram` [I]: 1e-4 is below the one-DN step of
+any 8- to 12-bit orthophoto's index, 3 is the width of ExG's whole range, and successive edges 24 %
+apart resolve the half peak distance of the mixed-cell test to a quarter; larger ranges (next to no
+data: infinite) fall in the last bin."""
 
 FINE_BINS_PER_BIN = 64
 """Fine bins per histogram bin [I]: 256 x 64 bins over ExG [-1, 2] are 0.00018 wide, far below
@@ -72,6 +107,11 @@ class ThresholdResult:
         Share of cells at or below the valley.
     counts, centres : numpy.ndarray
         The (unsmoothed) histogram.
+    index_step : float or None
+        Mean one-DN index step of the cells below the first valley, the narrowest bin of
+        their re-binned histogram; None where the steps are not known or nothing was re-binned.
+    stop_reason : str or None
+        Why :func:`find_bare_threshold` split no further, one sentence; None elsewhere.
     water_cells : int or None
         Cells of a kite-scale map left unclassified as open water (segments mostly
         blue-dominant, or of blurred NDVI below ``water_ndvi_below``); None where no map was made.
@@ -89,13 +129,17 @@ class ThresholdResult:
     centres: np.ndarray = field(default_factory=lambda: np.zeros(0))
     water_cells: int | None = None
     valleys: list = field(default_factory=list)
+    index_step: float | None = None
+    stop_reason: str | None = None
 
     def as_dict(self) -> dict:
-        """The thresholds and their diagnostics as a dict, without the histogram (``water_cells`` only when set)."""
+        """The thresholds and their diagnostics as a dict, without the histogram (``water_cells``,
+        ``index_step`` and ``stop_reason`` only when set)."""
         keys = ("valley", "otsu", "bimodal", "reason", "low_peak", "high_peak", "valley_ratio", "low_fraction", "valleys")
         out = {k: getattr(self, k) for k in keys}
-        if self.water_cells is not None:
-            out["water_cells"] = self.water_cells
+        for k in ("water_cells", "index_step", "stop_reason"):
+            if getattr(self, k) is not None:
+                out[k] = getattr(self, k)
         return out
 
 
@@ -136,7 +180,8 @@ def histogram(values: np.ndarray, bins: int, value_range: tuple[float, float] | 
     return counts.astype(np.int64), (0.5 * (edges[:-1] + edges[1:]))
 
 
-def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fraction: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fraction: float = 1e-3,
+                      min_width: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Re-bin a fine histogram into at most ``bins`` bins over the range its central cells occupy.
 
     A scene's histogram spans the data's own range (:func:`histogram`); a site-wide
@@ -146,7 +191,8 @@ def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fra
     is cut off each end (rare outliers in deep shadow or on roofs would otherwise widen
     it and coarsen the bins); the cut-off cells are counted in the end bins.  Each new bin
     is the smallest whole number of fine bins that keeps the count at most ``bins`` (so
-    between ``bins``/2 and ``bins`` bins when the range spans more than ``bins`` fine bins).
+    between ``bins``/2 and ``bins`` bins when the range spans more than ``bins`` fine bins),
+    and at least ``min_width`` wide.
 
     Parameters
     ----------
@@ -156,6 +202,8 @@ def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fra
         Largest number of bins over the central range.
     tail_fraction
         Share of the cells cut off each end [I] (as in :func:`find_thresholds`).
+    min_width
+        Narrowest new bin (the index's resolution, see the module notes); 0 for no bound.
 
     Returns
     -------
@@ -166,7 +214,8 @@ def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fra
     if counts.sum() == 0:
         return counts, 0.5 * (edges[:-1] + edges[1:])
     lo, hi = _central_bins(counts, tail_fraction)
-    group = max(1, int(np.ceil((hi - lo + 1) / bins)))
+    width = float(edges[1] - edges[0])
+    group = max(1, int(np.ceil((hi - lo + 1) / bins)), int(np.ceil(min_width / width - 1e-9)))
     n = int(np.ceil((hi - lo + 1) / group))
     start = max(0, min(lo, counts.size - n * group))
     stop = start + n * group
@@ -175,7 +224,6 @@ def central_histogram(counts: np.ndarray, edges: np.ndarray, bins: int, tail_fra
     out = fine[start:stop].reshape(n, group).sum(axis=1)
     out[0] += counts[:start].sum()
     out[-1] += counts[stop:].sum() if stop < counts.size else 0
-    width = float(edges[1] - edges[0])
     new_edges = edges[0] + width * (start + group * np.arange(n + 1))
     return out, 0.5 * (new_edges[:-1] + new_edges[1:])
 
@@ -231,6 +279,7 @@ def find_thresholds(
     max_iter: int = 10000,
     tail_fraction: float = 1e-3,
     valley_smoothing_bins: float = 2.0,
+    open_high: bool = False,
 ) -> ThresholdResult:
     """Valley and Otsu thresholds of a histogram, with the bimodality check.
 
@@ -248,6 +297,10 @@ def find_thresholds(
     valley_smoothing_bins
         Gaussian sigma (bins) of the histogram in which the valley is located [I]: enough
         to calm the Poisson noise of a sparse valley, far less than the peak search uses.
+    open_high
+        The histogram ends at an earlier valley (the part below it, :func:`find_bare_threshold`):
+        a rise at its high end is the flank of the mode above that valley, not a mode, so the
+        high end is not closed with an empty bin and cannot read as a peak [I].
     """
     counts = np.asarray(counts, dtype=np.int64)
     centres = np.asarray(centres, dtype=np.float64)
@@ -258,8 +311,9 @@ def find_thresholds(
     lo, hi = _central_bins(counts, tail_fraction)
     # one empty bin each side, so that a mode at the cut still reads as a peak
     width = centres[1] - centres[0] if centres.size > 1 else 1.0
-    trimmed = np.concatenate([[0], counts[lo:hi + 1], [0]])
-    tcentres = np.concatenate([[centres[lo] - width], centres[lo:hi + 1], [centres[hi] + width]])
+    high = [] if open_high else [0]
+    trimmed = np.concatenate([[0], counts[lo:hi + 1], high])
+    tcentres = np.concatenate([[centres[lo] - width], centres[lo:hi + 1], [centres[hi] + width] * len(high)])
     smooth, maxima = _smooth_to_two_maxima(trimmed, max_iter)
     if len(maxima) != 2:
         return ThresholdResult(None, otsu, False, "the smoothed histogram has a single peak", counts=counts, centres=centres)
@@ -330,6 +384,96 @@ def fine_histogram(values: np.ndarray, bins: int, value_range: tuple[float, floa
     return counts.astype(np.int64), edges
 
 
+@dataclass
+class IndexHistogram:
+    """Fine histogram of the blurred index with what the lowest-mode descent needs beside the counts.
+
+    Attributes
+    ----------
+    by_range : ndarray int64 (fine bins, len(RANGE_EDGES) - 1)
+        Cells per fine bin and local-range bin (:data:`RANGE_EDGES`).
+    step_sums : ndarray int64 (fine bins,)
+        Per fine bin, the cells' summed one-DN index steps in units of :data:`STEP_UNIT`
+        (integers, so that sums over tiles are exact in any order).
+    quantised : bool
+        Whether the bands are integers, so that the steps mean something.
+    """
+
+    by_range: np.ndarray
+    step_sums: np.ndarray
+    quantised: bool = True
+
+    @classmethod
+    def zeros(cls, fine_bins: int, quantised: bool = True) -> "IndexHistogram":
+        """An empty histogram of ``fine_bins`` fine bins."""
+        return cls(np.zeros((fine_bins, RANGE_EDGES.size - 1), dtype=np.int64), np.zeros(fine_bins, dtype=np.int64), quantised)
+
+    @classmethod
+    def of(cls, values: np.ndarray, steps: np.ndarray, ranges: np.ndarray, edges: np.ndarray,
+           quantised: bool = True) -> "IndexHistogram":
+        """The histogram of the finite ``values`` on the fine ``edges``. O(N).
+
+        Parameters
+        ----------
+        values : ndarray
+            Blurred index; NaN and infinite values are left out.
+        steps : ndarray
+            Each cell's one-DN index step (:func:`kitegully.obia.indices.exg_step`), same shape.
+        ranges : ndarray
+            Each cell's local range (:func:`kitegully.obia.indices.local_range`), same shape.
+        edges : ndarray
+            Fine bin edges (:func:`fine_histogram`); bins as :func:`numpy.histogram` makes them.
+        quantised : bool
+            Whether ``steps`` are known (integer bands).
+
+        Returns
+        -------
+        IndexHistogram
+        """
+        v = np.asarray(values, dtype=np.float64).ravel()
+        edges = np.asarray(edges, dtype=np.float64)
+        n = edges.size - 1
+        ok = np.isfinite(v) & (v >= edges[0]) & (v <= edges[-1])
+        v = v[ok]
+        fine = np.minimum(np.searchsorted(edges, v, side="right") - 1, n - 1)  # np.histogram's bins
+        r = np.nan_to_num(np.asarray(ranges, dtype=np.float64).ravel()[ok], nan=np.inf)
+        nr = RANGE_EDGES.size - 1
+        rbin = np.clip(np.searchsorted(RANGE_EDGES, r, side="right") - 1, 0, nr - 1)
+        by_range = np.bincount(fine * nr + rbin, minlength=n * nr).reshape(n, nr).astype(np.int64)
+        q = np.nan_to_num(np.asarray(steps, dtype=np.float64).ravel()[ok], nan=0.0)
+        step_sums = np.bincount(fine, weights=np.rint(q / STEP_UNIT), minlength=n)
+        return cls(by_range, np.rint(step_sums).astype(np.int64), quantised)
+
+    def save(self, path: str | Path, **extra) -> None:
+        """Write the histogram sparsely (nonzero cells only) to ``path`` (.npz), with ``extra`` arrays beside it."""
+        fine, rng = np.nonzero(self.by_range)
+        nz = np.flatnonzero(self.step_sums)
+        np.savez_compressed(path, fine=fine.astype(np.int32), range_bin=rng.astype(np.int16), count=self.by_range[fine, rng],
+                            step_bin=nz.astype(np.int32), step_sum=self.step_sums[nz], shape=np.array(self.by_range.shape),
+                            quantised=self.quantised, **extra)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "IndexHistogram":
+        """Read a histogram written by :meth:`save`; KeyError if ``path`` holds none."""
+        with np.load(path) as z:
+            by_range = np.zeros(tuple(int(v) for v in z["shape"]), dtype=np.int64)
+            by_range[z["fine"], z["range_bin"]] = z["count"]
+            steps = np.zeros(by_range.shape[0], dtype=np.int64)
+            steps[z["step_bin"]] = z["step_sum"]
+            return cls(by_range, steps, bool(z["quantised"]))
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Cells per fine bin (int64)."""
+        return self.by_range.sum(axis=1)
+
+    def __iadd__(self, other: "IndexHistogram") -> "IndexHistogram":
+        self.by_range += other.by_range
+        self.step_sums += other.step_sums
+        self.quantised = self.quantised and other.quantised
+        return self
+
+
 def find_bare_threshold(
     fine_counts: np.ndarray,
     fine_edges: np.ndarray,
@@ -337,6 +481,8 @@ def find_bare_threshold(
     min_class_fraction: float,
     max_valley_ratio: float,
     max_splits: int = 8,
+    fine_steps: np.ndarray | None = None,
+    fine_by_range: np.ndarray | None = None,
 ) -> ThresholdResult:
     """Valley that bounds the lowest ExG mode (bare soil) of a possibly multimodal histogram.
 
@@ -347,6 +493,11 @@ def find_bare_threshold(
     as soil at ExG 0.0 and straw at 0.05 are resolved) and searched again with the same
     tests; each side of a new valley must also hold ``min_class_fraction`` of ALL cells,
     and the dip must be significant against counting noise (:data:`DIP_SIGMAS`).
+    With ``fine_steps``, no re-binned bin is narrower than the mean one-DN index step of
+    the cells re-binned (module notes: the index's resolution); with ``fine_by_range``,
+    each side of a further split must hold ``min_class_fraction`` of all cells among the
+    cells whose local range is at most half the distance between its two peaks (module
+    notes: mixed cells).  ``stop_reason`` says why the descent ended.
     The result is the last valid split: its ``valley``, peaks, ratio and ``low_fraction``
     (of all cells) describe the lowest mode and the mode just above it; ``valleys`` lists
     every valley from the first to the last; ``otsu``, ``counts`` and ``centres`` are those
@@ -363,6 +514,12 @@ def find_bare_threshold(
         As in :func:`find_thresholds` [I].
     max_splits
         Safety bound on the number of further splits (each removes at least one mode).
+    fine_steps
+        Per fine bin, the summed one-DN index steps of its cells in :data:`STEP_UNIT`
+        (:attr:`IndexHistogram.step_sums`); None where the bands' quantisation is not known.
+    fine_by_range
+        Cells per fine bin and local-range bin (:attr:`IndexHistogram.by_range`); None
+        skips the mixed-cell test.
 
     Complexity: O(fine bins + max_splits x bins x smoothing iterations).
     """
@@ -380,20 +537,42 @@ def find_bare_threshold(
     if best.valley is None:
         return best
     valleys = [best.valley]
+    steps = None if fine_steps is None else np.asarray(fine_steps, dtype=np.float64) * STEP_UNIT
+    first_step = None
+    stop = f"stopped after {max_splits} further splits"
     for _ in range(max_splits):
         keep = fine_centres <= best.valley
         if keep.sum() < 2:
+            stop = "no cells below the last valley"
             break
-        sub_counts, sub_centres = central_histogram(fine_counts[keep], fine_edges[:int(keep.sum()) + 1], bins)
-        sub = find_thresholds(sub_counts, sub_centres, min_class_fraction, max_valley_ratio)
+        min_width = 0.0
+        if steps is not None:
+            min_width = float(steps[keep].sum() / max(int(fine_counts[keep].sum()), 1))
+            first_step = min_width if first_step is None else first_step
+        sub_counts, sub_centres = central_histogram(fine_counts[keep], fine_edges[:int(keep.sum()) + 1], bins,
+                                                    min_width=min_width)
+        sub = find_thresholds(sub_counts, sub_centres, min_class_fraction, max_valley_ratio, open_high=True)
+        where = f"the cells below {best.valley:.4g}"
         if sub.valley is None or sub.valley >= best.valley:
+            stop = f"{where} are not bimodal ({sub.reason})"
             break
-        below = int(fine_counts[fine_centres <= sub.valley].sum())
+        lower = fine_centres <= sub.valley
+        below = int(fine_counts[lower].sum())
         above = int(fine_counts[keep].sum()) - below
         if min(below, above) < min_class_fraction * total:
+            stop = f"{where}: one side of {sub.valley:.4g} holds < {100 * min_class_fraction:g} % of all cells"
             break
         if not _dip_is_significant(sub_counts, sub_centres, sub.valley, sub.high_peak):
+            stop = f"{where}: the dip at {sub.valley:.4g} is within counting noise"
             break
+        if fine_by_range is not None:
+            half = 0.5 * (sub.high_peak - sub.low_peak)
+            unmixed = np.asarray(fine_by_range)[:, RANGE_EDGES[1:] <= half].sum(axis=1)
+            pure = min(int(unmixed[lower].sum()), int(unmixed[keep & ~lower].sum()))
+            if pure < min_class_fraction * total:
+                stop = (f"{where}: a side of {sub.valley:.4g} is mixed cells ({100 * pure / total:.2f} % of all cells "
+                        f"have a local range <= {half:.3g}, half the peak distance)")
+                break
         valleys.append(sub.valley)
         best = ThresholdResult(
             sub.valley, best.otsu, True, f"lowest of {len(valleys) + 1} modes separated by valleys",
@@ -401,4 +580,6 @@ def find_bare_threshold(
             low_fraction=below / total, counts=counts, centres=centres,
         )
     best.valleys = [float(v) for v in valleys]
+    best.index_step = first_step
+    best.stop_reason = stop
     return best
