@@ -39,7 +39,9 @@ from twin_ensemble import BASE, members  # noqa: E402
 from kitegully.evaluate.dem import read_checkpoints  # noqa: E402
 from kitegully.gully.heads import HeadDetectionParams  # noqa: E402
 from kitegully.gully.relief import dsm_noise_at_checkpoints, head_scale_relief  # noqa: E402
-from kitegully.gully.pipeline import GullyParams, map_gullies, tracing_surface  # noqa: E402
+from kitegully.gully.params import GullyParams  # noqa: E402
+from kitegully.gully.pipeline import map_gullies  # noqa: E402
+from kitegully.gully.surface import tracing_surface  # noqa: E402
 from kitegully.io.raster import read_raster  # noqa: E402
 from kitegully.io.tables import write_table  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402

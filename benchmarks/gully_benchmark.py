@@ -149,7 +149,8 @@ def run_stage(dem_path: str, heads_path: str, out_dir: str, threads: int) -> Non
     """Whole gully mapping chain as the gully_map rule runs it, with the full-size site's (:data:`SITE`)
     ``gully:`` settings (flat resolution, head snapping, tracing surface), in a child process."""
     as_rule_process()
-    from kitegully.gully.pipeline import GullyParams, map_gullies, map_raster
+    from kitegully.gully.params import GullyParams
+    from kitegully.gully.pipeline import map_gullies, map_raster
     from kitegully.io.raster import read_raster, write_raster
     from kitegully.io.vectors import write_vector
 
@@ -200,7 +201,7 @@ def run_sensitivity(dem_path: str, out_dir: str, threads: int) -> None:
     """The gully_sensitivity rule's work (its library function with the full-size site's settings), in a child process."""
     as_rule_process()
     from kitegully.gully.network import GullyNetwork
-    from kitegully.gully.pipeline import GullyParams
+    from kitegully.gully.params import GullyParams
     from kitegully.gully.sensitivity import gully_sensitivity
     from kitegully.io.raster import read_raster
     from kitegully.io.vectors import read_vector

@@ -23,7 +23,8 @@ from kitegully.evaluate.dem import read_checkpoints
 from kitegully.gully.heads import HeadDetectionParams
 from kitegully.gully.relief import dsm_noise_at_checkpoints
 from kitegully.gully.inputs import read_heads
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
 from kitegully.gully.standin import noisy_dem
 from kitegully.io.raster import read_raster
 from kitegully.io.vectors import read_vector

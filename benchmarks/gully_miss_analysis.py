@@ -49,7 +49,9 @@ from kitegully.gully.heads import HeadDetectionParams
 from kitegully.gully.relief import dsm_noise_at_checkpoints
 from kitegully.gully.inputs import read_heads
 from kitegully.gully.network import topological_order
-from kitegully.gully.pipeline import GullyParams, map_gullies, tracing_surface
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
+from kitegully.gully.surface import tracing_surface
 from kitegully.io.raster import read_raster
 from kitegully.io.tables import write_table
 from kitegully.io.vectors import read_vector

@@ -39,7 +39,8 @@ except ImportError:
     pass
 import numpy as np, yaml
 from kitegully.io.raster import read_raster, write_raster
-from kitegully.gully.pipeline import GullyParams, tracing_surface
+from kitegully.gully.params import GullyParams
+from kitegully.gully.surface import tracing_surface
 from kitegully.gully.depth import depth_map
 from kitegully.gully.patches import depth_patches
 from kitegully.terrain.fill import priority_flood_fill

@@ -45,7 +45,8 @@ from kitegully.evaluate.gully_run import score_gully_run  # noqa: E402
 from kitegully.evaluate.dem import read_checkpoints  # noqa: E402
 from kitegully.gully.heads import HeadDetectionParams  # noqa: E402
 from kitegully.gully.relief import dsm_noise_at_checkpoints  # noqa: E402
-from kitegully.gully.pipeline import GullyParams, map_gullies  # noqa: E402
+from kitegully.gully.params import GullyParams  # noqa: E402
+from kitegully.gully.pipeline import map_gullies  # noqa: E402
 from kitegully.io.raster import read_raster  # noqa: E402
 from kitegully.io.vectors import read_vector  # noqa: E402
 

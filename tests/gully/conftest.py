@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
 from kitegully.io.raster import GridSpec
 
 CRS = "EPSG:32632"

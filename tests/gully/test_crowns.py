@@ -8,7 +8,8 @@ import pytest
 from kitegully import InputError
 from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, green_threshold, hidden_reaches, interpolate_under
 from kitegully.gully.heads import HeadDetectionParams
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
 from kitegully.io.raster import GridSpec
 
 CELL = 0.2
@@ -110,7 +111,7 @@ def test_no_bridge_without_a_mapped_reach_downstream_and_green_flat_grass_is_no_
 
 def test_a_tiled_site_traces_and_bridges_under_the_same_crowns():
     """The tiled path (crown mask and surface in one job, tiled fill, the map given both) equals the untiled map."""
-    from kitegully.gully.pipeline import crowns_on, tracing_surface
+    from kitegully.gully.surface import crowns_on, tracing_surface
     from kitegully.terrain.tiled_fill import tiled_priority_flood_fill
 
     grid, z, rgb, xs, ys = channel_with_shrubs()

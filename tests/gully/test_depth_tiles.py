@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from kitegully.gully.depth import depth_halo_cells, depth_map, depth_map_tile
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
 from kitegully.io.raster import GridSpec, write_raster
 from kitegully.seeds import rng_for
 from kitegully.terrain.tiling import split_grid

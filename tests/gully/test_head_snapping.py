@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from kitegully.gully.network import snap_heads
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
 from kitegully.io.raster import GridSpec
 
 CELL = 0.2

@@ -9,7 +9,8 @@ from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import HeadDetectionParams
 from kitegully.gully.inlets import edge_inlets, outer_edge_distance, route_courses
 from kitegully.gully.patches import depth_patches
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
 from kitegully.io.raster import GridSpec
 from kitegully.terrain.fill import priority_flood_fill
 

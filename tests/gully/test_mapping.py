@@ -12,7 +12,8 @@ from kitegully.gully.inputs import check_dem, check_heads_on_dem, read_heads
 from kitegully.gully.mapping import buffer_mask, final_map
 from kitegully.gully.network import network_lines, snap_heads, trace_network
 from kitegully.gully.patches import depth_patches
-from kitegully.gully.pipeline import GullyParams, map_gullies
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
 from kitegully.io.raster import GridSpec
 from kitegully.io.vectors import write_vector
 from kitegully.terrain.fill import priority_flood_fill

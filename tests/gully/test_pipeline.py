@@ -10,7 +10,8 @@ from shapely import LineString
 
 from kitegully.evaluate.network import footprint
 from kitegully.gully.network import network_lines
-from kitegully.gully.pipeline import GullyParams, gully_summary, map_gullies, map_raster
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import gully_summary, map_gullies, map_raster
 from kitegully.gully.sensitivity import gully_sensitivity, sensitivity_table
 from kitegully.io.raster import GridSpec
 

@@ -122,7 +122,8 @@ def test_relief_and_incision_snapping_need_the_detector_parameters():
     assert automatic_head_params("digitised", cfg, z, grid, head_snap="plane") is None
     assert automatic_head_params("digitised", cfg, z, grid, head_snap="relief") == P
     assert automatic_head_params("digitised", cfg, z, grid, head_snap="incision") == P
-    from kitegully.gully.pipeline import GullyParams, map_gullies
+    from kitegully.gully.params import GullyParams
+    from kitegully.gully.pipeline import map_gullies
 
     with pytest.raises(ValueError, match="incision-map parameters"):
         map_gullies(z, grid, np.array([0.5]), np.array([0.5]), GullyParams(head_snap="relief"), workers=1)
@@ -132,7 +133,8 @@ def test_posterior_snap_in_the_pipeline_lands_in_the_channel_and_not_in_a_gap():
     """map_gullies with ``head_snap: posterior``: the relief spread is measured on the DSM (ρ) and
     the head digitised 2 m upslope of the shallow channel starts its path in the channel; the snap
     reads observed cells only, as ``relief`` does."""
-    from kitegully.gully.pipeline import GullyParams, map_gullies
+    from kitegully.gully.params import GullyParams
+    from kitegully.gully.pipeline import map_gullies
 
     grid, z, xs, ys = steepening_slope_with_a_shallow_channel(kappa=0.0)
     X, Y = np.meshgrid(xs - xs[0], ys - ys[-1])
@@ -148,7 +150,8 @@ def test_posterior_snap_in_the_pipeline_lands_in_the_channel_and_not_in_a_gap():
 def test_relief_snap_never_lands_in_a_gap_of_the_dsm():
     # the DSM lost a 1.5-2 m disc over the channel next to the digitised head: the hole-filled surface
     # there is interpolated, so the snapping reads the relief of the observed cells only
-    from kitegully.gully.pipeline import GullyParams, map_gullies
+    from kitegully.gully.params import GullyParams
+    from kitegully.gully.pipeline import map_gullies
 
     grid, z, xs, ys = steepening_slope_with_a_shallow_channel(kappa=0.0)
     X, Y = np.meshgrid(xs - xs[0], ys - ys[-1])
@@ -184,7 +187,7 @@ def test_posterior_snap_weighs_the_digitising_error_against_the_relief():
     with pytest.raises(ValueError, match="relief noise"):
         snap_heads(z, grid, hx, hy, 6.0, "posterior", relief=relief)
     from kitegully import InputError
-    from kitegully.gully.pipeline import GullyParams
+    from kitegully.gully.params import GullyParams
 
     with pytest.raises(InputError, match="head_snap_radius_m"):
         GullyParams(head_snap="posterior", head_snap_radius_m=0.0)

@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from kitegully.gully.heads import HeadDetectionParams
-from kitegully.gully.pipeline import GullyParams, map_gullies, remove_objects, tracing_surface
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
+from kitegully.gully.surface import remove_objects, tracing_surface
 from kitegully.io.raster import GridSpec
 
 CELL = 0.2

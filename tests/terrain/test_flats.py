@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.ndimage as ndi
 
-from kitegully.gully.pipeline import GullyParams
+from kitegully.gully.params import GullyParams
 from kitegully.terrain import interpolate_holes, priority_flood_fill, trace_paths
 from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.flow import D8_OFFSETS, END_MERGE, END_OUTLET, END_PIT

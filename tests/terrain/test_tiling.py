@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from kitegully import InputError
-from kitegully.gully.pipeline import GullyParams, map_gullies, tracing_surface
+from kitegully.gully.params import GullyParams
+from kitegully.gully.pipeline import map_gullies
+from kitegully.gully.surface import tracing_surface
 from kitegully.io.raster import GridSpec, read_raster, write_raster
 from kitegully.seeds import rng_for
 from kitegully.terrain.fill import priority_flood_fill

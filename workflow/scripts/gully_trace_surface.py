@@ -10,7 +10,7 @@ import numpy as np
 from kitegully.gully import GullyParams, tracing_surface
 from kitegully.gully.heads import automatic_head_params
 from kitegully.gully.inputs import check_dem, read_orthophoto_on_grid
-from kitegully.gully.pipeline import crowns_on
+from kitegully.gully.surface import crowns_on
 from kitegully.io.raster import read_raster, write_raster
 from kitegully.logs import setup_script_logging
 from kitegully.memory import keep_freed_memory

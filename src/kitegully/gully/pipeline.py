@@ -7,161 +7,30 @@ import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Callable
 
 import geopandas as gpd
 import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
-from kitegully.gully.crowns import CrownParams, crown_mask, excess_green, hidden_reaches, interpolate_under
+from kitegully.gully.crowns import hidden_reaches
 from kitegully.gully.depth import depth_map
 from kitegully.gully.heads import HeadDetectionParams, channel_entries, detect_heads
-from kitegully.gully.relief import head_scale_ground, head_scale_relief, incision_map, standing_above, visible_incisions
+from kitegully.gully.relief import head_scale_ground, head_scale_relief, incision_map, visible_incisions
 from kitegully.gully.inlets import edge_inlets, route_courses
 from kitegully.gully.mapping import buffer_mask, final_map, gully_polygons
-from kitegully import InputError
-from kitegully.gully.network import HEAD_SNAPS, GullyNetwork, network_lines, snap_heads, trace_network
+from kitegully.gully.network import GullyNetwork, network_lines, snap_heads, trace_network
+from kitegully.gully.params import GullyParams
 from kitegully.gully.patches import depth_patches
+from kitegully.gully.surface import crowns_on, hole_filled, tracing_surface
 from kitegully.io.raster import GridSpec, read_grid, read_raster
 from kitegully.terrain.fill import priority_flood_fill
 from kitegully.terrain.flats import flow_directions
 from kitegully.terrain.flow import d8_directions
 from kitegully.terrain.least_cost import least_cost_directions
-from kitegully.terrain.holes import interpolate_holes
-from kitegully.terrain.smoothing import gaussian_smooth_fft
 
 log = logging.getLogger(__name__)
-
-#: Ways of routing flow across filled depressions and flats (``gully.flat_routing``).
-FLAT_ROUTINGS = ("resolve", "epsilon", "least_cost")
-
-
-@dataclass(frozen=True)
-class GullyParams:
-    """Method parameters (the ``gully:`` config section; defaults are the paper's).
-
-    Attributes
-    ----------
-    sigma_m : float
-        Gaussian σ of the smoothing (m); 10 m in the paper.
-    truncate_sigmas : float
-        Kernel radius and FFT zero padding in σ ([I] 4).
-    depth_threshold_m : float
-        Depth threshold (m); 0.25 m.
-    min_patch_volume_m3 : float
-        Minimum patch volume (m³); 1 m³.
-    connectivity : int
-        Patch connectivity, 4 or 8 ([I] 8).
-    flat_routing : str
-        How flow crosses filled depressions and flats ([I] ``resolve``): ``resolve`` =
-        priority-flood fill without gradient (ε = 0), then flat resolution (Barnes et al.
-        2014: towards lower and away from higher terrain, paths converge); ``epsilon`` =
-        priority-flood+ε fill, steepest descent on it (paths cross flats on parallel lines);
-        ``least_cost`` = directions by least-cost search on the unfilled tracing surface
-        (:func:`kitegully.terrain.least_cost.least_cost_directions`, after GRASS
-        ``r.watershed``): a depression is left through the same spill cell as the fill, but
-        the route inside it follows its lowest cells (a channel under a filled reach) instead
-        of the flat's shape; the ε = 0 fill is still made for the other steps.
-    fill_epsilon_m : float
-        Priority-flood ε (m per cell) of ``flat_routing: epsilon`` ([I] 1e-4).
-    water_min_area_m2 : float or None
-        Interior nodata holes of the DEM at least this large are open water (no
-        photogrammetric match on water): they are not interpolated, so the traced network
-        ends at their shore like at the DEM edge ([I] 2500 m² = 0.25 ha); ``None``
-        interpolates every interior hole.
-    head_snap : str
-        Where a digitised head is moved to (:data:`kitegully.gully.network.HEAD_SNAPS`):
-        ``lowest`` cell, ``deepest`` cell of the depth map, nearest cell of a kept
-        depth ``patch``, lowest cell below the local slope ``plane`` (of the smoothed
-        DEM), or nearest cell of a visible ``incision`` (the automatic detector's incision
-        map, so it needs the ``automatic_heads`` parameters), within ``head_snap_radius_m``
-        (see :func:`kitegully.gully.network.snap_heads`), or deepest cell of the head-scale
-        ``relief`` below the ground surface (the same map, before its threshold).
-    head_snap_radius_m : float
-        Search radius of the head snapping (m), e.g. 3× the digitising SD of the heads (P(r ≤ 3σ) = 1 − e^(−4.5) ≈ 99 % for a 2-D Gaussian error).
-    trace_smoothing_m : float
-        Gaussian σ (m) of a smoothing of the DEM used only for the flow tracing (0 = trace
-        on the DEM itself); the depth map always uses the raw DEM.
-    trace_ground : bool
-        Trace on the ground, not on the objects standing on it ([I] ``true`` on a
-        photogrammetric DSM): cells of the tracing surface standing more than
-        ``relief_k``·max(σ_z, ρ) above the ground surface (:func:`kitegully.gully.relief.ground_surface`,
-        the automatic detector's; σ_z the DSM noise at the checkpoints, ρ the surface's
-        head-scale micro-relief) are shrubs, trees or hedgerows and take the ground
-        surface's elevation (a progressive-morphological-filter step, Zhang et al. 2003,
-        with the elevation threshold from the DSM's own noise). Water runs on the soil
-        under a shrub: on the DSM a 1 m shrub crown over a gully floor is a 1 m dam, and
-        the steepest-descent path goes round it, down the field beside the gully, or
-        spills from the depression the fill makes behind it. Needs ``gully.automatic_heads``.
-        ``false`` = trace on the DSM (the DTM of a lidar or TLS survey has no objects).
-        Measured worse over the six ensemble DSMs (digitised good fit 77.9 → 68.6 % mean):
-        the crown hides the incision from the depth map too, so the paths under it are
-        clipped from the map, and the ground surface lowers gully rims; hence off by default.
-    buffer_m : float
-        Buffer around the network (m); 15 m.
-    crowns : CrownParams
-        Shrub and tree crowns seen in the orthophoto (``gully.crowns``, optional, off by
-        default; :mod:`kitegully.gully.crowns`): the tracing surface under them is the
-        harmonic interpolation of the DSM around them, and traced reaches hidden by them
-        between two mapped reaches count as mapped. Needs the orthophoto and
-        ``gully.automatic_heads``.
-    edge_inlets : bool
-        Also trace from where a channel enters the DEM across its outer edge
-        (:mod:`kitegully.gully.inlets`; optional, off by default): a depth patch crossing
-        the edge band (2σ, ``sigma_m``) whose path from the band's end stays in the patches
-        another 2σ inward, at least half of that way and of its course across the band
-        incised at the head scale (needs ``gully.automatic_heads``); paths follow that course
-        from two cells inside the edge. Such a channel's head lies outside the survey, so
-        nobody can digitise it.
-    """
-
-    sigma_m: float = 10.0
-    truncate_sigmas: float = 4.0
-    depth_threshold_m: float = 0.25
-    min_patch_volume_m3: float = 1.0
-    connectivity: int = 8
-    flat_routing: str = "resolve"
-    fill_epsilon_m: float = 1e-4
-    water_min_area_m2: float | None = 2500.0
-    head_snap: str = "lowest"
-    head_snap_radius_m: float = 1.0
-    trace_smoothing_m: float = 0.0
-    buffer_m: float = 15.0
-    trace_ground: bool = False
-    crowns: CrownParams = CrownParams()
-    edge_inlets: bool = False
-
-    @property
-    def needs_ground_surface(self) -> bool:
-        """``crowns`` and ``trace_ground`` stand on the incision map's ground surface and threshold
-        (``gully.automatic_heads``), whatever the heads are."""
-        return self.crowns.enabled or self.trace_ground
-
-    @property
-    def needs_incision_params(self) -> bool:
-        """Rules that read ``gully.automatic_heads`` whatever the heads are: the ground surface's and
-        ``edge_inlets`` (its channels must be incised at the head scale)."""
-        return self.needs_ground_surface or self.edge_inlets
-
-    @classmethod
-    def from_config(cls, cfg: Mapping[str, Any]) -> "GullyParams":
-        """Build from the ``gully:`` config section (keys of the same names; ``trace_ground``,
-        ``crowns`` and ``edge_inlets`` are optional, default off)."""
-        optional = {"trace_ground", "crowns", "edge_inlets"}
-        kw = {k: cfg[k] for k in cls.__dataclass_fields__ if k not in optional or k in cfg}
-        if "crowns" in kw:
-            kw["crowns"] = CrownParams.from_config(kw["crowns"])
-        return cls(**kw)
-
-    def __post_init__(self) -> None:
-        if self.flat_routing not in FLAT_ROUTINGS:
-            raise ValueError(f"flat_routing must be one of {FLAT_ROUTINGS}, got {self.flat_routing!r}")
-        if self.head_snap not in HEAD_SNAPS:
-            raise ValueError(f"head_snap must be one of {HEAD_SNAPS}, got {self.head_snap!r}")
-        if self.head_snap == "posterior" and not self.head_snap_radius_m > 0:
-            raise InputError("gully.head_snap_radius_m: head_snap posterior needs a positive radius "
-                             f"(3 x the heads' digitising SD), got {self.head_snap_radius_m!r}")
 
 
 @dataclass
@@ -250,7 +119,7 @@ def map_gullies(
         (e.g. the rule writes the two float rasters there, O(n) compression that would
         otherwise follow the fill on one core). It must not modify the arrays.
     crown_mask : ndarray bool (H, W), optional
-        The crown mask of ``crowns`` made elsewhere (:func:`crowns_on`; the trace-surface
+        The crown mask of ``crowns`` made elsewhere (:func:`kitegully.gully.surface.crowns_on`; the trace-surface
         job of a large site, whose surface the tiled ``filled`` was made from); then
         ``ortho`` is not needed. A ``filled`` DEM with ``crowns`` needs it: the fill must
         have been made on the surface interpolated under the same crowns.
@@ -507,165 +376,6 @@ def mapped_network(network: GullyNetwork, labels: np.ndarray, grid: GridSpec, pa
         bridged = hidden_reaches(network.cells, network.pos_down, gully, hidden, grid.cell, params.crowns.bridge_max_m)
     lines = network_lines(network, grid, keep=gully if bridged is None else gully | bridged)
     return gully, gully_whole, bridged, lines
-
-
-def hole_filled(dem: np.ndarray, grid: GridSpec, params: GullyParams) -> tuple[np.ndarray, int]:
-    """The DEM with holes smaller than ``water_min_area_m2`` interpolated (larger ones stay NaN: open water).
-
-    Parameters
-    ----------
-    dem : ndarray (H, W) float32
-        The DEM (m), NaN nodata.
-    grid : GridSpec
-    params : GullyParams
-
-    Returns
-    -------
-    z : ndarray (H, W)
-        The hole-filled DEM (heads are snapped and detected on it).
-    n_holes : int
-        Hole cells interpolated.
-    """
-    water_cells = None if params.water_min_area_m2 is None else int(np.ceil(params.water_min_area_m2 / grid.cell**2))
-    return interpolate_holes(dem, water_cells)
-
-
-def crowns_on(dem: np.ndarray, grid: GridSpec, params: GullyParams, incision: HeadDetectionParams, ortho: np.ndarray,
-              workers: int = 1) -> np.ndarray:
-    """The crown mask of ``gully.crowns`` (:func:`kitegully.gully.crowns.crown_mask`) on the DEM grid.
-
-    Crowns are cells green in the orthophoto that stand more than ``relief_k``·max(σ_z, ρ)
-    above the ground surface of the hole-filled DEM (the object threshold of
-    :func:`remove_objects`: the incision threshold mirrored above the ground). O(n log n).
-
-    Parameters
-    ----------
-    dem : ndarray (H, W) float32
-        The DEM (m), NaN nodata.
-    grid : GridSpec
-        Grid of ``dem``.
-    params : GullyParams
-        ``water_min_area_m2`` and ``crowns`` are used.
-    incision : HeadDetectionParams
-        Ground surface and threshold of the crowns' height.
-    ortho : ndarray (3, H, W) float32
-        The orthophoto's R, G, B on the DEM grid (:func:`kitegully.gully.inputs.read_orthophoto_on_grid`).
-    workers : int
-        FFT threads.
-
-    Returns
-    -------
-    ndarray (H, W) bool
-        The crown mask.
-    """
-    zi, _ = hole_filled(dem, grid, params)
-    ref = head_scale_ground(zi, grid.cell, incision, workers)
-    ground, rough = ref.ground, ref.rough
-    thr = incision.relief_k * max(incision.dsm_sigma_z_m, rough)
-    mask, _info = crown_mask(zi, excess_green(ortho), ground, thr, grid.cell, params.crowns)
-    return mask
-
-
-def tracing_surface(
-    dem: np.ndarray, grid: GridSpec, params: GullyParams, workers: int = 1,
-    incision: HeadDetectionParams | None = None,
-    hidden: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """The surface the network is traced on (steps f-g before the fill).
-
-    Holes smaller than ``water_min_area_m2`` are interpolated (larger ones stay NaN: open
-    water), then the surface is smoothed with ``trace_smoothing_m`` when that is > 0, and
-    with ``trace_ground`` the objects standing on the ground are removed
-    (:func:`remove_objects`, with the ``incision`` parameters: ground surface and threshold).
-
-    Parameters
-    ----------
-    dem : ndarray (H, W) float32
-        The DEM (m), NaN nodata.
-    grid : GridSpec
-    params : GullyParams
-    workers : int
-        FFT threads.
-    incision : HeadDetectionParams, optional
-        Ground surface and threshold of ``trace_ground``.
-    hidden : ndarray bool (H, W), optional
-        Crown mask (``gully.crowns``): there the surface is the harmonic interpolation of
-        the hole-filled DEM around it (:func:`kitegully.gully.crowns.interpolate_under`),
-        before the tracing smoothing.
-
-    Returns
-    -------
-    z_heads : ndarray (H, W)
-        The hole-filled DEM (heads are snapped and detected on it).
-    z_trace : ndarray (H, W)
-        The tracing surface (the input of the depression fill).
-    n_holes : int
-        Hole cells interpolated.
-
-    Notes
-    -----
-    O(n log n) (the FFT smoothing); the interpolation of holes is global (a hole may
-    cross any tile border), so a tiled site makes this surface in one job.
-    """
-    zi, n_holes = hole_filled(dem, grid, params)
-    z_trace = zi
-    if hidden is not None:
-        z_trace, n_under = interpolate_under(zi, hidden)
-        log.info("tracing surface: %d cells under crowns interpolated from the DSM around them", n_under)
-    if params.trace_smoothing_m > 0:
-        holes = ~np.isfinite(zi)
-        z_trace = gaussian_smooth_fft(z_trace, params.trace_smoothing_m / grid.cell, truncate=params.truncate_sigmas,
-                                      workers=workers)
-        z_trace[holes] = np.nan
-    if params.trace_ground:
-        if incision is None:
-            raise ValueError("gully.trace_ground needs the incision-map parameters (gully.automatic_heads)")
-        z_trace, n_obj = remove_objects(zi, z_trace, grid.cell, incision, workers)
-        log.info("tracing surface: %d cells (%.2f %%) stand on the ground (objects), traced on the ground surface",
-                 n_obj, 100.0 * n_obj / max(1, int(np.isfinite(zi).sum())))
-    return zi, z_trace, n_holes
-
-
-def remove_objects(z: np.ndarray, z_trace: np.ndarray, cell_m: float, params: HeadDetectionParams,
-                   workers: int = 1) -> tuple[np.ndarray, int]:
-    """The tracing surface with objects standing on the ground replaced by the ground surface.
-
-    A cell is an object where ``z_trace`` stands more than ``relief_k``·max(σ_z, ρ) above
-    :func:`kitegully.gully.relief.ground_surface` of ``z`` (σ_z = ``dsm_sigma_z_m``, ρ the
-    head-scale micro-relief of ``z``, :func:`kitegully.gully.relief.surface_roughness`): the
-    same threshold above the ground as the detector's incision threshold below it (a step
-    of 3 noise SDs, out of the furrows and crop rows). There the ground surface replaces it.
-    O(n log n).
-
-    Parameters
-    ----------
-    z : ndarray (H, W)
-        The hole-filled DEM (m), NaN nodata.
-    z_trace : ndarray (H, W)
-        The tracing surface (m) on the same grid.
-    cell_m : float
-        Cell size (m).
-    params : HeadDetectionParams
-        ``scale_m``, ``slope_window_m``, ``relief_k`` and ``dsm_sigma_z_m`` are used.
-    workers : int
-        FFT threads.
-
-    Returns
-    -------
-    z_trace : ndarray (H, W) float64
-        The tracing surface, objects removed.
-    n_objects : int
-        Cells replaced.
-    """
-    valid = np.isfinite(z)
-    ref = head_scale_ground(z, cell_m, params, workers)
-    ground, rough = ref.ground, ref.rough
-    thr = params.relief_k * max(params.dsm_sigma_z_m, rough)
-    obj = valid & standing_above(z_trace, ground, thr)
-    out = np.array(z_trace, dtype=np.float64, copy=True)
-    out[obj] = ground[obj]
-    log.info("object removal: threshold %.3f m (σ_z %.3f m, ρ %.3f m)", thr, params.dsm_sigma_z_m, rough)
-    return out, int(obj.sum())
 
 
 def new_heads(auto_idx: np.ndarray, grid: GridSpec, heads_x: np.ndarray, heads_y: np.ndarray,

@@ -23,7 +23,7 @@ from kitegully.gully.depth import depth_map
 from kitegully.gully.mapping import buffer_mask, final_map
 from kitegully.gully.network import GullyNetwork, network_lines
 from kitegully.gully.patches import depth_patches
-from kitegully.gully.pipeline import GullyParams
+from kitegully.gully.params import GullyParams
 from kitegully.io.raster import GridSpec
 
 if TYPE_CHECKING:
