@@ -9,9 +9,10 @@ the valley that bounds its lowest mode, bare soil
 (:func:`kitegully.obia.threshold.find_bare_threshold`: the first valley on ``hist_bins``
 bins over the fixed range, as before, then again on the finer re-binned part below it
 while that part is bimodal, with bins no narrower than the index's one-DN step on those
-cells and each side made of unmixed cells: the fine histogram also sums each cell's step and
-counts cells by their local range, :class:`kitegully.obia.threshold.IndexHistogram`).  Segmentation and classification then run per
-tile (segments do not cross tile borders [I]); the tile core is written to the output.
+cells and each side made of unmixed cells: the fine histogram also sums each cell's step
+and counts cells by their local range, :class:`kitegully.obia.threshold.IndexHistogram`).
+Segmentation and classification then run per tile (segments do not cross tile borders
+[I]); the tile core is written to the output.
 Segments most of whose cells are blue-dominant (open water) are left unclassified (255).
 Memory: a few tile-sized arrays.  Cost: O(N log T) for N cells and tiles of T cells.
 """
@@ -358,7 +359,9 @@ def bare_soil_map(ortho_path: str | Path, dsm_path: str | Path, out_path: str | 
     InputError
         Unreadable files, grids that do not fit, ``index: ndvi`` without ``nir_path``.
     """
-    thr = threshold if threshold is not None else global_threshold(site_histogram(ortho_path, dsm_path, params, tile_cells, nir_path), params)
+    thr = threshold
+    if thr is None:
+        thr = global_threshold(site_histogram(ortho_path, dsm_path, params, tile_cells, nir_path), params)
     with open_kite_inputs(ortho_path, dsm_path, nir_path, params, tile_cells) as (ortho, dsm, nir, grid, halo):
         src = str(ortho_path)
         tiles = list(iter_tiles(grid, tile_cells, halo))
