@@ -38,7 +38,7 @@ from kitegully.polygons.evaluation import evaluate_against_truth, regenerate_tab
 from kitegully.polygons.stage import PolygonParams, measure_polygons
 from kitegully.twin.gullies import Gully
 from kitegully.twin.peat_valley import PeatValleyParams, make_peat_valley
-from kitegully.twin.site import centrelines, polygons
+from kitegully.twin.gully_truth import centrelines, polygons
 
 REPO = Path(__file__).resolve().parents[1]
 CRS = "EPSG:32718"

@@ -4,7 +4,8 @@ One concern per module: ``noise`` (hash-based fractal noise, tile-independent),
 ``terrain`` (valley, reservoir, micro-relief), ``gullies`` (network tracing and carving),
 ``landcover`` (plots, tracks, trees, buildings, shrubs, water), ``texture`` (RGB+NIR
 reflectance), ``targets`` (GCP placement and painting), ``survey`` (RTK points, field
-network, digitised heads), ``epochs`` (second-epoch erosion), ``site`` (configuration,
+network, digitised heads), ``epochs`` (second-epoch erosion), ``gully_truth`` (the true
+gullies as vectors: centrelines, polygons, heads), ``site`` (configuration,
 planning and the tiled generator) and ``figures`` (report figures). The flight stage's
 library is here too: ``flight`` (strips, kite and camera motion, GPS), ``render_flight``,
 ``flight_gcps`` and ``flight_stage`` (one function per flight rule).

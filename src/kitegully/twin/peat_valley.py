@@ -29,7 +29,7 @@ from kitegully.config import config_section
 from kitegully.io.raster import GridSpec, Raster
 from kitegully.seeds import rng_for
 from kitegully.twin.gullies import Gully, Segments, carve
-from kitegully.twin.site import centrelines, polygons
+from kitegully.twin.gully_truth import centrelines, polygons
 
 #: Kinds of DEM twin (``dem_twin.kind``).
 KINDS = ("peat_valley",)
