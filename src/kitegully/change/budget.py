@@ -234,6 +234,49 @@ def unstable_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGrou
     return out
 
 
+def stable_candidates(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGroup], shape: tuple[int, int]) -> np.ndarray:
+    """Cells that may serve as stable ground: inside the masks flagged ``stable`` where there are any, else
+    outside the masks flagged ``unstable`` (:func:`unstable_union`).
+
+    A surveyor who knows where the ground did not change and looks like the ground being
+    measured (a track among ploughed fields, a bare patch kept out of the plough) flags
+    those polygons ``stable``: the co-registration and the variogram then use only them,
+    even where an unstable mask covers them too (a kite bare-soil map includes the tracks).
+    Voids and above-ground objects are removed by the caller. The error model's unchanged
+    cells are not restricted (it needs the whole range of terrain).
+
+    Parameters
+    ----------
+    specs : sequence of mapping
+        The budget mask specs; a mask is flagged by a true ``stable`` or ``unstable`` key.
+    groups : sequence of MaskGroup
+        The rasterised groups (:func:`mask_groups`); a flagged mask's union group is used.
+    shape : tuple of int
+        Shape ``(H, W)`` of the grid (cells).
+
+    Returns
+    -------
+    ndarray (H, W) bool
+        The candidate cells.
+
+    Raises
+    ------
+    InputError
+        A mask flagged both stable and unstable.
+    """
+    both = [s["name"] for s in specs if s.get("stable") and s.get("unstable")]
+    if both:
+        raise InputError(f"change.masks: {both[0]} is flagged both stable and unstable; choose one")
+    flagged = {s["name"] for s in specs if s.get("stable")}
+    if not flagged:
+        return ~unstable_union(specs, groups, shape)
+    out = np.zeros(shape, bool)
+    for g in groups:
+        if g.name in flagged:
+            out[g.rows, g.cols] |= g.local
+    return out
+
+
 # ----------------------------------------------------------------------------- variogram
 
 

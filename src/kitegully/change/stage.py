@@ -57,7 +57,8 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     epochs
         Two epoch specs (older first): ``name, dem, nodata, accuracy``.
     masks
-        Budget mask specs: ``name, file, kind, by, classes, values, unstable``.
+        Budget mask specs: ``name, file, kind, by, classes, values, unstable, stable``
+        (:func:`kitegully.change.budget.stable_candidates`).
     heads_path
         GeoPackage of heads digitised at epoch 1, or None.
     params : ChangeParams
@@ -86,7 +87,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     voids = matching_voids((e1, e2), grid, params.min_correlation, params.void_margin_m,
                            valid=np.isfinite(z1) & np.isfinite(z2_raw))
     del z2_raw
-    stable = np.isfinite(z1) & ~unstable & ~voids
+    stable = np.isfinite(z1) & ~voids & bg.stable_candidates(masks, groups, z1.shape)
     if params.stable_max_object_height_m is not None:
         objects = above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m)
         log.info("above-ground objects (> %.2f m): %.1f %% of the grid, left out of stable ground",
