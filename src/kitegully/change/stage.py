@@ -93,7 +93,9 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         log.info("above-ground objects (> %.2f m): %.1f %% of the grid, left out of stable ground",
                  params.stable_max_object_height_m, 100.0 * objects.mean())
         stable &= ~objects
-    log.info("stable ground: %.1f %% of the common grid", 100.0 * stable.mean())
+    inside = [m["name"] for m in masks if m.get("stable")]
+    log.info("stable ground: %.1f %% of the common grid%s", 100.0 * stable.mean(),
+             f" (inside the masks flagged stable only: {', '.join(inside)})" if inside else "")
     z2, coreg = coregister(z1, e2.dem, grid, stable, params)
     dod = dem_of_difference(z1, z2)
     n_void = int((voids & np.isfinite(dod)).sum())
