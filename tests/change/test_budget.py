@@ -2,6 +2,7 @@
 
 import geopandas as gpd
 import numpy as np
+from affine import Affine
 import pytest
 from change.change_synth import CRS, grid, pair
 from scipy import ndimage
@@ -139,10 +140,34 @@ def test_masks_on_a_window_equal_the_whole_grid_cropped(tmp_path, monkeypatch, s
     holes = [h for k, h in enumerate(holes) if all(Polygon(h).disjoint(Polygon(o)) for o in holes[:k])]
     outer = [(x0 - 30, y0 + 30), (x0 + g.width * c + 30, y0 + 25), (x0 + g.width * c + 20, y0 - g.height * c - 30), (x0 - 25, y0 - g.height * c - 20)]
     gpd.GeoDataFrame({"k": [1]}, geometry=[Polygon(outer, holes)], crs=CRS).to_file(tmp_path / "big.gpkg")
-    whole = features.rasterize([(Polygon(outer, holes), 1)], out_shape=(g.height, g.width), transform=g.transform, fill=0, dtype="uint8").astype(bool)
+    shifted = Affine.translation(bg.TIE_SHIFT_M, -bg.TIE_SHIFT_M) * g.transform  # each centre tested 0.1 mm east, south
+    whole = features.rasterize([(Polygon(outer, holes), 1)], out_shape=(g.height, g.width), transform=shifted, fill=0, dtype="uint8").astype(bool)
     spec = [{"name": "bare", "file": str(tmp_path / "big.gpkg"), "by": "k"}]
     monkeypatch.setattr(bg, "SPLIT_VERTICES", split_vertices)    # 20: the grid is halved down to 64 cells
     for r0, c0, h, w in ((0, 0, g.height, g.width), (7, 11, 33, 41), (g.height - 20, g.width - 25, 20, 25)):
         groups = bg.mask_groups(spec, g.window(r0, c0, h, w))
         np.testing.assert_array_equal(groups[1].mask, whole[r0:r0 + h, c0:c0 + w])
         np.testing.assert_array_equal(groups[2].mask, whole[r0:r0 + h, c0:c0 + w])
+
+
+@pytest.mark.parametrize("split_vertices", [50_000, 20])
+def test_polygon_edges_through_cell_centres_are_decided_alike_in_every_window(tmp_path, monkeypatch, split_vertices):
+    """A mask polygonised from a raster of half the cell (the kite bare-soil map on the DoD grid) has edges through
+    cell centres; every window, split or not, decides those centres as the whole grid does."""
+    from shapely.geometry import box
+    from shapely.ops import unary_union
+    g, *_ = pair(SD)
+    x0, y0, half = g.x0, g.y0, g.cell / 2
+    rng = rng_for(7, "test", "ties")
+    fine = rng.random((2 * g.height, 2 * g.width)) < 0.5  # a half-cell raster: its edges run through the centres
+    fine = np.kron(rng.random((g.height // 5, g.width // 5)) < 0.5, np.ones((10, 10), bool)) ^ (fine & (rng.random(fine.shape) < 0.05))
+    r, c = np.nonzero(fine)
+    poly = unary_union([box(x0 + cc * half, y0 - (rr + 1) * half, x0 + (cc + 1) * half, y0 - rr * half) for rr, cc in zip(r, c)])
+    gpd.GeoDataFrame({"k": [1]}, geometry=[poly], crs=CRS).to_file(tmp_path / "fine.gpkg")
+    spec = [{"name": "bare", "file": str(tmp_path / "fine.gpkg"), "by": None}]
+    monkeypatch.setattr(bg, "SPLIT_VERTICES", split_vertices)
+    whole = bg.mask_groups(spec, g)[1].mask
+    assert 0.2 < whole.mean() < 0.8
+    for r0, c0, h, w in ((7, 11, 33, 41), (0, 100, 200, 100), (123, 0, 77, 200), (50, 50, 101, 99)):
+        np.testing.assert_array_equal(bg.mask_groups(spec, g.window(r0, c0, h, w))[1].mask, whole[r0:r0 + h, c0:c0 + w])
+

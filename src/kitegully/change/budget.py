@@ -32,6 +32,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import pandas as pd
 import shapely
+from affine import Affine
 from rasterio import features
 from scipy import optimize
 from scipy.spatial.distance import pdist
@@ -114,9 +115,17 @@ def _clip(geoms: np.ndarray, grid: GridSpec) -> np.ndarray:
 #: 500 m tile; halving the grid and clipping keeps each call at O(rows · 50 000)).
 SPLIT_VERTICES = 50_000
 
+#: Offset (m, east and south) of the point each cell is tested at against the polygons [I]. Polygons made from a
+#: finer raster (the kite bare-soil map: 0.1 m cells on a 0.2 m DoD grid) have edges through the DoD's cell
+#: centres, and GDAL settles a centre lying exactly on an edge differently in different windows (a tile, a half of
+#: a split grid, the whole grid: 460 stable cells of the full-size corner). 0.1 mm is far above the rounding of
+#: projected coordinates (~1e-10 m) and far below any cell, so every window decides alike.
+TIE_SHIFT_M = 1e-4
+
 
 def _rasterise(geoms: Sequence[Any], grid: GridSpec) -> np.ndarray:
-    """Cells of ``grid`` whose centres lie inside any of ``geoms`` (GDAL's rasterize, no all-touched).
+    """Cells of ``grid`` whose centres lie inside any of ``geoms`` (GDAL's rasterize, no all-touched; each centre
+    tested :data:`TIE_SHIFT_M` east and south of itself, so that a centre on an edge is decided alike in any window).
 
     Large layers are clipped to the grid, then, while they hold more than
     :data:`SPLIT_VERTICES` vertices and the grid is larger than 64 cells, the grid is halved
@@ -138,7 +147,8 @@ def _rasterise(geoms: Sequence[Any], grid: GridSpec) -> np.ndarray:
             out[:, :w] = _rasterise(geoms, grid.window(0, 0, grid.height, w))
             out[:, w:] = _rasterise(geoms, grid.window(0, w, grid.height, grid.width - w))
         return out
-    return features.rasterize(((g, 1) for g in geoms), out_shape=out.shape, transform=grid.transform,
+    shifted = Affine.translation(TIE_SHIFT_M, -TIE_SHIFT_M) * grid.transform
+    return features.rasterize(((g, 1) for g in geoms), out_shape=out.shape, transform=shifted,
                               fill=0, dtype="uint8").astype(bool)
 
 
