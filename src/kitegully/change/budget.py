@@ -236,7 +236,13 @@ def unstable_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGrou
     ndarray (H, W) bool
         Cells of the flagged masks.
     """
-    flagged = {s["name"] for s in specs if s.get("unstable")}
+    return _flagged_union(specs, groups, shape, "unstable")
+
+
+def _flagged_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGroup], shape: tuple[int, int],
+                   flag: str) -> np.ndarray:
+    """Union of the union groups of the masks whose spec has a true ``flag`` key."""
+    flagged = {s["name"] for s in specs if s.get(flag)}
     out = np.zeros(shape, bool)
     for g in groups:
         if g.name in flagged:
@@ -277,14 +283,9 @@ def stable_candidates(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskG
     both = [s["name"] for s in specs if s.get("stable") and s.get("unstable")]
     if both:
         raise InputError(f"change.masks: {both[0]} is flagged both stable and unstable; choose one")
-    flagged = {s["name"] for s in specs if s.get("stable")}
-    if not flagged:
+    if not any(s.get("stable") for s in specs):
         return ~unstable_union(specs, groups, shape)
-    out = np.zeros(shape, bool)
-    for g in groups:
-        if g.name in flagged:
-            out[g.rows, g.cols] |= g.local
-    return out
+    return _flagged_union(specs, groups, shape, "stable")
 
 
 # ----------------------------------------------------------------------------- variogram
