@@ -21,16 +21,11 @@ import yaml
 from kitegully.change.evaluation import evaluate_change
 from kitegully.change.example import CONTROLLED_EPOCH1, export_epoch
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
-from kitegully.change.stage import detect_change
+from kitegully.change.stage import detect_change, output_paths
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "benchmarks" / "out" / "change_controlled"
 
-FILES = dict(dod="dod.tif", sigma_dod="sigma_dod.tif", stable="stable_ground.tif", coregistration="coregistration.csv",
-             sigma="sigma.csv", thresholds="thresholds.csv", variogram="variogram.csv", budget="budget.csv",
-             headcuts="headcut_retreat.csv", widening="widening.csv", dod_map="dod_map.png", budget_bars="budget_bars.png",
-             histogram="dod_histogram.png", variogram_png="variogram.png",
-             **{f"thresholded_{m}": f"dod_thresholded_{m}.tif" for m in THRESHOLD_METHODS})
 EVAL = dict(detection="detection.csv", budget_vs_truth="budget_vs_truth.csv", headcuts_vs_truth="headcut_retreat_vs_truth.csv",
             moritani_plots="moritani_plots.csv", summary="evaluation_summary.csv",
             widening_vs_truth="widening_vs_truth.csv")
@@ -47,7 +42,7 @@ def main() -> None:
     # not the site's photogrammetric epoch 2, so that both epochs' errors follow the model
     ch["epochs"][1].update(dem="results/kamech_dem_change/inputs/epoch2_dsm.tif", correlation=None)
     ch["epochs"][0]["correlation"] = None
-    out = {k: str(OUT / v) for k, v in FILES.items()}
+    out = output_paths(OUT)
     params = ChangeParams.from_config({k: ch[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "widening")},
                                       seed=cfg["seed"])
     detect_change(ch["epochs"], ch["masks"], ch["heads_file"], params, out, cfg["site"]["crs"], ch["figure"],

@@ -38,10 +38,11 @@ from rasterio import features
 from shapely.geometry import shape
 
 from kitegully.change.dod import resample
-from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
-from kitegully.change.stage import OUTPUTS, detect_change
+from kitegully.change.params import ChangeParams
+from kitegully.change.stage import detect_change, output_paths
 from kitegully.config import load_yaml, merge_config
 from kitegully.io.raster import Raster
+from kitegully.io.tables import write_table
 
 REPO = Path(__file__).resolve().parents[1]
 EDGE_INSET_M = 0.5  # [I] an operator draws inside the track's visible edge
@@ -59,14 +60,6 @@ def digitised_tracks(landcover: Path, classes: Path, crs: str) -> gpd.GeoDataFra
     return gpd.GeoDataFrame({"track_id": range(1, len(geoms) + 1)}, geometry=geoms, crs=crs)
 
 
-def _outputs(d: Path) -> dict[str, str]:
-    names = {k: f"{k}.{'tif' if k in ('dod', 'sigma_dod', 'stable') else 'png' if k in ('dod_map', 'budget_bars', 'histogram', 'variogram_png') else 'csv'}"
-             for k in OUTPUTS}
-    names.update({f"thresholded_{m}": f"thr_{m}.tif" for m in THRESHOLD_METHODS})
-    d.mkdir(parents=True, exist_ok=True)
-    return {k: str(d / v) for k, v in names.items()}
-
-
 def run(results: Path, cfg: dict, masks: list[dict], work: Path) -> dict:
     """One detect_change run and its whole-site score."""
     change = cfg["change"]
@@ -76,7 +69,7 @@ def run(results: Path, cfg: dict, masks: list[dict], work: Path) -> dict:
                "correlation": str(results / "dense" / ("" if n == 1 else "epoch2") / "correlation.tif"),
                "accuracy": {"checkpoints": str(results / "inputs" / ("" if n == 1 else "epoch2") / "checkpoints.csv")}}
               for n in (1, 2)]
-    out = _outputs(work)
+    out = output_paths(work)
     detect_change(epochs, masks, None, params, out, site_crs=cfg["site"]["crs"])
     dod_r = Raster.read(out["dod"])
     t1 = Raster.read(str(results / "twin" / "truth" / "dsm.tif"))
@@ -119,12 +112,9 @@ def main(argv: list[str] | None = None) -> int:
             rows.append({"stable ground": name, **run(res, cfg, m, Path(tmp) / name.split(":")[0].replace(" ", "_"))})
         rows[-1]["tracks"] = len(tracks)
     table = pd.DataFrame(rows)
-    text = table.to_markdown(index=False, floatfmt=".4g")
-    print(text)
+    print(table.to_markdown(index=False, floatfmt=".4g"))
     if a.out is not None:
-        a.out.parent.mkdir(parents=True, exist_ok=True)
-        table.to_csv(a.out.with_suffix(".csv"), index=False)
-        a.out.with_suffix(".md").write_text(text + "\n")
+        write_table(table, a.out.with_suffix(".csv"))
     return 0
 
 

@@ -36,10 +36,11 @@ import pandas as pd
 import yaml
 
 from kitegully.io.raster import read_raster
+from kitegully.io.tables import write_table
 from kitegully.obia.kite import bare_soil_map, histogram_edges, site_histogram
 from kitegully.obia.scene import ObiaParams
 from kitegully.obia.stage import kite_accuracy
-from kitegully.obia.threshold import IndexHistogram, ThresholdResult, find_bare_threshold, find_thresholds
+from kitegully.obia.threshold import IndexHistogram, ThresholdResult, find_bare_threshold
 
 REPO = Path(__file__).resolve().parents[1]
 log = logging.getLogger("obia_descent")
@@ -47,14 +48,10 @@ log = logging.getLogger("obia_descent")
 
 def thresholds(hist: IndexHistogram, params: ObiaParams) -> dict[str, ThresholdResult]:
     """The four thresholds of one site histogram, by variant name."""
-    edges = histogram_edges(params)
-    args = (hist.counts, edges, params.hist_bins, params.min_class_fraction, params.max_valley_ratio)
-    group = hist.counts.size // params.hist_bins
-    coarse = hist.counts.reshape(params.hist_bins, group).sum(axis=1)
-    centres = 0.5 * (edges[::group][:-1] + edges[::group][1:])
+    args = (hist.counts, histogram_edges(params), params.hist_bins, params.min_class_fraction, params.max_valley_ratio)
     steps = hist.step_sums if hist.quantised else None
     return {
-        "paper valley": find_thresholds(coarse, centres, params.min_class_fraction, params.max_valley_ratio),
+        "paper valley": find_bare_threshold(*args, max_splits=0),  # the first split: the paper's two-peak valley
         "lowest mode, no tests": find_bare_threshold(*args),
         "floor only": find_bare_threshold(*args, fine_steps=steps),
         "stage": find_bare_threshold(*args, fine_steps=steps, fine_by_range=hist.by_range),
@@ -105,12 +102,9 @@ def main(argv: list[str] | None = None) -> int:
     params = ObiaParams.from_config({**base.get("obia", {}), **cfg.get("obia", {})})
     rows = [r for res in a.results for r in score_site(res, params, cfg["obia"]["kite_scale"], a.tile_cells, a.save_histogram)]
     table = pd.DataFrame(rows)
-    text = table.to_markdown(index=False, floatfmt=".4g")
-    print(text)
+    print(table.to_markdown(index=False, floatfmt=".4g"))
     if a.out is not None:
-        a.out.parent.mkdir(parents=True, exist_ok=True)
-        table.to_csv(a.out.with_suffix(".csv"), index=False)
-        a.out.with_suffix(".md").write_text(text + "\n")
+        write_table(table, a.out.with_suffix(".csv"))
     return 0
 
 

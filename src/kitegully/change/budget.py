@@ -250,7 +250,8 @@ def _flagged_union(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGrou
     return out
 
 
-def stable_candidates(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGroup], shape: tuple[int, int]) -> np.ndarray:
+def stable_candidates(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskGroup], shape: tuple[int, int],
+                      unstable: np.ndarray | None = None) -> np.ndarray:
     """Cells that may serve as stable ground: inside the masks flagged ``stable`` where there are any, else
     outside the masks flagged ``unstable`` (:func:`unstable_union`).
 
@@ -269,6 +270,8 @@ def stable_candidates(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskG
         The rasterised groups (:func:`mask_groups`); a flagged mask's union group is used.
     shape : tuple of int
         Shape ``(H, W)`` of the grid (cells).
+    unstable : ndarray (H, W) bool, optional
+        :func:`unstable_union` of the same masks where the caller has it already.
 
     Returns
     -------
@@ -284,7 +287,7 @@ def stable_candidates(specs: Sequence[Mapping[str, Any]], groups: Sequence[MaskG
     if both:
         raise InputError(f"change.masks: {both[0]} is flagged both stable and unstable; choose one")
     if not any(s.get("stable") for s in specs):
-        return ~unstable_union(specs, groups, shape)
+        return ~(unstable_union(specs, groups, shape) if unstable is None else unstable)
     return _flagged_union(specs, groups, shape, "stable")
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
@@ -35,6 +36,19 @@ log = logging.getLogger(__name__)
 #: Keys of ``out`` that :func:`detect_change` writes (plus ``thresholded_<method>``).
 OUTPUTS = ("dod", "sigma_dod", "stable", "coregistration", "sigma", "thresholds", "variogram", "budget",
            "headcuts", "widening", "dod_map", "budget_bars", "histogram", "variogram_png")
+
+#: File names of :func:`detect_change`'s products in ``results/<site>/change/`` (the ``change_detect`` rule's).
+OUTPUT_FILES = dict(dod="dod.tif", sigma_dod="sigma_dod.tif", stable="stable_ground.tif", coregistration="coregistration.csv",
+                    sigma="sigma.csv", thresholds="thresholds.csv", variogram="variogram.csv", budget="budget.csv",
+                    headcuts="headcut_retreat.csv", widening="widening.csv", dod_map="dod_map.png",
+                    budget_bars="budget_bars.png", histogram="dod_histogram.png", variogram_png="variogram.png",
+                    **{f"thresholded_{m}": f"dod_thresholded_{m}.tif" for m in THRESHOLD_METHODS})
+
+
+def output_paths(folder: str | Path) -> dict[str, str]:
+    """:func:`detect_change`'s ``out`` for writing its products under ``folder`` (created) with the rule's file names."""
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    return {k: str(Path(folder) / v) for k, v in OUTPUT_FILES.items()}
 
 
 def read_heads(path: str) -> pd.DataFrame:
@@ -87,7 +101,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
     voids = matching_voids((e1, e2), grid, params.min_correlation, params.void_margin_m,
                            valid=np.isfinite(z1) & np.isfinite(z2_raw))
     del z2_raw
-    stable = np.isfinite(z1) & ~voids & bg.stable_candidates(masks, groups, z1.shape)
+    stable = np.isfinite(z1) & ~voids & bg.stable_candidates(masks, groups, z1.shape, unstable)
     if params.stable_max_object_height_m is not None:
         objects = above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m)
         log.info("above-ground objects (> %.2f m): %.1f %% of the grid, left out of stable ground",

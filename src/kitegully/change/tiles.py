@@ -308,7 +308,7 @@ def stable_tile(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[str
     groups = bg.mask_groups(masks, gw)
     unstable = bg.unstable_union(masks, groups, z1.shape)
     unchanged = np.isfinite(z1) & ~unstable & ~voids
-    stable = np.isfinite(z1) & ~voids & bg.stable_candidates(masks, groups, z1.shape)
+    stable = np.isfinite(z1) & ~voids & bg.stable_candidates(masks, groups, z1.shape, unstable)
     if params.stable_max_object_height_m is not None:
         stable &= ~above_ground(z1, grid.cell, params.stable_object_window_m, params.stable_max_object_height_m,
                                 fill=plan["z1_max"])
