@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     methods = {k: ch[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "quality", "widening") if k in ch}
     obia = {k: cfg["obia"][k] for k in METHOD_KEYS}
     tile_cells = int(cfg["obia"]["kite_scale"]["tile_cells"])
-    from kitegully.change.stage import OUTPUTS
+    from kitegully.change.params import OUTPUTS
     from kitegully.terrain.tiling import TilingParams
 
     names = TilingParams(**tiling).names()

@@ -22,7 +22,8 @@ from shapely.geometry import LineString, Point, box
 
 from change.change_synth import CRS, bump, noise, terrain, write, xy
 from kitegully.change.params import THRESHOLD_METHODS, ChangeParams
-from kitegully.change.stage import OUTPUTS, detect_change
+from kitegully.change.params import OUTPUTS
+from kitegully.change.stage import detect_change
 from kitegully.change.tiles import change_tile, coregister_tiles, halos, merge_change, plan_change, stable_tile
 from kitegully.io.raster import GridSpec, Raster
 from kitegully.terrain.tiling import TilingParams

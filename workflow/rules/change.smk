@@ -46,23 +46,8 @@ if "change" in config:
         if _missing_truth:
             raise WorkflowError(f"Invalid configuration: change.evaluation.{_missing_truth[0]}: null means the twin's own "
                                 "truth, which only a twin with change.epochs null has; name the GeoTIFF")
-    CHANGE_METHODS = ["min_lod", "propagated", "probabilistic", "coherence"]
+    from kitegully.change.params import OUTPUT_FILES as CHANGE_OUTPUT_FILES, THRESHOLD_METHODS as CHANGE_METHODS
     CHANGE_CAT = "Change between epochs"
-
-    def change_inputs(wildcards=None):
-        files = {f"dem{i + 1}": e["dem"] for i, e in enumerate(CHANGE["epochs"])}
-        for i, e in enumerate(CHANGE["epochs"]):
-            for k in ("error_raster", "checkpoints"):
-                if e["accuracy"].get(k):
-                    files[f"{k}{i + 1}"] = e["accuracy"][k]
-            if e.get("correlation"):
-                files[f"correlation{i + 1}"] = e["correlation"]
-        files.update({f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]})
-        if CHANGE["heads_file"]:
-            files["heads"] = CHANGE["heads_file"]
-        if CHANGE.get("sections_file"):
-            files["sections"] = CHANGE["sections_file"]
-        return files
 
     CHANGE_METHOD_KEYS = ("coregistration", "thresholds", "budget", "headcuts", "quality", "widening")
     CHANGE_PARAMS_METHODS = {k: CHANGE[k] for k in CHANGE_METHOD_KEYS if k in CHANGE}
@@ -93,6 +78,18 @@ if "change" in config:
         if CHANGE.get("sections_file"):
             files["sections"] = CHANGE["sections_file"]
         return files
+
+    def change_inputs(wildcards=None):
+        return {**change_epoch_inputs(), **change_mask_inputs(), **change_feature_inputs()}
+
+    # The products' file names are the library's (kitegully.change.params.OUTPUT_FILES); these are shown in the report.
+    CHANGE_CAPTIONS = {"coregistration": "change_coregistration", "sigma": "change_sigma", "budget": "change_budget",
+                       "dod_map": "change_dod_map", "budget_bars": "change_budget_bars", "histogram": "change_histogram",
+                       "variogram_png": "change_variogram"}
+
+    def change_outputs():
+        return {key: report(result("change", name), caption=caption(CHANGE_CAPTIONS[key]), category=CHANGE_CAT)
+                if key in CHANGE_CAPTIONS else result("change", name) for key, name in CHANGE_OUTPUT_FILES.items()}
 
     if CHANGE_TILED:
         from kitegully.terrain.tiling import TilingParams as _ChangeTilingParams
@@ -197,21 +194,7 @@ if "change" in config:
                 plan=result("change", "tiles/plan.json"),
                 coreg=result("change", "tiles/coregistration.json"),
             output:
-                dod=result("change", "dod.tif"),
-                sigma_dod=result("change", "sigma_dod.tif"),
-                stable=result("change", "stable_ground.tif"),
-                **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
-                coregistration=report(result("change", "coregistration.csv"), caption=caption("change_coregistration"), category=CHANGE_CAT),
-                sigma=report(result("change", "sigma.csv"), caption=caption("change_sigma"), category=CHANGE_CAT),
-                thresholds=result("change", "thresholds.csv"),
-                variogram=result("change", "variogram.csv"),
-                budget=report(result("change", "budget.csv"), caption=caption("change_budget"), category=CHANGE_CAT),
-                headcuts=result("change", "headcut_retreat.csv"),
-                widening=result("change", "widening.csv"),
-                dod_map=report(result("change", "dod_map.png"), caption=caption("change_dod_map"), category=CHANGE_CAT),
-                budget_bars=report(result("change", "budget_bars.png"), caption=caption("change_budget_bars"), category=CHANGE_CAT),
-                histogram=report(result("change", "dod_histogram.png"), caption=caption("change_histogram"), category=CHANGE_CAT),
-                variogram_png=report(result("change", "variogram.png"), caption=caption("change_variogram"), category=CHANGE_CAT),
+                **change_outputs(),
             params:
                 epochs=CHANGE["epochs"],
                 heads_file=CHANGE["heads_file"],
@@ -237,27 +220,13 @@ if "change" in config:
             input:
                 unpack(change_inputs),
             output:
-                dod=result("change", "dod.tif"),
-                sigma_dod=result("change", "sigma_dod.tif"),
-                stable=result("change", "stable_ground.tif"),
-                **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
-                coregistration=report(result("change", "coregistration.csv"), caption=caption("change_coregistration"), category=CHANGE_CAT),
-                sigma=report(result("change", "sigma.csv"), caption=caption("change_sigma"), category=CHANGE_CAT),
-                thresholds=result("change", "thresholds.csv"),
-                variogram=result("change", "variogram.csv"),
-                budget=report(result("change", "budget.csv"), caption=caption("change_budget"), category=CHANGE_CAT),
-                headcuts=result("change", "headcut_retreat.csv"),
-                widening=result("change", "widening.csv"),
-                dod_map=report(result("change", "dod_map.png"), caption=caption("change_dod_map"), category=CHANGE_CAT),
-                budget_bars=report(result("change", "budget_bars.png"), caption=caption("change_budget_bars"), category=CHANGE_CAT),
-                histogram=report(result("change", "dod_histogram.png"), caption=caption("change_histogram"), category=CHANGE_CAT),
-                variogram_png=report(result("change", "variogram.png"), caption=caption("change_variogram"), category=CHANGE_CAT),
+                **change_outputs(),
             params:
                 epochs=CHANGE["epochs"],
                 masks=CHANGE["masks"],
                 heads_file=CHANGE["heads_file"],
                 sections_file=CHANGE.get("sections_file"),
-                methods={k: CHANGE[k] for k in ("coregistration", "thresholds", "budget", "headcuts", "quality", "widening") if k in CHANGE},
+                methods=CHANGE_PARAMS_METHODS,
                 figure=CHANGE["figure"],
                 seed=config["seed"],
                 crs=config["site"]["crs"],
@@ -287,11 +256,11 @@ if "change" in config:
                 headcuts=CHANGE_OUT.headcuts,
                 widening=CHANGE_OUT.widening,
                 **({"sections": CHANGE["sections_file"]} if CHANGE.get("sections_file") else {}),
-                **{f"thresholded_{m}": result("change", f"dod_thresholded_{m}.tif") for m in CHANGE_METHODS},
+                **{f"thresholded_{m}": getattr(CHANGE_OUT, f"thresholded_{m}") for m in CHANGE_METHODS},
                 truth1=CHANGE_EVAL["dem1_truth"],
                 truth2=CHANGE_EVAL["dem2_truth"],
                 **{k: CHANGE_EVAL[k] for k in ("heads1_truth", "heads2_truth", "polygons1_truth", "polygons2_truth") if CHANGE_EVAL.get(k)},
-                **{f"mask_{m['name']}": m["file"] for m in CHANGE["masks"]},
+                **change_mask_inputs(),
                 **({"heads": CHANGE["heads_file"]} if CHANGE["heads_file"] else {}),
             output:
                 detection=report(result("change", "detection.csv"), caption=caption("change_detection"), category=CHANGE_CAT),

@@ -10,6 +10,17 @@ from kitegully.config import config_section
 
 THRESHOLD_METHODS = ("min_lod", "propagated", "probabilistic", "coherence")
 
+#: Keys of ``out`` that :func:`detect_change` writes (plus ``thresholded_<method>``).
+OUTPUTS = ("dod", "sigma_dod", "stable", "coregistration", "sigma", "thresholds", "variogram", "budget",
+           "headcuts", "widening", "dod_map", "budget_bars", "histogram", "variogram_png")
+
+#: File names of :func:`detect_change`'s products in ``results/<site>/change/`` (the change rules' outputs, workflow/rules/change.smk).
+OUTPUT_FILES = dict(dod="dod.tif", sigma_dod="sigma_dod.tif", stable="stable_ground.tif", coregistration="coregistration.csv",
+                    sigma="sigma.csv", thresholds="thresholds.csv", variogram="variogram.csv", budget="budget.csv",
+                    headcuts="headcut_retreat.csv", widening="widening.csv", dod_map="dod_map.png",
+                    budget_bars="budget_bars.png", histogram="dod_histogram.png", variogram_png="variogram.png",
+                    **{f"thresholded_{m}": f"dod_thresholded_{m}.tif" for m in THRESHOLD_METHODS})
+
 
 @dataclass(frozen=True)
 class ChangeParams:

@@ -21,7 +21,7 @@ from kitegully.evaluate.dem import nmad
 from kitegully.change.dod import dem_of_difference, load_epoch, matching_voids, on_common_grid
 from kitegully.change.error_model import SIGMA_FACTOR_TAG, checkpoint_cells, heteroscedastic_sigma
 from kitegully.change.headcuts import COLUMNS as HEADCUT_COLUMNS, measure_headcut_retreat
-from kitegully.change.params import THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
+from kitegully.change.params import OUTPUT_FILES, THRESHOLD_METHODS, ChangeParams  # noqa: F401  (ChangeParams re-exported)
 from kitegully.change.widening import COLUMNS as WIDENING_COLUMNS, measure_widening
 from kitegully.io.raster import Raster
 from kitegully.io.tables import write_table
@@ -32,18 +32,6 @@ if TYPE_CHECKING:
     from kitegully.io.raster import GridSpec
 
 log = logging.getLogger(__name__)
-
-#: Keys of ``out`` that :func:`detect_change` writes (plus ``thresholded_<method>``).
-OUTPUTS = ("dod", "sigma_dod", "stable", "coregistration", "sigma", "thresholds", "variogram", "budget",
-           "headcuts", "widening", "dod_map", "budget_bars", "histogram", "variogram_png")
-
-#: File names of :func:`detect_change`'s products in ``results/<site>/change/`` (the ``change_detect`` rule's).
-OUTPUT_FILES = dict(dod="dod.tif", sigma_dod="sigma_dod.tif", stable="stable_ground.tif", coregistration="coregistration.csv",
-                    sigma="sigma.csv", thresholds="thresholds.csv", variogram="variogram.csv", budget="budget.csv",
-                    headcuts="headcut_retreat.csv", widening="widening.csv", dod_map="dod_map.png",
-                    budget_bars="budget_bars.png", histogram="dod_histogram.png", variogram_png="variogram.png",
-                    **{f"thresholded_{m}": f"dod_thresholded_{m}.tif" for m in THRESHOLD_METHODS})
-
 
 def output_paths(folder: str | Path) -> dict[str, str]:
     """:func:`detect_change`'s ``out`` for writing its products under ``folder`` (created) with the rule's file names."""
@@ -77,7 +65,7 @@ def detect_change(epochs: Sequence[Mapping[str, Any]], masks: Sequence[Mapping[s
         GeoPackage of heads digitised at epoch 1, or None.
     params : ChangeParams
     out
-        Output paths by key (:data:`OUTPUTS` and ``thresholded_<method>``).
+        Output paths by key (:data:`kitegully.change.params.OUTPUTS` and ``thresholded_<method>``).
     site_crs
         The DEMs must be in this CRS.
     figure
@@ -237,7 +225,7 @@ def write_products(budget: pd.DataFrame, coreg: Coregistration, sigma_rows: list
     params : ChangeParams
         The stage's parameters.
     out : mapping
-        Output paths by key (:data:`OUTPUTS`).
+        Output paths by key (:data:`kitegully.change.params.OUTPUTS`).
     top_masks : list of str
         See above.
     figure : mapping or None

@@ -531,7 +531,7 @@ def merge_change(tile_files: Sequence[str | Path], plan_json: str | Path, coreg_
     params : ChangeParams
         The stage's parameters.
     out : mapping
-        Output paths by key (:data:`kitegully.change.stage.OUTPUTS` and ``thresholded_<method>``).
+        Output paths by key (:data:`kitegully.change.params.OUTPUTS` and ``thresholded_<method>``).
     site_crs : str or None
         The DEMs must be in this CRS.
     figure : mapping or None
