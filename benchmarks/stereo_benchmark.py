@@ -67,7 +67,8 @@ def true_disparity(rect, rig, xs, ys):
 
 def calibrated_cameras(sigma_px, seed):
     """Cameras recovered by the 3-D field calibration from targets with ``sigma_px`` noise and 0.2 mm field error."""
-    from kitegully.stereo.calibration import ControlField, calibrate_camera, calibration_field, calibration_poses, simulate_observations
+    from kitegully.stereo.calibration import calibrate_camera
+    from kitegully.stereo.control_field import ControlField, calibration_field, calibration_poses, simulate_observations
     from kitegully.stereo.rig import D2H_PIXEL_MM, paper_cameras
 
     rng = rng_for(seed, "stereo_benchmark", "calibration")

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from kitegully.seeds import rng_for
-from kitegully.stereo.calibration import (ControlField, calibrate_camera_weighted, calibration_field, calibration_poses,
-                                          convergent_poses, distortion_precision, simulate_observations)
+from kitegully.stereo.calibration import calibrate_camera_weighted, distortion_precision
+from kitegully.stereo.control_field import (ControlField, calibration_field, calibration_poses, convergent_poses, simulate_observations)
 from kitegully.stereo.rig import D2H_PIXEL_MM, camera_to_table, paper_cameras
 
 REPO = Path(__file__).resolve().parents[1]

@@ -28,8 +28,9 @@ import numpy as np
 import pandas as pd
 
 from kitegully.seeds import rng_for
-from kitegully.stereo.calibration import (ControlField, calibrate_camera_weighted, calibration_field, calibration_poses,
-                                          convergent_poses, distortion_precision, measure_calibration_images)
+from kitegully.stereo.calibration import calibrate_camera_weighted, distortion_precision
+from kitegully.stereo.calibration_targets import measure_calibration_images
+from kitegully.stereo.control_field import ControlField, calibration_field, calibration_poses, convergent_poses
 from kitegully.stereo.rig import D2H_PIXEL_MM, camera_to_table, paper_cameras
 from kitegully.stereo.stage import PREDICTION_ALLOWANCE_PX, _without_io
 

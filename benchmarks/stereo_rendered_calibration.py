@@ -3,9 +3,9 @@ import time
 
 import numpy as np
 
-from kitegully.stereo.calibration import (ControlField, calibrate_camera_weighted, calibration_field, calibration_poses,
-                                          calibration_targets, convergent_poses, distortion_precision, measure_targets,
-                                          projected_disc_offset_px, render_calibration_image)
+from kitegully.stereo.calibration import calibrate_camera_weighted, distortion_precision
+from kitegully.stereo.calibration_targets import (calibration_targets, measure_targets, projected_disc_offset_px, render_calibration_image)
+from kitegully.stereo.control_field import ControlField, calibration_field, calibration_poses, convergent_poses
 from kitegully.stereo.measure import PrintedMarks
 from kitegully.stereo.rig import paper_cameras, D2H_NOMINAL_F_MM, D2H_PIXEL_MM
 from kitegully.seeds import rng_for

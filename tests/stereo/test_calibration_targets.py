@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from kitegully import InputError
-from kitegully.stereo.calibration import (ControlField, calibration_field, calibration_targets, convergent_poses,
-                                          measure_targets, projected_disc_offset_px, render_calibration_image)
+from kitegully.stereo.calibration_targets import (calibration_targets, measure_targets, projected_disc_offset_px, render_calibration_image)
+from kitegully.stereo.control_field import ControlField, calibration_field, convergent_poses
 from kitegully.stereo.rig import D2H_NOMINAL_F_MM, D2H_PIXEL_MM, paper_cameras
 from kitegully.twin.camera import Camera
 

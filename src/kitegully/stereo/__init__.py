@@ -1,8 +1,9 @@
 """Close-range stereo photogrammetry of soil surfaces (Moritani et al. 2010, paper 003).
 
-Library core: the paper's two-camera rig (:mod:`.rig`), inner orientation on a 3-D control
-field (:mod:`.calibration`), relative orientation and epipolar rectification (:mod:`.rectify`),
-coarse-to-fine epipolar matching, triangulation and gridding (:mod:`.matching`), the printed
+Library core: the paper's two-camera rig (:mod:`.rig`), the 3-D control field and its stations
+(:mod:`.control_field`), inner orientation on it (:mod:`.calibration`) from targets measured in
+rendered photographs (:mod:`.calibration_targets`), relative orientation and epipolar
+rectification (:mod:`.rectify`), coarse-to-fine epipolar matching, triangulation and gridding (:mod:`.matching`), the printed
 marks and tie points measured in the photographs (:mod:`.measure`), the paper's accuracy
 measures (:mod:`.metrics`) and a direct projection renderer of textured height fields
 (:mod:`.synth`).

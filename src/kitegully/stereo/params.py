@@ -61,7 +61,7 @@ class StereoParams:
         ``"paper+convergent"`` = those 6 plus ``n_convergent`` convergent, rolled images;
         ``"paper+convergent+corners"`` = those 14 plus ``n_corner`` convergent images turned
         so the field's centre is imaged ``corner_fraction`` of the way to a frame corner.
-        [I] see :func:`kitegully.stereo.calibration.convergent_poses`: near-nadir images
+        [I] see :func:`kitegully.stereo.control_field.convergent_poses`: near-nadir images
         cannot separate f from the camera distance against a 0.2 mm field error, and K1 is
         only told from K2 where targets reach the frame's corners.
     calibration.n_corner, calibration.corner_fraction : int, float
@@ -75,7 +75,7 @@ class StereoParams:
         Target measurement precision (px). [I] 0.1 px: centroids of round targets ~10 px wide.
     calibration.targets : str
         ``"rendered"``: each target a printed disc rendered into the photographs and located
-        (template + weighted centroid, :func:`kitegully.stereo.calibration.measure_targets`), the
+        (template + weighted centroid, :func:`kitegully.stereo.calibration_targets.measure_targets`), the
         bundle weighted with the median centroid σ from the noise; ``"simulated"``: projections +
         N(0, ``target_sigma_px``) (the session-9 model; the calibration test at H = 2–6 m always uses it).
     calibration.target_diameter_mm, calibration.image_noise_dn : float

@@ -38,9 +38,9 @@ from kitegully.georef.similarity import umeyama
 from kitegully.io.figures import new_figure, save_figure
 from kitegully.io.tables import write_table
 from kitegully.seeds import rng_for
-from kitegully.stereo.calibration import (ControlField, calibrate_camera, calibrate_camera_weighted, calibration_field,
-                                          calibration_poses, calibration_table, convergent_poses, distortion_precision,
-                                          measure_calibration_images, simulate_observations)
+from kitegully.stereo.calibration import (calibrate_camera, calibrate_camera_weighted, calibration_table, distortion_precision)
+from kitegully.stereo.calibration_targets import measure_calibration_images
+from kitegully.stereo.control_field import (ControlField, calibration_field, calibration_poses, convergent_poses, simulate_observations)
 from kitegully.stereo.erosion import interrill_rate_kg_m2_h, runoff_detachment_kg_m2_h, settlement_mm
 from kitegully.stereo.evaluation import error_decomposition, matching_residual_px, pair_columns
 from kitegully.stereo.lab import (BOX, TEXTURE_EXTENT, box_grid, cell_truth, frame_marks, nail_positions, relief,
