@@ -241,16 +241,23 @@ def _local_maxima(hist: np.ndarray) -> list[int]:
     return idx
 
 
-def _smooth_to_two_maxima(counts: np.ndarray, max_iter: int) -> tuple[np.ndarray, list[int]]:
-    """Repeat skimage's 3-bin smoothing until fewer than 3 maxima remain."""
+def _smooth_to_two_maxima(counts: np.ndarray, max_iter: int) -> tuple[np.ndarray, list[int], list[tuple[np.ndarray, list[int]]]]:
+    """Repeat skimage's 3-bin smoothing until fewer than 3 maxima remain.
+
+    Returns the final smoothed histogram and its maxima, and every earlier level at which the
+    number of maxima (3 or more) changed, most smoothed first: ``(smoothed, maxima)``.
+    """
     smooth = counts.astype(np.float32)
     maxima: list[int] = []
+    earlier: list[tuple[np.ndarray, list[int]]] = []
     for _ in range(max_iter):
         smooth = ndimage.uniform_filter1d(smooth, 3)
         maxima = _local_maxima(smooth)
         if len(maxima) < 3:
             break
-    return smooth, maxima
+        if not earlier or len(earlier[-1][1]) != len(maxima):
+            earlier.append((smooth.copy(), maxima))
+    return smooth, maxima, earlier[::-1]
 
 
 def _central_bins(counts: np.ndarray, tail_fraction: float) -> tuple[int, int]:
@@ -301,6 +308,17 @@ def find_thresholds(
         The histogram ends at an earlier valley (the part below it, :func:`find_bare_threshold`):
         a rise at its high end is the flank of the mode above that valley, not a mode, so the
         high end is not closed with an empty bin and cannot read as a peak [I].
+
+    Returns
+    -------
+    ThresholdResult
+        The valley and its tests. The histogram is smoothed until two maxima remain (skimage's
+        ``threshold_minimum``, the paper's two-peak valley). Where that split fails a test and
+        the histogram held three or more modes on the way (soil, grass and shrubs: the smoothing
+        that merges the upper two also fills the valley above the narrow soil mode), the valley
+        is the lowest one of the most smoothed earlier level that passes the same tests and whose
+        dip exceeds counting noise (:data:`DIP_SIGMAS`) [I]; its ``reason`` says so. Not with
+        ``open_high``.
     """
     counts = np.asarray(counts, dtype=np.int64)
     centres = np.asarray(centres, dtype=np.float64)
@@ -314,28 +332,38 @@ def find_thresholds(
     high = [] if open_high else [0]
     trimmed = np.concatenate([[0], counts[lo:hi + 1], high])
     tcentres = np.concatenate([[centres[lo] - width], centres[lo:hi + 1], [centres[hi] + width] * len(high)])
-    smooth, maxima = _smooth_to_two_maxima(trimmed, max_iter)
-    if len(maxima) != 2:
-        return ThresholdResult(None, otsu, False, "the smoothed histogram has a single peak", counts=counts, centres=centres)
-    i0, i1 = maxima
-    ratio = float(smooth[i0:i1 + 1].min() / min(smooth[i0], smooth[i1]))
+    smooth, maxima, earlier = _smooth_to_two_maxima(trimmed, max_iter)
     light = ndimage.gaussian_filter1d(trimmed.astype(np.float64), valley_smoothing_bins, mode="constant")
-    valley = float(tcentres[i0 + _middle_of_lowest_run(light[i0:i1 + 1])])
-    low_fraction = float(counts[centres <= valley].sum() / total)
-    res = ThresholdResult(
-        valley, otsu, True, "two peaks separated by a valley",
-        low_peak=float(tcentres[i0]), high_peak=float(tcentres[i1]),
-        valley_ratio=ratio, low_fraction=low_fraction, counts=counts, centres=centres,
-    )
-    if min(low_fraction, 1.0 - low_fraction) < min_class_fraction:
-        res.bimodal = False
-        res.valley = None
-        res.reason = (f"one side of the valley holds only {100 * min(low_fraction, 1 - low_fraction):.2f} % of the cells "
-                      f"(< {100 * min_class_fraction:.2f} %)")
-    elif ratio > max_valley_ratio:
-        res.bimodal = False
-        res.valley = None
-        res.reason = f"the valley is too shallow (valley/peak = {ratio:.2f} > {max_valley_ratio:.2f})"
+
+    def split(level: np.ndarray, i0: int, i1: int, reason: str) -> ThresholdResult:
+        ratio = float(level[i0:i1 + 1].min() / min(level[i0], level[i1]))
+        valley = float(tcentres[i0 + _middle_of_lowest_run(light[i0:i1 + 1])])
+        low_fraction = float(counts[centres <= valley].sum() / total)
+        res = ThresholdResult(valley, otsu, True, reason, low_peak=float(tcentres[i0]), high_peak=float(tcentres[i1]),
+                              valley_ratio=ratio, low_fraction=low_fraction, counts=counts, centres=centres)
+        if min(low_fraction, 1.0 - low_fraction) < min_class_fraction:
+            res.bimodal, res.valley = False, None
+            res.reason = (f"one side of the valley holds only {100 * min(low_fraction, 1 - low_fraction):.2f} % of the cells "
+                          f"(< {100 * min_class_fraction:.2f} %)")
+        elif ratio > max_valley_ratio:
+            res.bimodal, res.valley = False, None
+            res.reason = f"the valley is too shallow (valley/peak = {ratio:.2f} > {max_valley_ratio:.2f})"
+        return res
+
+    if len(maxima) == 2:
+        res = split(smooth, maxima[0], maxima[1], "two peaks separated by a valley")
+    else:
+        res = ThresholdResult(None, otsu, False, "the smoothed histogram has a single peak", counts=counts, centres=centres)
+    if res.bimodal or open_high:
+        return res
+    # More than two modes (soil, grass, shrubs): merging the upper ones smooths the lowest
+    # valley away. Take the most smoothed earlier level whose lowest valley passes the same
+    # tests and is no counting noise. (A part below a valley, ``open_high``, is not searched
+    # so: there :func:`find_bare_threshold`'s own tests decide.)
+    for level, peaks in earlier:
+        alt = split(level, peaks[0], peaks[1], f"lowest valley of {len(peaks)} smoothed peaks (the two-peak split: {res.reason})")
+        if alt.bimodal and _dip_is_significant(trimmed, tcentres, alt.valley, alt.high_peak):
+            return alt
     return res
 
 
