@@ -19,6 +19,10 @@ twin (the same keys as an ensemble member) into ``--out``:
 Usage::
 
     .venv/bin/python benchmarks/draw_holdout_twins.py --names h3,h4,h5,h6 --seed 20261206
+    .venv/bin/python benchmarks/draw_holdout_twins.py --names h27,h28,h29 --seed 20261211 --greenness 0.4,0.7 --shrub-u 0.8,1.0
+
+The second form is a declared stress set: the same draw restricted to a corner of the range where a method
+failed on a random twin (session 43: h26), to confirm a fix there; it says so in each file.
 
 The files are committed; rerunning with the same arguments writes the same files.
 """
@@ -33,22 +37,26 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 
-def draw(rng: np.random.Generator) -> dict:
+def draw(rng: np.random.Generator, greenness_range: tuple[float, float] = (0.0, 0.9),
+         shrub_range: tuple[float, float] = (0.0, 1.0)) -> dict:
     """One twin's parameters, drawn uniformly over the ensemble's range.
 
     Parameters
     ----------
     rng : numpy.random.Generator
         Source of the draws.
+    greenness_range, shrub_range : tuple of float
+        Ranges of the grass greenness and of the shrub cover u; narrower than the ensemble's only for a
+        declared stress set (a part of the range where a method failed), never to pick easy twins.
 
     Returns
     -------
     dict
         ``greenness, sun_deg, shrub_u, threshold_gully, threshold_open, shallow, heads_sigma_m``.
     """
-    greenness = round(rng.uniform(0.0, 0.9) / 0.05) * 0.05
+    greenness = round(rng.uniform(*greenness_range) / 0.05) * 0.05
     sun = round(rng.uniform(25.0, 60.0) / 5.0) * 5.0
-    u = rng.uniform(0.0, 1.0)
+    u = rng.uniform(*shrub_range)
     shallow = round(rng.uniform(0.5, 0.8) / 0.05) * 0.05
     sigma = round(rng.uniform(2.0, 4.0) / 0.5) * 0.5
     return {"greenness": round(greenness, 2), "sun_deg": int(sun), "shrub_u": round(u, 2),
@@ -56,13 +64,14 @@ def draw(rng: np.random.Generator) -> dict:
             "shallow": round(shallow, 2), "heads_sigma_m": sigma}
 
 
-def site_file(name: str, twin_seed: int, p: dict, draw_seed: int) -> str:
-    """The overrides file of one held-out twin (YAML text)."""
-    desc = (f"Kamech-like twin, held-out {name} (random draw): grass {p['greenness']}, sun {p['sun_deg']} deg, "
+def site_file(name: str, twin_seed: int, p: dict, draw_seed: int, stress: str = "") -> str:
+    """The overrides file of one held-out twin (YAML text); ``stress`` names a restricted draw's ranges."""
+    kind = f"stress draw, {stress}" if stress else "random draw"
+    desc = (f"Kamech-like twin, held-out {name} ({kind}): grass {p['greenness']}, sun {p['sun_deg']} deg, "
             f"shrub cover {p['shrub_u']}, {int(round(p['shallow'] * 100))} % shallow, {p['heads_sigma_m']} m digitising")
     return f"""# Held-out twin {name} (issue 15): overrides on top of config/sites/kamech_twin.yaml, like the ensemble
-# members, drawn at random inside the ensemble's range by benchmarks/draw_holdout_twins.py
-# (--seed {draw_seed}) before any run, and never used to write or choose a method: an independent
+# members, drawn at random inside {"a declared part of " if stress else ""}the ensemble's range by benchmarks/draw_holdout_twins.py
+# (--seed {draw_seed}{(" " + stress) if stress else ""}) before any run, and never used to write or choose a method: an independent
 # check of the ensemble's numbers (benchmarks/twin_ensemble.py --member-dir config/sites/holdout).
 site:
   name: {name}
@@ -88,15 +97,20 @@ def main() -> None:
     ap.add_argument("--names", required=True, help="comma-separated twin names, e.g. h3,h4")
     ap.add_argument("--seed", type=int, required=True, help="seed of the draw")
     ap.add_argument("--out", default=str(REPO / "config" / "sites" / "holdout"))
+    ap.add_argument("--greenness", default=None, metavar="LO,HI", help="stress set: grass greenness range (default 0,0.9)")
+    ap.add_argument("--shrub-u", default=None, metavar="LO,HI", help="stress set: shrub cover range (default 0,1)")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    ranges = {"greenness_range": args.greenness, "shrub_range": args.shrub_u}
+    stress = " ".join(f"--{k.split('_')[0].replace('shrub', 'shrub-u')} {v}" for k, v in ranges.items() if v)
+    ranges = {k: tuple(float(x) for x in v.split(",")) for k, v in ranges.items() if v}
     for name in args.names.split(","):
         k = int(name.lstrip("h"))
-        p = draw(rng)
+        p = draw(rng, **ranges)
         path = out / f"{name}.yaml"
-        path.write_text(site_file(name, 1000 + 101 * k, p, args.seed))
+        path.write_text(site_file(name, 1000 + 101 * k, p, args.seed, stress))
         print(path.relative_to(REPO) if path.is_relative_to(REPO) else path, p)
 
 

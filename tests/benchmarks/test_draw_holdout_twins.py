@@ -18,7 +18,7 @@ def test_the_committed_files_are_the_draw_of_their_seed(tmp_path):
     # rerunning the stated command writes the same files: nobody edited a drawn twin afterwards
     for seed, names in ((20261206, ("h3", "h4", "h5", "h6")), (20261207, ("h7", "h8", "h9", "h10")),
                         (20261208, ("h11", "h12", "h13", "h14")), (20261209, ("h15", "h16", "h17", "h18")),
-                        (20261210, ("h19", "h20", "h21", "h22"))):
+                        (20261210, ("h19", "h20", "h21", "h22")), (20261208, ("h23", "h24", "h25", "h26"))):
         rng = np.random.default_rng(seed)
         for name in names:
             text = dh.site_file(name, 1000 + 101 * int(name[1:]), dh.draw(rng), seed)
@@ -43,3 +43,14 @@ def test_draws_stay_inside_the_ensemble_range():
         for key, v in (("g", p["greenness"]), ("s", p["sun_deg"]), ("tg", p["threshold_gully"]),
                        ("sh", p["shallow"]), ("d", p["heads_sigma_m"])):
             assert lo[key] - 1e-9 <= v <= hi[key] + 1e-9
+
+
+def test_a_stress_set_is_drawn_in_its_declared_part_of_the_range_and_says_so():
+    seed, ranges = 20261211, {"greenness_range": (0.4, 0.7), "shrub_range": (0.8, 1.0)}
+    rng = np.random.default_rng(seed)
+    for name in ("h27", "h28", "h29"):
+        p = dh.draw(rng, **ranges)
+        assert 0.4 <= p["greenness"] <= 0.7 and 0.8 <= p["shrub_u"] <= 1.0
+        text = dh.site_file(name, 1000 + 101 * int(name[1:]), p, seed, "--greenness 0.4,0.7 --shrub-u 0.8,1.0")
+        assert text == (REPO / "config" / "sites" / "holdout" / f"{name}.yaml").read_text()
+        assert "a declared part of the ensemble's range" in text and "stress draw" in text
