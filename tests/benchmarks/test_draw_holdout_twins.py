@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 REPO = Path(__file__).resolve().parents[2]
@@ -45,12 +46,14 @@ def test_draws_stay_inside_the_ensemble_range():
             assert lo[key] - 1e-9 <= v <= hi[key] + 1e-9
 
 
-def test_a_stress_set_is_drawn_in_its_declared_part_of_the_range_and_says_so():
-    seed, ranges = 20261211, {"greenness_range": (0.4, 0.7), "shrub_range": (0.8, 1.0)}
+@pytest.mark.parametrize("seed, names, greenness, shrub_u", [(20261211, ("h27", "h28", "h29"), (0.4, 0.7), (0.8, 1.0)),
+                                                          (20261212, ("h30", "h31", "h32"), (0.5, 0.6), (0.85, 1.0))])
+def test_a_stress_set_is_drawn_in_its_declared_part_of_the_range_and_says_so(seed, names, greenness, shrub_u):
     rng = np.random.default_rng(seed)
-    for name in ("h27", "h28", "h29"):
-        p = dh.draw(rng, **ranges)
-        assert 0.4 <= p["greenness"] <= 0.7 and 0.8 <= p["shrub_u"] <= 1.0
-        text = dh.site_file(name, 1000 + 101 * int(name[1:]), p, seed, "--greenness 0.4,0.7 --shrub-u 0.8,1.0")
+    flags = f"--greenness {greenness[0]},{greenness[1]} --shrub-u {shrub_u[0]},{shrub_u[1]}"  # as typed
+    for name in names:
+        p = dh.draw(rng, greenness_range=greenness, shrub_range=shrub_u)
+        assert greenness[0] <= p["greenness"] <= greenness[1] and shrub_u[0] <= p["shrub_u"] <= shrub_u[1]
+        text = dh.site_file(name, 1000 + 101 * int(name[1:]), p, seed, flags)
         assert text == (REPO / "config" / "sites" / "holdout" / f"{name}.yaml").read_text()
         assert "a declared part of the ensemble's range" in text and "stress draw" in text

@@ -207,3 +207,14 @@ def test_interpolation_in_batches_of_whole_crowns_equals_one_solve():
     assert n_whole == n_batched > 0
     np.testing.assert_allclose(batched, whole, rtol=0, atol=1e-9, equal_nan=True)
     assert not np.allclose(whole[mask & np.isfinite(z)], z[mask & np.isfinite(z)])
+
+
+def test_foliage_threshold_when_grass_and_shrubs_merge_in_the_two_peak_smoothing():
+    # soil (74 %), grass (ExG 0.13) and shrubs (0.25), like held-out h26: the two-peak smoothing merges grass and
+    # shrubs and fills the valley above the soil; the threshold is that valley, not "no crowns" (session 43)
+    rng = np.random.default_rng(2)
+    n = 400_000
+    exg = np.concatenate([rng.normal(0.0, 0.006, int(0.74 * n)), rng.normal(0.13, 0.008, int(0.17 * n)),
+                          rng.normal(0.248, 0.015, int(0.07 * n)), rng.uniform(0.0, 0.25, int(0.02 * n))])
+    thr = green_threshold(exg, CrownParams(enabled=True))
+    assert thr is not None and 0.03 < thr < 0.11

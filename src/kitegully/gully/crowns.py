@@ -110,7 +110,8 @@ def green_threshold(exg: np.ndarray, params: CrownParams) -> float | None:
     The kite-scale OBIA map's rule (:func:`kitegully.obia.threshold.find_thresholds`, Mayr et
     al. 2016: the smoothed histogram reduced to two peaks, valley between them, both sides
     holding ``min_class_fraction`` of the cells and the valley at most ``max_valley_ratio``
-    of the lower peak). ExG of soil and straw differ by their hue (≈ 0.00–0.06); foliage
+    of the lower peak; where that merges grass and shrubs into one mode and fills the valley above
+    the soil, the lowest valley of a less smoothed level, session 43). ExG of soil and straw differ by their hue (≈ 0.00–0.06); foliage
     stands at 0.1–0.3, so the camera's colour noise (≈ 0.003 on grey soil) does not set
     the threshold. None when the histogram is not bimodal (no foliage to speak of). O(n).
     """
@@ -121,6 +122,7 @@ def green_threshold(exg: np.ndarray, params: CrownParams) -> float | None:
     if not res.bimodal:
         log.info("crown mask: ExG histogram not bimodal (%s): no crowns", res.reason)
         return None
+    log.info("crown mask: ExG valley %.4f (%s)", res.valley, res.reason)
     return float(res.valley)
 
 
@@ -172,7 +174,7 @@ def crown_mask(z: np.ndarray, exg: np.ndarray, ground: np.ndarray, height_thresh
         mask = dist * cell_m <= params.window_m
     mask &= np.isfinite(z)
     info = {"green_threshold": thr, "crown_cells": int(crowns.sum()), "mask_cells": int(mask.sum())}
-    log.info("crown mask: ExG > %.4f (two-peak valley) and > %.3f m above the ground, pieces >= %.2f m: %d crown cells, "
+    log.info("crown mask: ExG > %.4f (the histogram's valley) and > %.3f m above the ground, pieces >= %.2f m: %d crown cells, "
              "%d cells (%.2f %%) within %.2f m of them", thr, height_threshold_m, params.window_m, info["crown_cells"],
              info["mask_cells"], 100.0 * info["mask_cells"] / max(1, int(np.isfinite(z).sum())), params.window_m)
     return mask, info
