@@ -31,7 +31,7 @@ def test_members_are_default_plus_five():
 
 def test_held_out_twins_are_their_own_members_without_the_default():
     found = te.members(None, te.BASE, REPO / "config" / "sites" / "holdout")
-    assert [n for n, _ in found] == [f"h{k}" for k in range(1, 23)]
+    assert [n for n, _ in found] == [f"h{k}" for k in range(1, 33)]  # h27-h32: declared stress draws (session 43)
     cfgs = [te.deep_merge(te.yaml.safe_load(te.BASE.read_text()), te.yaml.safe_load(f[0].read_text())) for _, f in found]
     ens_seeds = {te.yaml.safe_load(f.read_text())["seed"] for _, files in te.members(None, te.BASE) for f in files}
     assert {c["seed"] for c in cfgs}.isdisjoint(ens_seeds | {2018})  # new draws, not an ensemble member's
