@@ -49,9 +49,10 @@ ensemble: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) $(ENSEMBLE_ARGS)
 
 # The same chain on the held-out twins of config/sites/holdout/ (never looked at while a method was
-# written or chosen; h3-h14 drawn at random by benchmarks/draw_holdout_twins.py): results/holdout/summary.csv
-# and summary.md (14 twins, about 14 x 8 min = 2 h on 2 cores; one set: ENSEMBLE_ARGS="--members h11,h12,h13,h14";
-# with `make holdout-change`, about 10 min per twin in all).
+# written or chosen; h3-h26 drawn at random by benchmarks/draw_holdout_twins.py; h27-h32 declared stress draws in
+# one corner of the range, session 43): results/holdout/summary.csv and summary.md (32 twins, about 32 x 8 min =
+# 4.3 h on 2 cores; one set: ENSEMBLE_ARGS="--members h23,h24,h25,h26"; with `make holdout-change`, about 12 min per
+# twin in all).
 holdout: $(STAMP)
 	PYTHONPATH=$(CURDIR)/src $(BIN)/python benchmarks/twin_ensemble.py --cores $(CORES) --member-dir config/sites/holdout --out results/holdout $(ENSEMBLE_ARGS)
 
