@@ -103,9 +103,10 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    ranges = {"greenness_range": args.greenness, "shrub_range": args.shrub_u}
-    stress = " ".join(f"--{k.split('_')[0].replace('shrub', 'shrub-u')} {v}" for k, v in ranges.items() if v)
-    ranges = {k: tuple(float(x) for x in v.split(",")) for k, v in ranges.items() if v}
+    given = [(flag, key, v) for flag, key, v in (("--greenness", "greenness_range", args.greenness),
+                                                 ("--shrub-u", "shrub_range", args.shrub_u)) if v]
+    stress = " ".join(f"{flag} {v}" for flag, _, v in given)  # as typed, written into each file
+    ranges = {key: tuple(float(x) for x in v.split(",")) for _, key, v in given}
     for name in args.names.split(","):
         k = int(name.lstrip("h"))
         p = draw(rng, **ranges)
